@@ -1,0 +1,39 @@
+# Two commands do all the set-up on a fresh machine:
+#   make run    the main job (results and pictures in results/)
+#   make test   the whole test suite, serial and MPI
+# Both create .venv with a Python >= 3.12 if it is missing.
+
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# Extras: the DOLFINx wheel unless told otherwise (EXTRAS=test for a conda DOLFINx).
+EXTRAS ?= dolfinx,test
+OUT    ?= results
+
+.PHONY: run test bench venv clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@set -e; \
+	if [ ! -x $(PY) ]; then \
+	  py=$$(sh scripts/find_python.sh) || exit 1; \
+	  echo "creating $(VENV) with $$py"; \
+	  "$$py" -m venv $(VENV); \
+	fi; \
+	$(PY) -m pip install --quiet --upgrade pip; \
+	$(PY) -m pip install --quiet -e ".[$(EXTRAS)]"; \
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/eyemech run scleral-buckling --out $(OUT) || \
+	  $(VENV)/bin/eyemech run sphere-inflation --out $(OUT)
+
+test: $(STAMP)
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m pytest -ra --timeout=1800 $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(VENV)/bin/eyemech bench all --out docs/bench
+
+clean:
+	rm -rf $(VENV) results .pytest_cache

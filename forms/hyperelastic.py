@@ -1,0 +1,65 @@
+"""Isochoric hyperelastic laws and the incompressible mixed u–p energy.
+
+The buckling paper's strain energy (seed 002, §2.1) is the polynomial
+
+    W = Σ c_rs (Ī1 − 3)^r (Ī2 − 3)^s
+
+in the reduced invariants of C. Incompressibility is enforced by a pressure
+multiplier p:  Π = ∫ W(Ī1, Ī2) + p (J − 1) dV. The paper writes 2λ(J − 1); our
+p = 2λ is the (negative) hydrostatic Cauchy pressure correction, so that for the
+neo-Hookean law σ = 2 c10 dev(b̄) + p I.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Protocol
+
+import ufl
+
+from eyemech.forms.kinematics import isochoric_invariants
+
+
+class Material(Protocol):
+    def strain_energy(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+        """Isochoric strain energy density per reference volume."""
+        ...
+
+
+@dataclasses.dataclass(frozen=True)
+class PolynomialIsochoric:
+    """W = Σ c_rs (Ī1 − 3)^r (Ī2 − 3)^s; ``coefficients`` maps (r, s) to c_rs in MPa."""
+
+    coefficients: tuple[tuple[int, int, float], ...]
+
+    def __post_init__(self) -> None:
+        for r, s, c in self.coefficients:
+            if r < 0 or s < 0 or (r, s) == (0, 0):
+                raise ValueError(f"polynomial term ({r}, {s}) must have r, s >= 0, not both 0")
+
+    @property
+    def shear_modulus(self) -> float:
+        """Small-strain shear modulus μ = 2 (c10 + c01)."""
+        linear = {(r, s): c for r, s, c in self.coefficients}
+        return 2.0 * (linear.get((1, 0), 0.0) + linear.get((0, 1), 0.0))
+
+    def strain_energy(self, F):
+        I1b, I2b, _ = isochoric_invariants(F)
+        return sum(c * (I1b - 3) ** r * (I2b - 3) ** s for r, s, c in self.coefficients)
+
+
+def NeoHooke(c10: float) -> PolynomialIsochoric:
+    """W = c10 (Ī1 − 3): the law of every soft tissue in the buckling paper (Table 1)."""
+    return PolynomialIsochoric(((1, 0, c10),))
+
+
+def MooneyRivlin(c10: float, c01: float) -> PolynomialIsochoric:
+    """W = c10 (Ī1 − 3) + c01 (Ī2 − 3)."""
+    return PolynomialIsochoric(((1, 0, c10), (0, 1, c01)))
+
+
+def incompressible_energy_density(material: Material, u, p):
+    """Mixed u–p energy density W(F) + p (J − 1); its stationary point is the
+    incompressible equilibrium and p the Lagrange multiplier."""
+    F = ufl.Identity(len(u)) + ufl.grad(u)
+    return material.strain_energy(F) + p * (ufl.det(F) - 1)

@@ -1,0 +1,125 @@
+"""From a gmsh model to a DOLFINx mesh whose tags are known by name.
+
+gmsh runs on rank 0 only; DOLFINx distributes the mesh. Tag names (``cavity_wall``,
+``sclera``, ...) are part of each builder's API, and the integer values behind them
+are looked up through :class:`TaggedMesh`, never hard-coded by callers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from typing import Callable, Iterator
+
+import numpy as np
+from mpi4py import MPI
+
+try:  # the wheel's MPI ordering module, when it is the DOLFINx in use
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+import gmsh
+import ufl
+from dolfinx.io import gmsh as gmshio
+
+
+class MeshError(ValueError):
+    """A mesh that cannot be used: inverted cells, a missing or empty tag, ..."""
+
+
+@dataclasses.dataclass
+class TaggedMesh:
+    mesh: dolfinx.mesh.Mesh
+    cell_tags: dolfinx.mesh.MeshTags | None
+    facet_tags: dolfinx.mesh.MeshTags | None
+    names: dict[str, tuple[int, int]]  # physical name -> (dim, tag)
+
+    def tag(self, name: str) -> int:
+        if name not in self.names:
+            raise MeshError(f"the mesh has no region '{name}'; it has: {', '.join(sorted(self.names))}")
+        return self.names[name][1]
+
+    def facets(self, name: str) -> np.ndarray:
+        """Local indices of the facets tagged ``name``."""
+        return self.facet_tags.find(self.tag(name))
+
+    def cells(self, name: str) -> np.ndarray:
+        return self.cell_tags.find(self.tag(name))
+
+    def ds(self, metadata: dict | None = None) -> ufl.Measure:
+        return ufl.Measure("ds", domain=self.mesh, subdomain_data=self.facet_tags, metadata=metadata)
+
+    def dx(self, metadata: dict | None = None) -> ufl.Measure:
+        return ufl.Measure("dx", domain=self.mesh, subdomain_data=self.cell_tags, metadata=metadata)
+
+    def count(self, name: str) -> int:
+        """Global number of entities tagged ``name`` (owned entities only)."""
+        dim, _ = self.names[name]
+        tags = self.cell_tags if dim == self.mesh.topology.dim else self.facet_tags
+        entities = tags.find(self.tag(name))
+        owned = self.mesh.topology.index_map(dim).size_local
+        return self.mesh.comm.allreduce(int(np.sum(entities < owned)), op=MPI.SUM)
+
+    def require_nonempty(self, *names: str) -> None:
+        for name in names:
+            self.tag(name)
+            if self.count(name) == 0:
+                raise MeshError(f"the mesh region '{name}' is empty")
+
+
+@contextlib.contextmanager
+def gmsh_session(comm: MPI.Comm, root: int = 0) -> Iterator[gmsh.model | None]:
+    """A fresh gmsh model on ``root``; other ranks get None."""
+    if comm.rank != root:
+        yield None
+        return
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.option.setNumber("General.Verbosity", 1)
+    gmsh.clear()
+    gmsh.model.add("eyemech")
+    try:
+        yield gmsh.model
+    finally:
+        gmsh.clear()
+        if started:
+            gmsh.finalize()
+
+
+def from_gmsh(build: Callable[[gmsh.model], None], comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """Run ``build(model)`` on rank 0 (it must create physical groups and mesh),
+    then distribute and check the mesh."""
+    error = None
+    with gmsh_session(comm) as model:
+        if model is not None:
+            try:
+                build(model)
+            except Exception as err:  # reported on every rank below, not a deadlock
+                error = err
+        error = comm.bcast(error, root=0)
+        if error is not None:
+            raise error
+        data = gmshio.model_to_mesh(model, comm, 0, gdim=3)
+    tagged = TaggedMesh(data.mesh, data.cell_tags, data.facet_tags,
+                        {name: (g.dim, g.tag) for name, g in data.physical_groups.items()})
+    check_orientation(tagged.mesh)
+    return tagged
+
+
+def check_orientation(mesh: dolfinx.mesh.Mesh) -> None:
+    """Refuse meshes with inverted (or degenerate) cells: det of the reference-to-
+    physical Jacobian must be positive at every cell midpoint."""
+    if mesh.topology.dim != mesh.geometry.dim:
+        return  # manifold meshes have no sign of the Jacobian determinant
+    degree0 = dolfinx.fem.functionspace(mesh, ("DG", 0))
+    detJ = dolfinx.fem.Function(degree0)
+    expr = dolfinx.fem.Expression(ufl.JacobianDeterminant(mesh), degree0.element.interpolation_points)
+    detJ.interpolate(expr)
+    n_local = mesh.topology.index_map(mesh.topology.dim).size_local
+    local_min = float(np.min(detJ.x.array[:n_local])) if n_local else np.inf
+    worst = mesh.comm.allreduce(local_min, op=MPI.MIN)
+    if not worst > 0:
+        raise MeshError(f"the mesh has inverted or degenerate cells (min det J = {worst:.3e})")

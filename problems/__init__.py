@@ -1,0 +1,37 @@
+"""Scenes and benchmarks. Each scene module exposes ``SCENE`` (name, parameter
+dataclass, ``run``); :func:`scenes` finds them all, so adding a scene is adding a
+module.
+
+    from eyemech.problems import sphere_inflation
+    result = sphere_inflation.run(sphere_inflation.Parameters(pressure=0.02))
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+# Infrastructure modules, not scenes (kept out of the discovery import).
+_INFRASTRUCTURE = {"analytic", "context", "driver", "output", "parameters", "results", "scene",
+                   "spaces", "sweep", "registry"}
+
+
+def scenes() -> dict:
+    """Name -> Scene for every scene module in this package."""
+    found = {}
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if info.name.startswith("_") or info.name in _INFRASTRUCTURE:
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        scene = getattr(module, "SCENE", None)
+        if scene is not None:
+            found[scene.name] = scene
+    return found
+
+
+def get(name: str):
+    """The scene called ``name`` (KeyError listing the known names otherwise)."""
+    known = scenes()
+    if name not in known:
+        raise KeyError(f"unknown scene '{name}'; known: {', '.join(sorted(known))}")
+    return known[name]

@@ -1,0 +1,57 @@
+"""Exact solutions used by benchmarks, tests and convergence studies.
+
+Thick incompressible neo-Hookean sphere under internal pressure
+---------------------------------------------------------------
+A sphere A ≤ R ≤ B deforms radially to a ≤ r ≤ b. Incompressibility fixes
+r³ − R³ = a³ − A³, so the hoop stretch λ(r) = r / R(r) with R³ = r³ − a³ + A³ and the
+radial stretch is λ⁻². For W = c10 (I1 − 3) (μ = 2 c10) the principal Cauchy stress
+difference is σθθ − σrr = μ (λ² − λ⁻⁴). Radial equilibrium dσrr/dr = 2(σθθ − σrr)/r,
+with σrr(a) = −p and σrr(b) = −p_out, integrates to
+
+    p − p_out = ∫_a^b 2μ/r (λ(r)² − λ(r)⁻⁴) dr.
+
+Given p we solve this scalar equation for a (monotone up to the limit point).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import integrate, optimize
+
+
+def _stretch(r, a, A):
+    return r / np.cbrt(r**3 - a**3 + A**3)
+
+
+def sphere_pressure(a: float, A: float, B: float, c10: float) -> float:
+    """Pressure difference p − p_out that holds the inner radius at ``a``."""
+    mu = 2.0 * c10
+    b = np.cbrt(a**3 + B**3 - A**3)
+    integrand = lambda r: 2.0 * mu / r * (_stretch(r, a, A) ** 2 - _stretch(r, a, A) ** -4)
+    value, _ = integrate.quad(integrand, a, b, epsabs=1e-14, epsrel=1e-13)
+    return value
+
+
+def sphere_limit_point(A: float, B: float, c10: float) -> tuple[float, float]:
+    """(a, p) at the pressure maximum: beyond p_max no radial equilibrium exists."""
+    res = optimize.minimize_scalar(lambda a: -sphere_pressure(a, A, B, c10),
+                                   bounds=(A * 1.01, A * 5.0), method="bounded",
+                                   options={"xatol": 1e-10})
+    return float(res.x), float(-res.fun)
+
+
+def sphere_inner_radius(pressure: float, A: float, B: float, c10: float) -> float:
+    """Deformed inner radius a for a pressure difference below the limit point."""
+    if pressure == 0:
+        return A
+    a_max, p_max = sphere_limit_point(A, B, c10)
+    if pressure >= p_max:
+        raise ValueError(f"pressure {pressure} is beyond the limit point {p_max:.6g}")
+    lower = A * (1 - 0.5) if pressure < 0 else A
+    upper = a_max if pressure > 0 else A
+    return float(optimize.brentq(lambda a: sphere_pressure(a, A, B, c10) - pressure,
+                                 lower, upper, xtol=1e-14, rtol=1e-14))
+
+
+def sphere_outer_radius(a: float, A: float, B: float) -> float:
+    return float(np.cbrt(a**3 + B**3 - A**3))

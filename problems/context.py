@@ -1,0 +1,80 @@
+"""What every scene's ``run`` shares: options, timings, output folder, the Result,
+and the guarantee that ``results.json`` is written whole (also on failure)."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import traceback
+from pathlib import Path
+from typing import Any
+
+from mpi4py import MPI
+
+from eyemech.problems.driver import NewtonOptions, SolveFailure
+from eyemech.problems.parameters import SceneParameters
+from eyemech.problems.results import Result, Timings, peak_memory_mb, write_json_atomic
+
+log = logging.getLogger("eyemech")
+
+
+@dataclasses.dataclass
+class RunOptions:
+    """How to run, as opposed to what to model (the scene's parameters)."""
+
+    quiet: bool = True            # no progress bar
+    fields: bool = True           # write VTX fields
+    pictures: bool = True         # write PNG pictures (pyvista, rank 0)
+    newton: NewtonOptions = dataclasses.field(default_factory=NewtonOptions)
+
+
+class RunContext:
+    """``with RunContext(...) as ctx:`` around a scene's work.
+
+    On leaving, ``results.json`` is written atomically by rank 0 with status ``ok``,
+    or ``failed`` and the message when a :class:`SolveFailure` escapes (the failure
+    is then re-raised for the caller or the command line to report).
+    """
+
+    def __init__(self, scene: str, params: SceneParameters, comm: MPI.Comm | None,
+                 out: str | Path | None, options: RunOptions | None):
+        params.validate()  # bad input stops here, before anything is created or solved
+        self.comm = comm if comm is not None else MPI.COMM_WORLD
+        self.out = Path(out) if out is not None else None
+        self.options = options or RunOptions()
+        self.timings = Timings()
+        self.result = Result(scene=scene, parameters=params.as_dict(), mpi_size=self.comm.size)
+        if self.out is not None and self.comm.rank == 0:
+            self.out.mkdir(parents=True, exist_ok=True)
+        self.comm.Barrier()
+
+    def __enter__(self) -> "RunContext":
+        return self
+
+    def __exit__(self, kind, error, tb) -> bool:
+        if isinstance(error, SolveFailure):
+            self.result.status = "failed"
+            self.result.message = str(error)
+        elif error is not None:
+            self.result.status = "error"
+            self.result.message = "".join(traceback.format_exception_only(kind, error)).strip()
+        self.result.timings = self.timings.as_dict()
+        collective = error is None or isinstance(error, SolveFailure)  # all ranks are here
+        memory = peak_memory_mb()
+        self.result.peak_memory_mb = self.comm.allreduce(memory, op=MPI.MAX) if collective else memory
+        self.write()
+        return False
+
+    @property
+    def rank0(self) -> bool:
+        return self.comm.rank == 0
+
+    def path(self, name: str) -> Path | None:
+        return None if self.out is None else self.out / name
+
+    def record_step(self, **values: Any) -> None:
+        self.result.steps.append(values)
+
+    def write(self) -> None:
+        if self.out is not None and self.rank0:
+            write_json_atomic(self.out / "results.json", self.result.as_json())

@@ -1,0 +1,289 @@
+"""The solve driver every scene uses: SNES Newton with MUMPS, timed, and a path
+follower (load or time stepping) that cuts the step on divergence and grows it
+after easy steps.
+
+Design notes
+- The residual and Jacobian callbacks are DOLFINx's own; we wrap them only to
+  time assembly and to let a scene add global terms (contact forces, a
+  substituted cavity pressure) after the local assembly.
+- A failed Newton solve restores the last converged unknowns before retrying, so
+  the caller never sees a half-updated state; when cutting is exhausted
+  :class:`SolveFailure` reports the step, the load and the residual history.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import sys
+import time
+from typing import Callable, Sequence
+
+import numpy as np
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+import dolfinx.fem.petsc
+from petsc4py import PETSc
+
+from eyemech.problems.results import Timings
+
+log = logging.getLogger("eyemech")
+
+
+class SolveFailure(RuntimeError):
+    """Newton failed and step cutting is exhausted; the last converged state is kept."""
+
+    def __init__(self, step: int, load: float, last_converged: float, residuals: list[float],
+                 reason: str):
+        self.step, self.load, self.last_converged = step, load, last_converged
+        self.residuals, self.reason = residuals, reason
+        history = ", ".join(f"{r:.3e}" for r in residuals) or "none"
+        super().__init__(
+            f"Newton did not converge at step {step} trying load {load:.6g} "
+            f"(SNES reason: {reason}); residual norms of the last attempt: [{history}]. "
+            f"Last converged load {last_converged:.6g} is kept.")
+
+
+@dataclasses.dataclass
+class NewtonOptions:
+    """SNES settings; ``petsc`` entries (without prefix) override everything else."""
+
+    line_search: str = "basic"  # basic | bt | l2 | cp | nleqerr
+    rtol: float = 1e-9
+    atol: float = 1e-10
+    stol: float = 0.0
+    max_it: int = 25
+    linear_solver: str = "mumps"  # mumps | superlu_dist | petsc (LU) | iterative via petsc
+    petsc: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    def as_petsc(self) -> dict[str, str]:
+        options = {
+            "snes_type": "newtonls",
+            "snes_linesearch_type": self.line_search,
+            "snes_rtol": self.rtol,
+            "snes_atol": self.atol,
+            "snes_stol": self.stol,
+            "snes_max_it": self.max_it,
+            "snes_error_if_not_converged": False,
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": self.linear_solver,
+            # MUMPS: more working space for the indefinite saddle-point systems
+            "mat_mumps_icntl_14": 100,
+        }
+        options.update(self.petsc)
+        return {k: str(v) for k, v in options.items()}
+
+
+ResidualHook = Callable[[PETSc.Vec, PETSc.Vec], None]
+JacobianHook = Callable[[PETSc.Vec, PETSc.Mat], None]
+
+
+class NonlinearSolver:
+    """A residual F(u) = 0 on one function or a block of functions, solved by SNES.
+
+    ``residual`` is a UFL form or a list of block forms (``ufl.extract_blocks``).
+    Hooks run after DOLFINx has assembled the residual or the Jacobian, on the
+    same vector or matrix, e.g. to add node-to-surface contact.
+    """
+
+    _count = 0
+
+    def __init__(self, residual, unknowns, bcs: Sequence = (), *, jacobian=None,
+                 options: NewtonOptions | None = None, timings: Timings | None = None,
+                 residual_hooks: Sequence[ResidualHook] = (),
+                 jacobian_hooks: Sequence[JacobianHook] = (),
+                 matrix_kind: str | None = None):
+        self.options = options or NewtonOptions()
+        self.timings = timings or Timings()
+        self.unknowns = list(unknowns) if isinstance(unknowns, (list, tuple)) else [unknowns]
+        blocked = isinstance(residual, (list, tuple))
+        NonlinearSolver._count += 1
+        prefix = f"eyemech{NonlinearSolver._count}_"
+        start = time.perf_counter()
+        self.problem = dolfinx.fem.petsc.NonlinearProblem(
+            residual, self.unknowns if blocked else self.unknowns[0], bcs=list(bcs), J=jacobian,
+            petsc_options_prefix=prefix, kind=(matrix_kind or "mpi") if blocked else matrix_kind)
+        self.timings.add("form_compilation", time.perf_counter() - start)
+        self.residual_hooks = list(residual_hooks)
+        self.jacobian_hooks = list(jacobian_hooks)
+        self._wrap_callbacks()
+        self._set_options(prefix)
+        self.residual_history: list[float] = []
+        self.snes.setMonitor(lambda _snes, _it, norm: self.residual_history.append(float(norm)))
+
+    # -- set-up -----------------------------------------------------------------
+    @property
+    def snes(self) -> PETSc.SNES:
+        return self.problem.solver
+
+    def _wrap_callbacks(self) -> None:
+        b, (f_call, f_args, f_kargs) = self.snes.getFunction()
+        A, P, (j_call, j_args, j_kargs) = self.snes.getJacobian()
+
+        def residual(snes, x, vec):
+            start = time.perf_counter()
+            f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
+            for hook in self.residual_hooks:
+                hook(x, vec)
+            self.timings.add("assembly", time.perf_counter() - start)
+
+        def jacobian(snes, x, mat, pmat):
+            start = time.perf_counter()
+            j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
+            for hook in self.jacobian_hooks:
+                hook(x, mat)
+            self.timings.add("assembly", time.perf_counter() - start)
+
+        self.snes.setFunction(residual, b)
+        self.snes.setJacobian(jacobian, A, P)
+
+    def _set_options(self, prefix: str) -> None:
+        opts = PETSc.Options()
+        values = self.options.as_petsc()
+        for key, value in values.items():
+            opts[f"{prefix}{key}"] = value
+        self.snes.setFromOptions()
+        self.snes.getKSP().setFromOptions()
+        for key in values:
+            del opts[f"{prefix}{key}"]
+
+    # -- state ------------------------------------------------------------------
+    def save_state(self) -> list[np.ndarray]:
+        return [u.x.array.copy() for u in self.unknowns]
+
+    def restore_state(self, state: list[np.ndarray]) -> None:
+        for u, values in zip(self.unknowns, state):
+            u.x.array[:] = values
+            u.x.scatter_forward()
+
+    def jacobian_nonzeros(self) -> int:
+        """Nonzeros allocated in the Jacobian (global)."""
+        info = self.problem.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)
+        return int(info["nz_allocated"])
+
+    # -- solve ------------------------------------------------------------------
+    def solve(self) -> tuple[bool, int]:
+        """One Newton solve from the current unknowns; (converged, iterations)."""
+        self.residual_history = []
+        start = time.perf_counter()
+        assembly_before = self.timings.seconds["assembly"]
+        try:
+            self.problem.solve()
+            reason = self.snes.getConvergedReason()
+        except PETSc.Error:  # e.g. a zero pivot from an inverted element
+            reason = -1
+        elapsed = time.perf_counter() - start
+        # assembly inside SNES is timed by the callbacks; "solve" is the rest
+        # (factorisation, triangular solves, line search bookkeeping)
+        assembly = self.timings.seconds["assembly"] - assembly_before
+        self.timings.add("solve", elapsed - assembly)
+        iterations = self.snes.getIterationNumber()
+        converged = reason > 0 and all(np.isfinite(self.residual_history))
+        return converged, iterations
+
+    def reason(self) -> str:
+        code = self.snes.getConvergedReason()
+        names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
+        return names.get(code, str(code))
+
+
+@dataclasses.dataclass
+class Stepping:
+    """Path following from ``start`` to ``end`` (a load factor or a time)."""
+
+    start: float = 0.0
+    end: float = 1.0
+    initial_step: float = 0.25
+    min_step: float = 1e-5
+    max_step: float = 1.0
+    grow: float = 1.5
+    easy_iterations: int = 6
+    max_cuts: int = 10
+    stops: tuple[float, ...] = ()  # values the path must land on exactly (outputs, stages)
+
+
+@dataclasses.dataclass
+class StepRecord:
+    step: int
+    load: float
+    increment: float
+    iterations: int
+    cuts: int
+    residuals: list[float]
+
+
+def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
+                stepping: Stepping, *, on_converged: Callable[[StepRecord], None] | None = None,
+                label: str = "", quiet: bool = False) -> list[StepRecord]:
+    """Solve along the path: ``apply(value, increment)`` sets loads (or time) for the
+    target value, Newton solves, and ``on_converged`` records and updates history
+    variables. A failed solve restores the last converged state and halves the
+    increment; easy solves grow it."""
+    span = stepping.end - stepping.start
+    if span <= 0:
+        raise ValueError("stepping.end must be greater than stepping.start")
+    stops = sorted(s for s in set(stepping.stops) | {stepping.end}
+                   if stepping.start < s <= stepping.end)
+    value = stepping.start
+    increment = stepping.initial_step * span
+    records: list[StepRecord] = []
+    bar = _progress(solver, label, quiet)
+    step = 0
+    while value < stepping.end - 1e-12 * span:
+        step += 1
+        state = solver.save_state()
+        cuts = 0
+        while True:
+            next_stop = next(s for s in stops if s > value + 1e-12 * span)
+            target = min(value + increment, next_stop)
+            if next_stop - target < 1e-3 * increment:  # avoid a sliver before a stop
+                target = next_stop
+            apply(target, target - value)
+            converged, iterations = solver.solve()
+            if converged:
+                break
+            history = list(solver.residual_history)
+            log.info("step %d: no convergence at %.6g (%s), cutting", step, target, solver.reason())
+            solver.restore_state(state)
+            cuts += 1
+            increment *= 0.5
+            if cuts > stepping.max_cuts or increment < stepping.min_step * span:
+                apply(value, 0.0)
+                bar.close()
+                raise SolveFailure(step, target, value, history, solver.reason())
+        record = StepRecord(step, target, target - value, iterations, cuts,
+                            list(solver.residual_history))
+        value = target
+        records.append(record)
+        if on_converged is not None:
+            on_converged(record)
+        bar.update((target - stepping.start) / span - bar.n)
+        if cuts == 0 and iterations <= stepping.easy_iterations:
+            increment = min(increment * stepping.grow, stepping.max_step * span)
+    bar.close()
+    return records
+
+
+class _NoBar:
+    n = 0.0
+
+    def update(self, _):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(solver: NonlinearSolver, label: str, quiet: bool):
+    comm = solver.problem.A.comm.tompi4py()
+    if quiet or comm.rank != 0 or not sys.stderr.isatty():
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=1.0, desc=label or "path", unit="", leave=False,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")

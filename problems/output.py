@@ -1,0 +1,137 @@
+"""Fields for ParaView/pyvista (ADIOS2 VTX, one file per element family) and PNG
+pictures rendered off-screen by pyvista on rank 0 from data gathered from all ranks."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from mpi4py import MPI
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+import dolfinx.plot
+
+
+class FieldWriter:
+    """Time series of functions; functions that share an element share a file."""
+
+    def __init__(self, out: Path | None, comm: MPI.Comm, functions: Sequence[dolfinx.fem.Function],
+                 stem: str = "fields"):
+        self.files: list[str] = []
+        self._writers = []
+        if out is None:
+            return
+        groups: dict[str, list] = {}
+        for function in functions:
+            key = function.function_space.element.signature
+            groups.setdefault(key, []).append(function)
+        for index, group in enumerate(groups.values()):
+            name = f"{stem}_{'_'.join(f.name for f in group)}.bp"
+            path = Path(out) / name
+            self._writers.append(dolfinx.io.VTXWriter(comm, str(path), group, engine="BP4"))
+            self.files.append(name)
+
+    def write(self, time: float) -> None:
+        for writer in self._writers:
+            writer.write(time)
+
+    def close(self) -> None:
+        for writer in self._writers:
+            writer.close()
+        self._writers = []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,
+                cell_data: dict[str, np.ndarray] | None = None):
+    """A pyvista grid of the whole mesh on rank 0 (None elsewhere), built on the
+    degrees of freedom of ``function``'s (Lagrange) space, with ``function`` and the
+    ``point_data`` functions (same space) attached."""
+    import pyvista
+
+    space = function.function_space
+    comm = space.mesh.comm
+    topology, cell_types, geometry = dolfinx.plot.vtk_mesh(space)
+    n_cells = space.mesh.topology.index_map(space.mesh.topology.dim).size_local
+    # keep owned cells only so that each cell is drawn once
+    nodes_per_cell = topology[0] + 1 if len(topology) else 0
+    topology = topology[: n_cells * nodes_per_cell] if nodes_per_cell else topology
+    cell_types = cell_types[:n_cells]
+    values = {function.name: _point_values(function)}
+    for name, f in (point_data or {}).items():
+        values[name] = _point_values(f)
+    cells_extra = {name: np.asarray(v)[:n_cells] for name, v in (cell_data or {}).items()}
+    gathered = comm.gather((topology, cell_types, geometry, values, cells_extra), root=0)
+    if comm.rank != 0:
+        return None
+    offset = 0
+    tops, types, geoms = [], [], []
+    merged: dict[str, list] = {name: [] for name in values}
+    merged_cells: dict[str, list] = {name: [] for name in cells_extra}
+    for top, ctype, geom, vals, cvals in gathered:
+        top = top.copy().reshape(-1, nodes_per_cell) if len(top) else top.reshape(0, max(nodes_per_cell, 1))
+        if len(top):
+            top[:, 1:] += offset
+        tops.append(top.ravel())
+        types.append(ctype)
+        geoms.append(geom)
+        for name in merged:
+            merged[name].append(vals[name])
+        for name in merged_cells:
+            merged_cells[name].append(cvals[name])
+        offset += geom.shape[0]
+    grid = pyvista.UnstructuredGrid(np.concatenate(tops), np.concatenate(types), np.vstack(geoms))
+    for name, chunks in merged.items():
+        grid.point_data[name] = np.concatenate(chunks)
+    for name, chunks in merged_cells.items():
+        grid.cell_data[name] = np.concatenate(chunks)
+    return grid
+
+
+def _point_values(function: dolfinx.fem.Function) -> np.ndarray:
+    bs = function.function_space.dofmap.index_map_bs
+    values = function.x.array.reshape(-1, bs) if bs > 1 else function.x.array.copy()
+    if bs == 2:  # pyvista warps by 3-vectors
+        values = np.hstack([values, np.zeros((values.shape[0], 1))])
+    return values.copy()
+
+
+def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None = None,
+               title: str = "", camera: str | Sequence = "iso", clim=None,
+               show_undeformed: bool = True, cmap: str = "viridis") -> None:
+    """Off-screen pyvista picture of ``grid`` (rank 0 only)."""
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    with contextlib.suppress(Exception):
+        pyvista.start_xvfb()  # harmless when a display or OSMesa exists
+    plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
+    shown = grid.warp_by_vector(warp, factor=1.0) if warp else grid
+    if show_undeformed and warp:
+        plotter.add_mesh(grid, style="wireframe", color="grey", opacity=0.25)
+    plotter.add_mesh(shown, scalars=scalars, show_edges=True, cmap=cmap, clim=clim,
+                     scalar_bar_args={"title": scalars or ""})
+    if title:
+        plotter.add_text(title, font_size=12)
+    if camera == "iso":
+        plotter.view_isometric()
+    elif isinstance(camera, str):
+        getattr(plotter, f"view_{camera}")()
+    else:  # a direction to look from
+        plotter.view_vector(camera)
+    tmp = Path(path).with_suffix(".tmp.png")
+    plotter.screenshot(str(tmp))
+    plotter.close()
+    os.replace(tmp, path)

@@ -1,0 +1,110 @@
+"""Parameter studies: the Cartesian product of ``--grid`` values, cases run side by
+side on split communicators, one CSV row per case (failures recorded, not fatal)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import traceback
+from pathlib import Path
+from typing import Any
+
+from mpi4py import MPI
+
+from eyemech.problems.context import RunOptions
+from eyemech.problems.driver import SolveFailure
+from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.results import write_text_atomic
+
+
+def parse_grid(entries: list[str]) -> dict[str, list[str]]:
+    grid: dict[str, list[str]] = {}
+    for entry in entries:
+        if "=" not in entry:
+            raise ParameterError(entry, "a --grid entry is key=v1,v2,...")
+        key, values = entry.split("=", 1)
+        items = [v.strip() for v in values.split(",") if v.strip()]
+        if not items:
+            raise ParameterError(key, "--grid needs at least one value")
+        grid[key.strip()] = items
+    return grid
+
+
+def cases(scene, base: dict[str, Any], grid: dict[str, list[str]]) -> list[dict[str, Any]]:
+    """Every combination, each validated now so that a bad value stops the sweep
+    before any case runs."""
+    keys = list(grid)
+    combos = []
+    for values in itertools.product(*(grid[k] for k in keys)):
+        overrides = dict(base)
+        overrides.update(zip(keys, values))
+        build(scene.parameters, overrides)
+        combos.append(overrides)
+    return combos
+
+
+def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path,
+              ranks_per_case: int = 1, options: RunOptions | None = None,
+              resume: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[dict[str, Any]]:
+    all_cases = cases(scene, base, grid)
+    if ranks_per_case < 1 or comm.size % ranks_per_case:
+        raise ParameterError("--ranks-per-case", f"must divide the number of ranks ({comm.size})")
+    groups = comm.size // ranks_per_case
+    color = comm.rank // ranks_per_case
+    sub = comm.Split(color, comm.rank)
+    rows = []
+    for index, overrides in enumerate(all_cases):
+        if index % groups != color:
+            continue
+        case_dir = Path(out) / f"case_{index:04d}"
+        row = {"case": index, **{k: overrides[k] for k in grid}}
+        previous = _finished(case_dir) if resume else None
+        if previous is not None:
+            rows.append({**row, **previous})
+            continue
+        params = build(scene.parameters, overrides)
+        try:
+            result = scene.run(params, comm=sub, out=case_dir, options=options)
+            row.update(status=result.status, **_scalars(result.quantities))
+            row["wall_time_s"] = result.timings.get("total")
+        except SolveFailure as err:
+            row.update(status="failed", error=str(err))
+        except Exception as err:  # one case's error must not stop the others
+            row.update(status="error", error="".join(traceback.format_exception_only(err)).strip())
+        if sub.rank == 0:
+            rows.append(row)
+    sub.Free()
+    gathered = comm.gather(rows, root=0)
+    if comm.rank != 0:
+        return []
+    table = sorted((r for part in gathered for r in part), key=lambda r: r["case"])
+    write_text_atomic(Path(out) / "sweep.csv", _csv(table))
+    return table
+
+
+def _finished(case_dir: Path) -> dict[str, Any] | None:
+    path = case_dir / "results.json"
+    if not path.exists():
+        return None
+    data = json.loads(path.read_text())
+    if data.get("status") != "ok":
+        return None
+    return {"status": "ok", **_scalars(data.get("quantities", {})),
+            "wall_time_s": data.get("timings", {}).get("total")}
+
+
+def _scalars(quantities: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in quantities.items() if isinstance(v, (int, float, bool, str))}
+
+
+def _csv(rows: list[dict[str, Any]]) -> str:
+    columns: list[str] = []
+    for row in rows:
+        columns += [k for k in row if k not in columns]
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=columns)
+    writer.writeheader()
+    writer.writerows(rows)
+    return buffer.getvalue()

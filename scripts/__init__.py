@@ -1,0 +1,1 @@
+"""The command line (``eyemech``): parsing, then a call into ``eyemech.problems``."""

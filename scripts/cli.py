@@ -1,0 +1,167 @@
+"""``eyemech``: list, run and sweep scenes (design brief §4).
+
+    eyemech list [-v]
+    eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
+    eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R]
+
+Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
+failed (the last converged state and results.json with status "failed" are kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+EXIT_SOLVE_FAILED = 3
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="eyemech", description=__doc__.split("\n\n")[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log Newton progress")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p_list = sub.add_parser("list", help="scenes and benchmarks, one line each")
+    p_list.add_argument("-v", "--verbose", action="store_true", help="with their parameters")
+
+    def common(p):
+        p.add_argument("name", help="scene or benchmark (see 'eyemech list')")
+        p.add_argument("--config", help="TOML file with parameter values")
+        p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                       help="override one parameter (repeatable)")
+        p.add_argument("--petsc", action="append", default=[], metavar="OPTION=VALUE",
+                       help="PETSc option for the Newton solver, e.g. snes_linesearch_type=bt")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+        p.add_argument("--no-fields", action="store_true", help="do not write VTX fields")
+        p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
+
+    p_run = sub.add_parser("run", help="run one scene")
+    common(p_run)
+    p_run.add_argument("--out", help="output folder (default results/NAME)")
+    p_run.add_argument("--json", action="store_true",
+                       help="print results.json as the last line on stdout")
+
+    p_sweep = sub.add_parser("sweep", help="parameter study over a grid")
+    common(p_sweep)
+    p_sweep.add_argument("--grid", action="append", default=[], required=True,
+                         metavar="KEY=V1,V2,...", help="values of one parameter (repeatable)")
+    p_sweep.add_argument("--out", required=True, help="output folder (sweep.csv, case_NNNN/)")
+    p_sweep.add_argument("--ranks-per-case", type=int, default=1)
+    p_sweep.add_argument("--resume", action="store_true", help="skip cases already finished")
+    p_sweep.add_argument("--json", action="store_true", help="print the rows as JSON")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(message)s", stream=sys.stderr)
+    # Imported here so that `eyemech --help` is instant.
+    from mpi4py import MPI
+
+    from eyemech import problems
+    from eyemech.problems.driver import SolveFailure
+    from eyemech.problems.parameters import ParameterError
+    from eyemech.meshes import MeshError
+
+    comm = MPI.COMM_WORLD
+    say = (lambda *a, **k: print(*a, **k)) if comm.rank == 0 else (lambda *a, **k: None)
+    try:
+        if args.command == "list":
+            return _list(problems, args.verbose, say)
+        scene = problems.get(args.name)
+        overrides = _overrides(args)
+        options = _options(args)
+        if args.command == "run":
+            return _run(scene, overrides, args, options, comm, say)
+        return _sweep(scene, overrides, args, options, comm, say)
+    except KeyError as err:
+        say(f"eyemech: error: {err.args[0]}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (ParameterError, MeshError) as err:
+        say(f"eyemech: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SolveFailure as err:
+        say(f"eyemech: solve failed: {err}", file=sys.stderr)
+        return EXIT_SOLVE_FAILED
+
+
+def _list(problems, verbose: bool, say) -> int:
+    from eyemech.problems.parameters import describe
+
+    for name, scene in problems.scenes().items():
+        say(f"{name:24s} {scene.kind:10s} {scene.summary}")
+        if verbose:
+            for key, kind, default, unit, text in describe(scene.parameters):
+                say(f"    {key:20s} {kind:14s} {default!s:12s} {unit:8s} {text}")
+    return 0
+
+
+def _overrides(args) -> dict:
+    from eyemech.problems.parameters import load_toml, parse_assignments
+
+    overrides = load_toml(args.config) if args.config else {}
+    overrides.update(parse_assignments(args.sets))
+    return overrides
+
+
+def _options(args):
+    from eyemech.problems.context import RunOptions
+    from eyemech.problems.driver import NewtonOptions
+    from eyemech.problems.parameters import parse_assignments
+
+    newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()})
+    return RunOptions(quiet=args.quiet, fields=not args.no_fields, pictures=not args.no_pictures,
+                      newton=newton)
+
+
+def _run(scene, overrides, args, options, comm, say) -> int:
+    from eyemech.problems.driver import SolveFailure
+    from eyemech.problems.parameters import build
+
+    params = build(scene.parameters, overrides)  # raises before anything is created
+    out = Path(args.out) if args.out else Path("results") / scene.name
+    try:
+        result = scene.run(params, comm=comm, out=out, options=options)
+    except SolveFailure:
+        if args.json:
+            say(json.dumps(json.loads((out / "results.json").read_text())) if comm.rank == 0 else "")
+        raise
+    if args.json:
+        say(json.dumps(result.as_json()))
+    else:
+        _summary(result, out, say)
+    return 0
+
+
+def _summary(result, out: Path, say) -> None:
+    say(f"{result.scene}: {result.status} in {result.timings.get('total', 0):.1f} s "
+        f"on {result.mpi_size} rank(s); results in {out}/results.json")
+    for key, value in result.quantities.items():
+        if isinstance(value, float):
+            say(f"  {key:32s} {value:.6g}")
+        elif isinstance(value, (int, bool, str)):
+            say(f"  {key:32s} {value}")
+
+
+def _sweep(scene, overrides, args, options, comm, say) -> int:
+    from eyemech.problems.sweep import parse_grid, run_sweep
+
+    rows = run_sweep(scene, overrides, parse_grid(args.grid), Path(args.out),
+                     ranks_per_case=args.ranks_per_case, options=options, resume=args.resume,
+                     comm=comm)
+    if comm.rank == 0:
+        failed = [r for r in rows if r.get("status") != "ok"]
+        if args.json:
+            say(json.dumps(rows))
+        else:
+            say(f"{len(rows)} cases, {len(failed)} failed; table in {Path(args.out) / 'sweep.csv'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
