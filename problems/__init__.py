@@ -11,16 +11,11 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-# Infrastructure modules, not scenes (kept out of the discovery import).
-_INFRASTRUCTURE = {"analytic", "context", "driver", "output", "parameters", "results", "scene",
-                   "spaces", "sweep", "registry"}
-
-
 def scenes() -> dict:
     """Name -> Scene for every scene module in this package."""
     found = {}
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name.startswith("_") or info.name in _INFRASTRUCTURE:
+        if info.name.startswith("_") or info.ispkg:
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
         scene = getattr(module, "SCENE", None)

@@ -51,6 +51,12 @@ class ElementFamily:
 ELEMENTS: dict[str, ElementFamily] = {
     "P2P1": ElementFamily("P2P1", "tetrahedron", 2, "P", 1,
                           "Taylor–Hood tetrahedra: continuous P2 displacement, P1 pressure"),
+    "P2P0": ElementFamily("P2P0", "tetrahedron", 2, "DG", 0,
+                          "P2 displacement, piecewise constant pressure"),
+    "Q1P0": ElementFamily("Q1P0", "hexahedron", 1, "DG", 0,
+                          "the buckling paper's element: 8 displacement nodes, 1 pressure"),
+    "Q2P1": ElementFamily("Q2P1", "hexahedron", 2, "DPC", 1,
+                          "Q2 displacement, discontinuous P1 (DPC) pressure: LBB-stable (cornea paper)"),
 }
 
 
@@ -69,8 +75,7 @@ def mixed_displacement_pressure(mesh: dolfinx.mesh.Mesh, family: ElementFamily):
         "DG": lambda: basix.ufl.element("Lagrange", cell, family.pressure_degree,
                                         discontinuous=True, lagrange_variant=lagrange),
         "DPC": lambda: basix.ufl.element("DPC", cell, family.pressure_degree, discontinuous=True,
-                                         dpc_variant=basix.DPCVariant.legendre,
-                                         lagrange_variant=basix.LagrangeVariant.legendre),
+                                         dpc_variant=basix.DPCVariant.legendre),
     }[family.pressure_family]()
     Q = dolfinx.fem.functionspace(mesh, element)
     u, p = dolfinx.fem.Function(V), dolfinx.fem.Function(Q)

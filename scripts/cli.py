@@ -3,6 +3,7 @@
     eyemech list [-v]
     eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
     eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R]
+    eyemech study NAME|all|list [--quick] [--out DIR]
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
 failed (the last converged state and results.json with status "failed" are kept).
@@ -53,6 +54,10 @@ def _parser() -> argparse.ArgumentParser:
     p_sweep.add_argument("--ranks-per-case", type=int, default=1)
     p_sweep.add_argument("--resume", action="store_true", help="skip cases already finished")
     p_sweep.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p_study = sub.add_parser("study", help="accuracy-vs-cost and stability studies (CSV + PNG)")
+    p_study.add_argument("name", help="study name, or 'all' (see 'eyemech study list')")
+    p_study.add_argument("--out", default="docs/studies", help="output folder")
+    p_study.add_argument("--quick", action="store_true", help="coarse settings (for tests)")
     return parser
 
 
@@ -73,6 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "list":
             return _list(problems, args.verbose, say)
+        if args.command == "study":
+            return _study(args, comm, say)
         scene = problems.get(args.name)
         overrides = _overrides(args)
         options = _options(args)
@@ -98,6 +105,24 @@ def _list(problems, verbose: bool, say) -> int:
         if verbose:
             for key, kind, default, unit, text in describe(scene.parameters):
                 say(f"    {key:20s} {kind:14s} {default!s:12s} {unit:8s} {text}")
+    return 0
+
+
+def _study(args, comm, say) -> int:
+    from eyemech.problems.studies import studies
+
+    known = studies()
+    if args.name == "list":
+        for name, study in known.items():
+            say(f"{name:32s} {study.summary}")
+        return 0
+    chosen = list(known) if args.name == "all" else [args.name]
+    for name in chosen:
+        if name not in known:
+            raise KeyError(f"unknown study '{name}'; known: {', '.join(sorted(known))}")
+    for name in chosen:
+        files = known[name].run(out=Path(args.out), quick=args.quick, comm=comm)
+        say(f"{name}: wrote {', '.join(str(f) for f in files)}")
     return 0
 
 

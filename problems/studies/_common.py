@@ -1,0 +1,16 @@
+"""Shared pieces of studies: a stamp naming machine, versions and date on every chart."""
+
+from __future__ import annotations
+
+import datetime
+import platform
+
+from eyemech.problems.results import versions
+
+
+def stamp() -> str:
+    """One line for a chart footer and a CSV comment: what measured this, where, when."""
+    v = versions()
+    return (f"{datetime.date.today().isoformat()} · {platform.node()} ({platform.machine()}, "
+            f"{__import__('os').cpu_count()} cpus) · eyemech {v.get('eyemech', '?')} · "
+            f"DOLFINx {v.get('dolfinx', '?')} · PETSc {v.get('petsc', '?')}")
