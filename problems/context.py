@@ -54,7 +54,9 @@ class RunContext:
     def __exit__(self, kind, error, tb) -> bool:
         if isinstance(error, SolveFailure):
             self.result.status = "failed"
-            self.result.message = str(error)
+            kept = f" Converged steps are in {self.out}: {', '.join(self.result.fields)}." \
+                if self.out is not None and self.result.fields else ""
+            self.result.message = str(error) + kept
         elif error is not None:
             self.result.status = "error"
             self.result.message = "".join(traceback.format_exception_only(kind, error)).strip()

@@ -56,7 +56,7 @@ class NewtonOptions:
     rtol: float = 1e-9
     atol: float = 1e-10
     stol: float = 0.0
-    max_it: int = 25
+    max_it: int = 15
     linear_solver: str = "mumps"  # mumps | superlu_dist | petsc (LU) | iterative via petsc
     petsc: dict[str, str] = dataclasses.field(default_factory=dict)
 
@@ -199,7 +199,7 @@ class Stepping:
     start: float = 0.0
     end: float = 1.0
     initial_step: float = 0.25
-    min_step: float = 1e-5
+    min_step: float = 1e-4
     max_step: float = 1.0
     grow: float = 1.5
     easy_iterations: int = 6

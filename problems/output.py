@@ -135,3 +135,34 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
     plotter.screenshot(str(tmp))
     plotter.close()
     os.replace(tmp, path)
+
+
+class PyvistaSeries:
+    """Converged states as ``.vtu`` files plus a ``.pvd`` index, written by rank 0 from
+    the gathered grid: what notebooks read with ``pyvista.read`` (the VTX ``.bp`` files
+    are for ParaView and parallel I/O; VTK's PyPI wheel cannot read them)."""
+
+    def __init__(self, out: Path | None, comm: MPI.Comm, stem: str = "state"):
+        self.out, self.comm, self.stem = (Path(out) if out else None), comm, stem
+        self.entries: list[tuple[float, str]] = []
+
+    @property
+    def files(self) -> list[str]:
+        return [f"{self.stem}.pvd"] if self.entries else []
+
+    def write(self, time: float, grid) -> None:
+        """``grid`` from :func:`gather_grid` (None on ranks other than 0)."""
+        if self.out is None or self.comm.rank != 0 or grid is None:
+            return
+        name = f"{self.stem}_{len(self.entries):04d}.vtu"
+        tmp = self.out / f".{name}.tmp.vtu"
+        grid.save(str(tmp))
+        os.replace(tmp, self.out / name)
+        self.entries.append((time, name))
+        datasets = "\n".join(f'    <DataSet timestep="{t:.9g}" part="0" file="{n}"/>'
+                             for t, n in self.entries)
+        index = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
+                 f'  <Collection>\n{datasets}\n  </Collection>\n</VTKFile>\n')
+        from eyemech.problems.results import write_text_atomic
+
+        write_text_atomic(self.out / f"{self.stem}.pvd", index)

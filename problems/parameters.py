@@ -66,13 +66,14 @@ def convert(cls: type, key: str, raw: Any) -> Any:
     try:
         return _convert_value(kind, raw)
     except (TypeError, ValueError) as err:
-        raise ParameterError(key, f"cannot read {raw!r} as {_type_name(kind)} ({err})") from None
+        raise ParameterError(key, f"cannot read {raw!r} as {_type_name(kind)}") from None
 
 
 def _type_name(kind: Any) -> str:
     if get_origin(kind) is Literal:
         return "one of " + ", ".join(repr(a) for a in get_args(kind))
-    return getattr(kind, "__name__", str(kind))
+    plain = {int: "an integer", float: "a number", bool: "true or false", str: "text"}
+    return plain.get(kind, getattr(kind, "__name__", str(kind)))
 
 
 def _convert_value(kind: Any, raw: Any) -> Any:

@@ -20,8 +20,8 @@ from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, incompre
 from eyemech.meshes import spherical_shell
 from eyemech.problems import analytic
 from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
+from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, render_png
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
 from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure, symmetry_bcs, surface_mean
@@ -83,9 +83,23 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     "cavity_volume": ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form))}
 
         u.name, p.name = "displacement", "pressure"
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [u])
-        writer_p = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [p])
-        writer.write(0.0)
+        field_dir = ctx.out if ctx.options.fields else None
+        writer = FieldWriter(field_dir, ctx.comm, [u])
+        writer_p = FieldWriter(field_dir, ctx.comm, [p])
+        series = PyvistaSeries(field_dir, ctx.comm)
+        # pressure on the displacement's nodes, for pyvista (one grid, one space)
+        nodal_space = dolfinx.fem.functionspace(shell.mesh, ("Lagrange", family.displacement_degree))
+        nodal_pressure = dolfinx.fem.Function(nodal_space, name="pressure")
+
+        def write_state(load: float) -> None:
+            with ctx.timings("output"):
+                writer.write(load)
+                writer_p.write(load)
+                if field_dir is not None:
+                    nodal_pressure.interpolate(p)
+                    series.write(load, gather_grid(u, {"pressure": nodal_pressure}))
+
+        write_state(0.0)
 
         def apply(load: float, _increment: float) -> None:
             pressure.value = load * params.pressure
@@ -95,17 +109,19 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.record_step(step=record.step, load_factor=record.load,
                             pressure=record.load * params.pressure, newton_iterations=record.iterations,
                             cuts=record.cuts, residuals=record.residuals, **values)
-            with ctx.timings("output"):
-                writer.write(record.load)
-                writer_p.write(record.load)
+            write_state(record.load)
 
         try:
             follow_path(solver, apply, Stepping(initial_step=1.0 / params.load_steps),
                         on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
+        except SolveFailure:
+            # the driver restored the last converged state: report that one
+            ctx.result.quantities.update(quantities())
+            raise
         finally:
             writer.close()
             writer_p.close()
-            ctx.result.fields = writer.files + writer_p.files
+            ctx.result.fields = writer.files + writer_p.files + series.files
         ctx.result.quantities.update(quantities())
         ctx.result.quantities["jacobian_nonzeros"] = solver.jacobian_nonzeros()
         ctx.result.quantities["dofs"] = sum(f.function_space.dofmap.index_map.size_global

@@ -1,0 +1,54 @@
+"""Parameter handling: typed overrides, TOML configs and errors that name the key.
+No solves here — these are the checks that run before anything is built."""
+
+from __future__ import annotations
+
+import pytest
+
+from eyemech.problems import sphere_inflation as si
+from eyemech.problems.parameters import ParameterError, build, describe, load_toml
+
+
+def test_defaults_are_valid():
+    params = build(si.Parameters)
+    assert params.inner_radius == 10.0 and params.outer_radius == 12.0
+
+
+def test_overrides_are_typed_from_the_dataclass():
+    params = build(si.Parameters, {"pressure": "0.02", "load_steps": "3", "element": "P2P1"})
+    assert params.pressure == pytest.approx(0.02) and isinstance(params.load_steps, int)
+
+
+@pytest.mark.parametrize("overrides, key, words", [
+    ({"presure": "1"}, "presure", "valid keys are"),
+    ({"pressure": "high"}, "pressure", "cannot read"),
+    ({"load_steps": "2.5"}, "load_steps", "integer"),
+    ({"c10": "0"}, "c10", "> 0"),
+    ({"c10": "-1"}, "c10", "> 0"),
+    ({"outer_radius": "9"}, "outer_radius", "inner_radius"),
+    ({"mesh_size": "-0.5"}, "mesh_size", "> 0"),
+    ({"element": "Q9"}, "element", "one of"),
+])
+def test_bad_input_names_the_key(overrides, key, words):
+    with pytest.raises(ParameterError) as info:
+        build(si.Parameters, overrides)
+    assert info.value.key == key
+    assert key in str(info.value) and words in str(info.value)
+
+
+def test_unknown_key_lists_the_valid_ones():
+    with pytest.raises(ParameterError) as info:
+        build(si.Parameters, {"radius": "1"})
+    assert "inner_radius" in str(info.value) and "mesh_size" in str(info.value)
+
+
+def test_toml_config(tmp_path):
+    config = tmp_path / "case.toml"
+    config.write_text('[parameters]\npressure = 0.015\nmesh_size = 2.0\n')
+    params = build(si.Parameters, load_toml(config))
+    assert params.pressure == 0.015 and params.mesh_size == 2.0
+
+
+def test_every_parameter_is_documented():
+    for name, _kind, _default, _unit, text in describe(si.Parameters):
+        assert text, f"{name} has no help text"
