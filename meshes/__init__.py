@@ -2,5 +2,6 @@
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh, from_gmsh
 from eyemech.meshes.sphere import spherical_shell
+from eyemech.meshes.eye import EyeGeometry, half_eye
 
-__all__ = ["MeshError", "TaggedMesh", "from_gmsh", "spherical_shell"]
+__all__ = ["EyeGeometry", "MeshError", "TaggedMesh", "from_gmsh", "half_eye", "spherical_shell"]
