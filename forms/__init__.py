@@ -11,6 +11,8 @@ from eyemech.forms.hyperelastic import (
     NeoHooke,
     PolynomialIsochoric,
     incompressible_energy_density,
+    nearly_incompressible_energy_density,
+    volumetric_energy,
 )
 from eyemech.forms.cavity import enclosed_volume, follower_pressure
 
@@ -24,4 +26,6 @@ __all__ = [
     "follower_pressure",
     "incompressible_energy_density",
     "isochoric_invariants",
+    "nearly_incompressible_energy_density",
+    "volumetric_energy",
 ]
