@@ -14,9 +14,14 @@ from eyemech.forms.hyperelastic import (
     nearly_incompressible_energy_density,
     volumetric_energy,
 )
-from eyemech.forms.cavity import enclosed_volume, follower_pressure
+from eyemech.forms.cavity import (axis_volumes, enclosed_volume, follower_pressure, liquid_law_residual,
+                                  liquid_pressure, volume_density)
 
 __all__ = [
+    "axis_volumes",
+    "liquid_law_residual",
+    "liquid_pressure",
+    "volume_density",
     "Material",
     "MooneyRivlin",
     "NeoHooke",
