@@ -123,12 +123,29 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.result.quantities["inner_radius_exact"] = exact
             ctx.result.quantities["inner_radius_error"] = (
                 ctx.result.quantities["inner_radius_deformed"] / exact - 1.0)
+            ctx.result.quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
         except ValueError:
             pass
         if ctx.options.pictures and ctx.out is not None:
             with ctx.timings("output"):
                 _picture(u, ctx, params)
     return ctx.result
+
+
+def _displacement_error(u, shell, params: Parameters, a: float) -> float:
+    """‖u − u_exact‖ / ‖u_exact‖ in L² over the wall; u_exact = (r(R)/R − 1) X with
+    r³ = R³ − A³ + a³ (incompressible radial map, :mod:`analytic`)."""
+    X = ufl.SpatialCoordinate(shell.mesh)
+    R = ufl.sqrt(ufl.dot(X, X))
+    r = (R**3 - params.inner_radius**3 + a**3) ** (1.0 / 3.0)
+    exact = (r / R - 1.0) * X
+    dx = shell.dx({"quadrature_degree": 2 * u.function_space.element.basix_element.degree + 2})
+    comm = shell.mesh.comm
+    error = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
+        ufl.dot(u - exact, u - exact) * dx)), op=MPI.SUM)
+    norm = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(ufl.dot(exact, exact) * dx)),
+                          op=MPI.SUM)
+    return float(np.sqrt(error / norm))
 
 
 def _picture(u, ctx: RunContext, params: Parameters) -> None:
