@@ -39,12 +39,13 @@ def _assemble(form) -> float:
     return form.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
 
 
-def check_closed(u, wall_measure, name: str = "cavity wall", rtol: float = 1e-6) -> float:
+def check_closed(u, wall_measure, name: str = "cavity wall", rtol: float = 1e-6,
+                 outward_sign: float = -1.0) -> float:
     """The enclosed volume, after checking that the wall closes it (with symmetry
     planes through the origin): the volumes from the fields x_k e_k must agree
     (:func:`eyemech.forms.axis_volumes`). Raises MeshError otherwise."""
-    volumes = [_assemble(dolfinx.fem.form(f)) for f in axis_volumes(u, wall_measure)]
-    volume = _assemble(dolfinx.fem.form(enclosed_volume(u, wall_measure)))
+    volumes = [_assemble(dolfinx.fem.form(f)) for f in axis_volumes(u, wall_measure, outward_sign)]
+    volume = _assemble(dolfinx.fem.form(enclosed_volume(u, wall_measure, outward_sign)))
     spread = max(volumes) - min(volumes)
     if not volume > 0 or spread > rtol * abs(volume):
         raise MeshError(
