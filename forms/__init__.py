@@ -11,10 +11,17 @@ from eyemech.forms.hyperelastic import (
     NeoHooke,
     PolynomialIsochoric,
     incompressible_energy_density,
+    nearly_incompressible_energy_density,
+    volumetric_energy,
 )
-from eyemech.forms.cavity import enclosed_volume, follower_pressure
+from eyemech.forms.cavity import (axis_volumes, enclosed_volume, follower_pressure, liquid_law_residual,
+                                  liquid_pressure, volume_density)
 
 __all__ = [
+    "axis_volumes",
+    "liquid_law_residual",
+    "liquid_pressure",
+    "volume_density",
     "Material",
     "MooneyRivlin",
     "NeoHooke",
@@ -24,4 +31,6 @@ __all__ = [
     "follower_pressure",
     "incompressible_energy_density",
     "isochoric_invariants",
+    "nearly_incompressible_energy_density",
+    "volumetric_energy",
 ]
