@@ -25,3 +25,8 @@ __all__ = [
     "incompressible_energy_density",
     "isochoric_invariants",
 ]
+
+from eyemech.forms import contact  # noqa: E402  (obstacles: contact.Plane, contact.Ring, ...)
+from eyemech.forms.elastic import compressible_neo_hooke, lame  # noqa: E402
+
+__all__ += ["contact", "compressible_neo_hooke", "lame"]
