@@ -80,9 +80,12 @@ class NodeToSurfaceContact:
 
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
                  penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
-                 timings: Timings | None = None):
+                 smoothing: float = 0.0, timings: Timings | None = None):
         if not penalty > 0:
             raise ValueError(f"the penalty must be > 0, got {penalty}")
+        if not smoothing >= 0:
+            raise ValueError(f"the smoothing width must be >= 0, got {smoothing}")
+        self.smoothing = float(smoothing)
         tagged.require_nonempty(slave, master)
         self.u, self.penalty, self.search_depth = u, float(penalty), float(search_depth)
         self.candidates = candidates
@@ -206,21 +209,45 @@ class NodeToSurfaceContact:
                                     np.zeros(0, dtype=int), np.zeros((0, 3)), np.inf)
             _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
             nearest = nearest.reshape(len(slaves), k)
-            points, shape = closest_points(slaves[:, None, :], corners[nearest])
+            points, _ = closest_points(slaves[:, None, :], corners[nearest])
             distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
             best = np.argmin(distance, axis=1)
             rows = np.arange(len(slaves))
-            tri = nearest[rows, best]
+            tri = self._sticky(slaves, corners, nearest, best, rows)
+            self._previous = tri.copy()
             a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
+            shape = closest_points(slaves, corners[tri])[1]
             normal = np.cross(b - a, c - a)
             normal /= np.linalg.norm(normal, axis=1)[:, None]
-            gaps = np.einsum("ij,ij->i", slaves - points[rows, best], normal)
+            # the paper's gap G = (x_h − x_t1)·n to the triangle's plane: its Hessian
+            # in x_s vanishes, whereas the distance to a nearest edge or vertex
+            # would add a tangential stiffness α w (I − n nᵀ) that a frozen-normal
+            # Jacobian misses (Newton then oscillates)
+            gaps = np.einsum("ij,ij->i", slaves - a, normal)
             # a pair far below the master surface is on the wrong side: not contact
             paired = gaps > -self.search_depth
-            active = np.flatnonzero(paired & (gaps < 0))
+            active = np.flatnonzero(paired & (gaps < self.smoothing))
             min_gap = float(np.min(gaps[paired], initial=np.inf))
             return ContactState(active, gaps[active], normal[active], tri[active],
-                                shape[rows, best][active], min_gap)
+                                shape[active], min_gap)
+
+    def _sticky(self, slaves, corners, nearest, best, rows):
+        """Keep the previous triangle while the node's projection on its plane stays
+        inside it up to a barycentric tolerance ``STICKY``.
+
+        Slave nodes sitting over a master edge would otherwise alternate between
+        the two triangles from one Newton iterate to the next (the plane gap jumps
+        by the offset times the angle between them) and Newton cycles. The price is
+        a gap measured on the previous plane up to STICKY·h beyond its edge.
+        """
+        previous = getattr(self, "_previous", None)
+        if previous is None or len(previous) != len(rows):
+            return nearest[rows, best]
+        bary = plane_barycentric(slaves, corners[previous])
+        keep = bary.min(axis=1) >= -self.STICKY
+        return np.where(keep, previous, nearest[rows, best])
+
+    STICKY = 0.02
 
     # -- assembly hooks -------------------------------------------------------------------
     def _pair_dofs(self, state: ContactState) -> np.ndarray:
@@ -234,10 +261,11 @@ class NodeToSurfaceContact:
         return (factors[:, :, None] * state.normals[:, None, :]).reshape(len(factors), 4 * self.bs)
 
     def residual_hook(self, _x: PETSc.Vec, b: PETSc.Vec) -> None:
-        """F += α w g D for the active pairs (u already holds the iterate)."""
+        """F += −w p(g) D for the active pairs (u already holds the iterate)."""
         self.state = state = self.search()
         dofs = self._pair_dofs(state)
-        scale = self.penalty * self.slave_weights[state.active] * state.gaps
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        scale = -self.slave_weights[state.active] * pressure
         values = scale[:, None] * self._pair_vectors(state)
         keep = ~np.isin(dofs, list(self._constrained)) if self._constrained else np.ones_like(dofs, bool)
         b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
@@ -245,15 +273,17 @@ class NodeToSurfaceContact:
         b.assemblyEnd()
 
     def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
-        """K += α w D Dᵀ (frozen normal) for the active pairs."""
+        """K += −w p'(g) D Dᵀ (frozen normal) for the active pairs."""
         state = self.search()
         dofs = self._pair_dofs(state)
         D = self._pair_vectors(state)
+        _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        stiffness = -self.slave_weights[state.active] * slope
         constrained = self._constrained
         for i in range(len(dofs)):
             keep = np.array([d not in constrained for d in dofs[i]])
             index = dofs[i][keep].astype(PETSc.IntType)
-            block = self.penalty * self.slave_weights[state.active[i]] * np.outer(D[i][keep], D[i][keep])
+            block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
             A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
         A.assemble()
 
@@ -262,8 +292,9 @@ class NodeToSurfaceContact:
         """Collective: active nodes, max penetration, contact area and normal force."""
         state = self.state or self.search()
         weights = self.slave_weights[state.active]
-        local = np.array([len(state.active), weights.sum(),
-                          (self.penalty * weights * -state.gaps).sum()])
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        touching = state.gaps < 0
+        local = np.array([touching.sum(), weights[touching].sum(), (weights * pressure).sum()])
         total = self.comm.allreduce(local, op=MPI.SUM)
         depth = self.comm.allreduce(float(np.max(-state.gaps, initial=0.0)), op=MPI.MAX)
         return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
@@ -272,6 +303,38 @@ class NodeToSurfaceContact:
     def min_gap(self) -> float:
         """Smallest gap of any paired slave node (collective; negative = penetration)."""
         return self.comm.allreduce(self.search().min_gap, op=MPI.MIN)
+
+
+def penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Contact pressure p(g) ≥ 0 and its slope dp/dg.
+
+    ε = 0: p = α ⟨−g⟩ (kink at g = 0). ε > 0: the kink is rounded off over
+    −ε < g < ε by p = α (ε − g)² / (4ε), which joins α(−g) and 0 with matching
+    slopes; p is then C¹, so Newton cannot cycle on a node sitting at g ≈ 0.
+    The price: a pressure up to αε/4 for gaps below ε (a stand-off ≤ ε).
+    """
+    if smoothing == 0.0:
+        return penalty * np.maximum(-gaps, 0.0), np.where(gaps < 0, -penalty, 0.0)
+    eps = smoothing
+    blend = (gaps > -eps) & (gaps < eps)
+    pressure = np.where(gaps <= -eps, -penalty * gaps, 0.0)
+    slope = np.where(gaps <= -eps, -penalty, 0.0)
+    pressure = np.where(blend, penalty * (eps - gaps) ** 2 / (4 * eps), pressure)
+    slope = np.where(blend, -penalty * (eps - gaps) / (2 * eps), slope)
+    return pressure, slope
+
+
+def plane_barycentric(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (n, 3) of the projections of ``points`` (n, 3) on the
+    planes of ``triangles`` (n, 3, 3); all ≥ 0 inside."""
+    a = triangles[:, 0]
+    e1, e2, w = triangles[:, 1] - a, triangles[:, 2] - a, points - a
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    r1, r2 = (w * e1).sum(1), (w * e2).sum(1)
+    det = d11 * d22 - d12**2
+    s = (d22 * r1 - d12 * r2) / det
+    t = (d11 * r2 - d12 * r1) / det
+    return np.column_stack([1 - s - t, s, t])
 
 
 def closest_points(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

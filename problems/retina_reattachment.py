@@ -48,19 +48,21 @@ class Parameters(SceneParameters):
     soft_thickness: float = field(0.2, "thickness of the soft layer (retina)", "mm")
     gap: float = field(0.1, "initial gap between the layers", "mm")
     stiff_thickness: float = field(0.3, "thickness of the stiff layer (choroid, sclera)", "mm")
-    half_angle: float = field(20.0, "polar half-angle of the caps", "deg")
+    half_angle: float = field(12.0, "polar half-angle of the caps", "deg")
     soft_modulus: float = field(0.005, "Young's modulus of the soft layer", "MPa")
     stiff_modulus: float = field(0.05, "Young's modulus of the stiff layer", "MPa")
     poisson_ratio: float = field(0.3, "Poisson's ratio of both layers", "")
     pressure: float = field(2e-5, "pressure on the soft layer's inner face", "MPa")
     penalty: float = field(100.0, "penalty factor: α = penalty · soft_modulus / mesh_size", "")
-    mesh_size: float = field(0.25, "element size", "mm")
+    smoothing: float = field(0.5, "penalty round-off width ε as a fraction of p/α (0 = plain kink)", "")
+    mesh_size: float = field(0.3, "element size", "mm")
     degree: int = field(2, "displacement degree (1 or 2)")
-    load_steps: int = field(4, "initial number of load steps (cut and grown as needed)")
+    load_steps: int = field(8, "initial number of load steps (cut and grown as needed)")
     slave: str = field("slave", "facet region of the slave surface")
     master: str = field("master", "facet region of the master surface")
 
     def validate(self) -> None:
+        self.require_nonnegative("smoothing")
         self.require_positive("inner_radius", "soft_thickness", "gap", "stiff_thickness",
                               "half_angle", "soft_modulus", "stiff_modulus", "pressure", "penalty",
                               "mesh_size", "load_steps")
@@ -98,6 +100,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         alpha = params.penalty_stiffness
         contact = NodeToSurfaceContact(u, caps, params.slave, params.master, alpha, bcs,
                                        search_depth=params.gap + params.soft_thickness,
+                                       smoothing=params.smoothing * params.pressure / alpha,
                                        timings=ctx.timings)
         if contact.min_gap() < 0:
             raise ParameterError("gap", "the layers start interpenetrating")
