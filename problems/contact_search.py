@@ -52,6 +52,7 @@ import dolfinx.fem
 import dolfinx.fem.petsc
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh
+from eyemech.problems.parameters import ParameterError
 from eyemech.problems.results import Timings
 
 
@@ -300,6 +301,14 @@ class NodeToSurfaceContact:
         return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
                 "contact_normal_force": float(total[2]), "max_penetration": depth}
 
+    def refuse_initial_penetration(self, key: str, tolerance: float = 0.0) -> None:
+        """ParameterError naming ``key`` when slave nodes start inside the master body
+        (deeper than ``tolerance`` but within the search depth)."""
+        gap = self.min_gap()
+        if gap < -tolerance:
+            raise ParameterError(key, f"the slave surface starts {-gap:.4g} mm inside the master "
+                                      "surface (the bodies interpenetrate before any load)")
+
     def min_gap(self) -> float:
         """Smallest gap of any paired slave node (collective; negative = penetration)."""
         return self.comm.allreduce(self.search().min_gap, op=MPI.MIN)
@@ -341,8 +350,10 @@ def closest_points(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarra
     """Closest point on each triangle (…, 3, 3) to each point (…, 3), broadcast, and its
     barycentric weights (N1, N2, N3): the plane projection when it falls inside,
     else the nearest point on the three edges."""
+    shape = np.broadcast_shapes(points.shape, triangles.shape[:-2] + (3,))
+    triangles = np.broadcast_to(triangles, shape[:-1] + (3, 3))
     a, b, c = triangles[..., 0, :], triangles[..., 1, :], triangles[..., 2, :]
-    points = np.broadcast_to(points, a.shape)
+    points = np.broadcast_to(points, shape)
     e1, e2, w = b - a, c - a, points - a
     d11, d12, d22 = (np.einsum("...i,...i", e1, e1), np.einsum("...i,...i", e1, e2),
                      np.einsum("...i,...i", e2, e2))

@@ -102,8 +102,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                        search_depth=params.gap + params.soft_thickness,
                                        smoothing=params.smoothing * params.pressure / alpha,
                                        timings=ctx.timings)
-        if contact.min_gap() < 0:
-            raise ParameterError("gap", "the layers start interpenetrating")
+        contact.refuse_initial_penetration("gap")
         solver = NonlinearSolver(residual, u, bcs, options=ctx.options.newton, timings=ctx.timings,
                                  residual_hooks=[contact.residual_hook],
                                  jacobian_hooks=[contact.jacobian_hook])
