@@ -34,3 +34,8 @@ __all__ = [
     "nearly_incompressible_energy_density",
     "volumetric_energy",
 ]
+
+from eyemech.forms import contact  # noqa: E402  (obstacles: contact.Plane, contact.Ring, ...)
+from eyemech.forms.elastic import compressible_neo_hooke, lame  # noqa: E402
+
+__all__ += ["contact", "compressible_neo_hooke", "lame"]

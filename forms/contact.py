@@ -1,0 +1,234 @@
+"""Penalty contact with analytic rigid obstacles, in UFL.
+
+Each obstacle is a small dataclass with a signed distance ``gap(x)`` of the
+deformed position x = X + u: g > 0 outside the obstacle (free), g < 0 inside
+(penetration). Its outward unit normal is n = ∂g/∂x (``normal``). The obstacle
+moves by a prescribed motion — a translation vector and, for bodies of
+revolution, a radial ``indentation`` towards their axis — given as dolfinx
+Constants (or any UFL expression), so the load parameter of a scene can be the
+obstacle's position.
+
+The penalty energy on the slave surface Γ_s (reference area, seed 002 eq. 9) is
+
+    Π_c = ∫_Γs ½ α ⟨−g(X + u)⟩² dA,      ⟨a⟩ = max(a, 0),
+
+whose first variation δΠ_c = −∫ α ⟨−g⟩ n·δu dA is the contact traction
+t = α ⟨−g⟩ n pushing the body out of the obstacle. UFL differentiates it exactly
+(curvature of the obstacle included), so Newton sees the consistent tangent.
+
+Obstacles of revolution use cylindrical coordinates about an axis (point a, unit
+direction e): z = (x − a)·e and ρ = |x − a − z e|; a ring is any 2D profile in
+the (ρ, z) half-plane swept about the axis: the encircling band and the
+silicone tire of scleral buckling are rounded rectangles or polygons there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Sequence
+
+import numpy as np
+import ufl
+
+Vector3 = tuple[float, float, float]
+
+
+def _unit(v: Sequence[float]) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    norm = np.linalg.norm(v)
+    if not norm > 0:
+        raise ValueError("a direction must be a nonzero vector")
+    return v / norm
+
+
+def _vec(v: Sequence[float]) -> ufl.core.expr.Expr:
+    return ufl.as_vector([float(c) for c in v])
+
+
+def _translated(x, translation):
+    return x if translation is None else x - translation
+
+
+def _soft_norm(w):
+    """|w|, kept differentiable at w = 0 (an axis point of an obstacle of revolution)."""
+    return ufl.sqrt(ufl.dot(w, w) + 1e-24)
+
+
+# -- obstacles -------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Plane:
+    """Half-space {(x − p)·m < 0}; the body lives where (x − p)·m > 0.
+
+    ``normal`` m points from the obstacle into the body's side.
+    """
+
+    point: Vector3
+    normal: Vector3
+    translation: object | None = None  # UFL vector (dolfinx Constant of shape (3,))
+
+    def gap(self, x):
+        m = _vec(_unit(self.normal))
+        return ufl.dot(_translated(x, self.translation) - _vec(self.point), m)
+
+
+@dataclasses.dataclass(frozen=True)
+class Sphere:
+    """A rigid ball (body outside it) or a spherical cup (``inside=True``: body inside)."""
+
+    center: Vector3
+    radius: float
+    inside: bool = False
+    translation: object | None = None
+
+    def gap(self, x):
+        distance = _soft_norm(_translated(x, self.translation) - _vec(self.center))
+        return self.radius - distance if self.inside else distance - self.radius
+
+
+@dataclasses.dataclass(frozen=True)
+class _OfRevolution:
+    """Cylindrical coordinates about an axis, with a radial indentation δ that
+    moves the obstacle δ towards the axis (the band tightening around the eye)."""
+
+    axis_point: Vector3 = (0.0, 0.0, 0.0)
+    axis: Vector3 = (0.0, 0.0, 1.0)
+    translation: object | None = None
+    indentation: object | None = None  # UFL scalar (dolfinx Constant)
+
+    def _rho_z(self, x):
+        y = _translated(x, self.translation) - _vec(self.axis_point)
+        e = _vec(_unit(self.axis))
+        z = ufl.dot(y, e)
+        rho = _soft_norm(y - z * e)
+        if self.indentation is not None:  # the profile moved inwards = the point moved outwards
+            rho = rho + self.indentation
+        return rho, z
+
+
+@dataclasses.dataclass(frozen=True)
+class Cylinder(_OfRevolution):
+    """An infinite circular cylinder of ``radius``; ``inside=True``: the body is inside
+    (a tube, the band's inner face), else outside (a rod)."""
+
+    radius: float = 1.0
+    inside: bool = True
+
+    def gap(self, x):
+        rho, _ = self._rho_z(x)
+        return self.radius - rho if self.inside else rho - self.radius
+
+
+@dataclasses.dataclass(frozen=True)
+class Torus(_OfRevolution):
+    """A torus: circle of ``tube_radius`` at distance ``major_radius`` from the axis;
+    the body is outside the tube (a round band or an O-ring)."""
+
+    major_radius: float = 1.0
+    tube_radius: float = 0.1
+
+    def gap(self, x):
+        rho, z = self._rho_z(x)
+        return ufl.sqrt((rho - self.major_radius) ** 2 + z**2 + 1e-24) - self.tube_radius
+
+
+# -- 2D profiles in the (ρ, z) half-plane --------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class RoundedRectangle:
+    """Centre (ρc, zc), full ``width`` (along ρ) and ``height`` (along z), corners
+    rounded with ``corner_radius`` (0 = sharp). Signed distance (Quílez)."""
+
+    center: tuple[float, float]
+    width: float
+    height: float
+    corner_radius: float = 0.0
+
+    def __post_init__(self):
+        if not 0 <= self.corner_radius <= 0.5 * min(self.width, self.height):
+            raise ValueError("corner_radius must lie in [0, min(width, height)/2]")
+
+    def distance(self, rho, z):
+        r = self.corner_radius
+        qx = abs(rho - self.center[0]) - (0.5 * self.width - r)
+        qz = abs(z - self.center[1]) - (0.5 * self.height - r)
+        outside = ufl.sqrt(ufl.max_value(qx, 0.0) ** 2 + ufl.max_value(qz, 0.0) ** 2 + 1e-24)
+        return outside + ufl.min_value(ufl.max_value(qx, qz), 0.0) - r
+
+
+@dataclasses.dataclass(frozen=True)
+class Polygon:
+    """A simple closed polygon through ``points`` [(ρ, z), ...], optionally rounded by
+    offsetting it outwards by ``rounding``. Signed distance: the nearest edge gives
+    the magnitude, the crossing number the sign (Quílez's polygon SDF)."""
+
+    points: tuple[tuple[float, float], ...]
+    rounding: float = 0.0
+
+    def __post_init__(self):
+        if len(self.points) < 3:
+            raise ValueError("a polygon needs at least 3 points")
+
+    def distance(self, rho, z):
+        p = ufl.as_vector([rho, z])
+        vertices = [ufl.as_vector([float(a), float(b)]) for a, b in self.points]
+        first = p - vertices[0]
+        squared = ufl.dot(first, first)
+        sign = 1.0
+        for i, vi in enumerate(vertices):
+            vj = vertices[i - 1]
+            e, w = vj - vi, p - vi
+            t = ufl.min_value(ufl.max_value(ufl.dot(w, e) / ufl.dot(e, e), 0.0), 1.0)
+            b = w - t * e
+            squared = ufl.min_value(squared, ufl.dot(b, b))
+            c1, c2 = ufl.ge(p[1], vi[1]), ufl.lt(p[1], vj[1])
+            c3 = ufl.gt(e[0] * w[1], e[1] * w[0])
+            crossing = ufl.Or(ufl.And(ufl.And(c1, c2), c3),
+                              ufl.And(ufl.And(ufl.Not(c1), ufl.Not(c2)), ufl.Not(c3)))
+            sign = sign * ufl.conditional(crossing, -1.0, 1.0)
+        return sign * ufl.sqrt(squared + 1e-24) - self.rounding
+
+
+@dataclasses.dataclass(frozen=True)
+class Ring(_OfRevolution):
+    """A ring swept about the axis from a 2D ``profile`` (RoundedRectangle, Polygon,
+    or anything with ``distance(rho, z)``); the body is outside the profile."""
+
+    profile: object = None
+
+    def gap(self, x):
+        rho, z = self._rho_z(x)
+        return self.profile.distance(rho, z)
+
+
+# -- energy, traction, normal -----------------------------------------------------------------
+def deformed_position(u):
+    return ufl.SpatialCoordinate(u.ufl_function_space().mesh) + u
+
+
+def obstacle_normal(obstacle, u):
+    """n = ∂g/∂x at x = X + u: unit outward normal of the obstacle's level set."""
+    x = ufl.variable(deformed_position(u))
+    return ufl.diff(obstacle.gap(x), x)
+
+
+def penetration(obstacle, u):
+    """⟨−g⟩: how deep the deformed point lies inside the obstacle (0 when free)."""
+    return ufl.max_value(-obstacle.gap(deformed_position(u)), 0.0)
+
+
+def penalty_energy(obstacle, u, penalty, measure):
+    """Π_c = ∫ ½ α ⟨−g(X + u)⟩² dA over ``measure`` (the slave surface, reference area)."""
+    return 0.5 * penalty * penetration(obstacle, u) ** 2 * measure
+
+
+def contact_traction(obstacle, u, penalty):
+    """t = α ⟨−g⟩ n: the force per reference area the obstacle exerts on the body."""
+    return penalty * penetration(obstacle, u) * obstacle_normal(obstacle, u)
+
+
+def default_penalty(youngs_modulus: float, mesh_size: float, factor: float = 100.0) -> float:
+    """α = factor · E / h (MPa/mm). The penetration of a penalty traction p is p/α,
+    so relative to the element size h it is (p/E)/factor: small for factor ≫ p/E.
+    ``factor`` = 100 is what the hertz penalty study (docs/contact.md) justifies."""
+    if not (youngs_modulus > 0 and mesh_size > 0 and factor > 0):
+        raise ValueError("penalty scaling needs E > 0, h > 0, factor > 0")
+    return factor * youngs_modulus / mesh_size

@@ -1,0 +1,22 @@
+"""Compressible isotropic hyperelasticity for bodies that are not nearly
+incompressible (contact benchmarks, stiff supports)."""
+
+from __future__ import annotations
+
+import ufl
+
+
+def lame(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
+    """(μ, λ) from E and ν (ν < 0.5)."""
+    mu = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+    lmbda = youngs_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio))
+    return mu, lmbda
+
+
+def compressible_neo_hooke(u, youngs_modulus: float, poisson_ratio: float):
+    """W = μ/2 (I1 − 3 − 2 ln J) + λ/2 (ln J)², with I1 = tr(FᵀF): linear elasticity
+    with (E, ν) at small strain, well behaved under large compression."""
+    mu, lmbda = lame(youngs_modulus, poisson_ratio)
+    F = ufl.Identity(len(u)) + ufl.grad(u)
+    J = ufl.det(F)
+    return 0.5 * mu * (ufl.tr(F.T * F) - 3 - 2 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2

@@ -1,0 +1,139 @@
+"""Bodies for the contact benchmarks.
+
+``quarter_hemisphere``: the lower half (z ≤ 0) of a ball of radius R centred at the
+origin, one quarter (x ≥ 0, y ≥ 0). Tags: cell ``ball``; facets ``contact`` (the
+spherical surface), ``top`` (the equatorial plane z = 0), ``symmetry_x``,
+``symmetry_y``. Elements are graded from ``contact_size`` within ``zone`` of the
+south pole (0, 0, −R) — where the ball touches a plane — to ``far_size``.
+
+``layered_caps``: two concentric spherical caps about the z axis (one quarter), a
+soft inner layer a small ``gap`` inside a stiffer outer one — the detached retina
+under the choroid. Tags: cells ``soft``, ``stiff``; facets ``slave`` (outer face of
+the soft layer), ``master`` (inner face of the stiff layer), ``pressure`` (inner
+face of the soft layer), ``fixed`` (outer face of the stiff layer), ``soft_rim``
+and ``stiff_rim`` (the conical cuts), ``symmetry_x``, ``symmetry_y``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from eyemech.meshes.tagged import TaggedMesh, from_gmsh
+
+
+def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone: float,
+                       order: int = 2, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    if not 0 < contact_size <= far_size:
+        raise ValueError("need 0 < contact_size <= far_size")
+
+    def build(model):
+        occ = model.occ
+        ball = occ.addSphere(0, 0, 0, radius)
+        box = occ.addBox(0, 0, -2 * radius, 2 * radius, 2 * radius, 2 * radius)
+        quarter, _ = occ.intersect([(3, ball)], [(3, box)])
+        occ.synchronize()
+        model.addPhysicalGroup(3, [quarter[0][1]], tag=1, name="ball")
+        groups = {"contact": [], "top": [], "symmetry_x": [], "symmetry_y": []}
+        tol = 1e-8 * radius
+        for dim, tag in model.getBoundary(quarter, oriented=False):
+            x, y, z = occ.getCenterOfMass(dim, tag)
+            if abs(x) < tol:
+                groups["symmetry_x"].append(tag)
+            elif abs(y) < tol:
+                groups["symmetry_y"].append(tag)
+            elif abs(z) < tol:
+                groups["top"].append(tag)
+            else:
+                groups["contact"].append(tag)
+        for tag, (name, surfaces) in enumerate(groups.items(), start=1):
+            model.addPhysicalGroup(2, surfaces, tag=tag, name=name)
+        pole = occ.addPoint(0, 0, -radius)
+        occ.synchronize()
+        _graded_field(model, [pole], contact_size, far_size, zone)
+        model.mesh.generate(3)
+        if order > 1:
+            model.mesh.setOrder(order)
+
+    return from_gmsh(build, comm)
+
+
+def _graded_field(model, points: list[int], fine: float, coarse: float, zone: float) -> None:
+    import gmsh
+
+    distance = model.mesh.field.add("Distance")
+    model.mesh.field.setNumbers(distance, "PointsList", points)
+    threshold = model.mesh.field.add("Threshold")
+    model.mesh.field.setNumber(threshold, "InField", distance)
+    model.mesh.field.setNumber(threshold, "SizeMin", fine)
+    model.mesh.field.setNumber(threshold, "SizeMax", coarse)
+    model.mesh.field.setNumber(threshold, "DistMin", zone)
+    model.mesh.field.setNumber(threshold, "DistMax", zone + 2 * coarse)
+    model.mesh.field.setAsBackgroundMesh(threshold)
+    gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+    # the pole is an embedded point only to carry the field; keep it out of the mesh
+    gmsh.option.setNumber("Mesh.CharacteristicLengthMax", coarse)
+
+
+def layered_caps(inner_radius: float, soft_thickness: float, gap: float, stiff_thickness: float,
+                 half_angle_deg: float, mesh_size: float, order: int = 2,
+                 comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """Soft layer r ∈ [R, R + t_s], stiff layer r ∈ [R + t_s + gap, R + t_s + gap + t_m],
+    both cut to polar angle θ ≤ ``half_angle_deg`` about +z, quarter x, y ≥ 0."""
+    if not (inner_radius > 0 and soft_thickness > 0 and gap > 0 and stiff_thickness > 0):
+        raise ValueError("radii, thicknesses and gap must be positive")
+    theta = np.radians(half_angle_deg)
+    r_slave = inner_radius + soft_thickness
+    r_master = r_slave + gap
+    r_out = r_master + stiff_thickness
+
+    def build(model):
+        occ = model.occ
+        far = 2 * r_out
+        cone = occ.addCone(0, 0, 0, 0, 0, far, 0, far * np.tan(theta))
+        box = occ.addBox(0, 0, 0, far, far, far)
+        wedge, _ = occ.intersect([(3, cone)], [(3, box)])
+
+        def layer(r0, r1):
+            shell, _ = occ.cut([(3, occ.addSphere(0, 0, 0, r1))], [(3, occ.addSphere(0, 0, 0, r0))])
+            part, _ = occ.intersect(shell, occ.copy(wedge))
+            return part
+
+        soft = layer(inner_radius, r_slave)
+        stiff = layer(r_master, r_out)
+        occ.remove(wedge, recursive=True)
+        occ.synchronize()
+        model.addPhysicalGroup(3, [t for _, t in soft], tag=1, name="soft")
+        model.addPhysicalGroup(3, [t for _, t in stiff], tag=2, name="stiff")
+        groups = {name: [] for name in ("slave", "master", "pressure", "fixed", "soft_rim",
+                                        "stiff_rim", "symmetry_x", "symmetry_y")}
+        tol = 1e-6 * r_out
+        for body, (inner_name, outer_name, rim_name) in (
+                (soft, ("pressure", "slave", "soft_rim")), (stiff, ("master", "fixed", "stiff_rim"))):
+            for dim, tag in model.getBoundary(body, oriented=False):
+                x, y, z = occ.getCenterOfMass(dim, tag)
+                xmin, ymin, zmin, xmax, ymax, zmax = occ.getBoundingBox(dim, tag)
+                if xmax - xmin < tol and abs(x) < tol:
+                    groups["symmetry_x"].append(tag)
+                elif ymax - ymin < tol and abs(y) < tol:
+                    groups["symmetry_y"].append(tag)
+                elif model.getType(dim, tag) != "Sphere":
+                    groups[rim_name].append(tag)  # the conical cut
+                elif zmax < 0.5 * (inner_radius + r_slave) + (r_master - inner_radius) * (body is stiff):
+                    groups[inner_name].append(tag)  # a quarter cap about +z reaches z = r at its pole
+                else:
+                    groups[outer_name].append(tag)
+        for tag, (name, surfaces) in enumerate(groups.items(), start=1):
+            model.addPhysicalGroup(2, surfaces, tag=tag, name=name)
+        import gmsh
+
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMax", mesh_size)
+        gmsh.option.setNumber("Mesh.CharacteristicLengthMin", 0.3 * mesh_size)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        model.mesh.generate(3)
+        if order > 1:
+            model.mesh.setOrder(order)
+
+    return from_gmsh(build, comm)

@@ -1,0 +1,384 @@
+"""Deformable-on-deformable penalty contact: slave nodes against master triangles
+(seed 002, §2.3), added to the assembled residual and Jacobian through the
+driver's hooks and refreshed at every Newton iteration.
+
+Formulation (single pass, node to surface). Slave node s with lumped area w_s,
+master triangle with nodes x1, x2, x3, outward unit normal n and closest point
+x_p = Σ N_j(ξ) x_j of the deformed slave position x_s:
+
+    g = (x_s − x_p)·n,      Π_c = ½ α w_s ⟨−g⟩²      (paper eq. 9–10)
+    δΠ_c = α w_s g D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12, 12 entries)
+    K_c = α w_s D Dᵀ        (frozen normal and frozen ξ, eq. 13)
+
+For a closest-point projection the gradient is exact (x_s − x_p ∥ n, so the
+normal's variation drops out of δg); K_c omits only the terms of order α g
+(normal and ξ rotation), small because the penalty penetration is small, so
+Newton converges nearly quadratically once the active set has settled.
+
+Search: a global step (a k-d tree on the master triangles' centroids gives the
+nearest few candidates) and a local step (the exact closest point on each
+candidate triangle, vectorised); the candidate nearest in distance wins.
+
+Parallel: each rank treats the slave nodes it owns. The master surface (its
+triangles as global node numbers, its current node positions) is gathered on all
+ranks at every evaluation: simple and cheap for the surfaces of these scenes
+(hundreds to a few thousand triangles), not meant for millions. Forces and
+stiffness go into the global PETSc vector and matrix by global indices, so the
+slave and the master may live on different ranks.
+
+Master triangles: a P1 facet is one triangle; a P2 facet (6 nodes) is split into
+4 flat triangles through its edge nodes, as the paper splits hexahedral faces.
+Slave weights: the row of the slave surface's mass matrix lumped by HRZ
+(diagonal scaled to the surface area), which is positive for P2 vertices too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import basix
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+from scipy.spatial import cKDTree
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
+
+from eyemech.meshes.tagged import MeshError, TaggedMesh
+from eyemech.problems.parameters import ParameterError
+from eyemech.problems.results import Timings
+
+
+@dataclasses.dataclass
+class ContactState:
+    """The pairs found at one evaluation (slave arrays are rank-local)."""
+
+    active: np.ndarray          # indices into the rank's slave nodes
+    gaps: np.ndarray            # g of the active pairs (< 0)
+    normals: np.ndarray         # (n, 3)
+    triangles: np.ndarray       # master triangle index of each active pair
+    shape: np.ndarray           # (n, 3) N_j(ξ) at the closest point
+    min_gap: float              # smallest gap of any slave node with a partner (rank-local)
+
+
+class NodeToSurfaceContact:
+    """Penalty contact of the ``slave`` facets' nodes against the ``master`` facets.
+
+    ``u`` is the displacement (vector Lagrange P1 or P2, the only unknown of the
+    system), ``penalty`` α in force per area per length (MPa/mm), ``bcs`` the
+    Dirichlet conditions (their rows and columns are left alone),
+    ``search_depth`` the deepest penetration still counted as contact (deeper
+    pairs are taken to be on the wrong side), ``candidates`` the triangles tested
+    per slave node.
+    """
+
+    def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
+                 penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
+                 smoothing: float = 0.0, timings: Timings | None = None):
+        if not penalty > 0:
+            raise ValueError(f"the penalty must be > 0, got {penalty}")
+        if not smoothing >= 0:
+            raise ValueError(f"the smoothing width must be >= 0, got {smoothing}")
+        self.smoothing = float(smoothing)
+        tagged.require_nonempty(slave, master)
+        self.u, self.penalty, self.search_depth = u, float(penalty), float(search_depth)
+        self.candidates = candidates
+        self.timings = timings or Timings()
+        self.comm = tagged.mesh.comm
+        space = u.function_space
+        self.bs = space.dofmap.index_map_bs
+        if self.bs != 3 or space.ufl_element().embedded_superdegree not in (1, 2):
+            raise ValueError("node-to-surface contact needs a 3D vector P1 or P2 displacement")
+        self.imap = space.dofmap.index_map
+        self.reference = space.tabulate_dof_coordinates()
+        self._slave_setup(tagged, slave)
+        self._master_setup(tagged, master)
+        self._constrained = self._constrained_dofs(bcs)
+        self.state: ContactState | None = None
+
+    # -- set-up ---------------------------------------------------------------------------
+    def _slave_setup(self, tagged: TaggedMesh, slave: str) -> None:
+        """Owned slave nodes and their HRZ-lumped areas."""
+        scalar, to_parent = self.u.function_space.sub(0).collapse()
+        p, q = ufl.TrialFunction(scalar), ufl.TestFunction(scalar)
+        ds = tagged.ds()(tagged.tag(slave))
+        mass = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(p * q * ds))
+        mass.assemble()
+        diagonal = mass.getDiagonal().array.copy()
+        mass.destroy()
+        one = dolfinx.fem.Constant(tagged.mesh, 1.0)
+        area = self.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(one * ds)))
+        total = self.comm.allreduce(float(diagonal.sum()))
+        weights = diagonal * (area / total)
+        owned = np.flatnonzero(weights > 0)
+        to_parent = np.asarray(to_parent[0] if isinstance(to_parent, list) else to_parent)
+        self.slave_blocks = to_parent[owned] // self.bs
+        self.slave_weights = weights[owned]
+        self.slave_global = self.imap.local_to_global(self.slave_blocks.astype(np.int32))
+        self.slave_area = area
+
+    def _master_setup(self, tagged: TaggedMesh, master: str) -> None:
+        """Master triangles (global node numbers, outward orientation) on every rank."""
+        mesh = tagged.mesh
+        tdim = mesh.topology.dim
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        mesh.topology.create_connectivity(tdim, tdim - 1)
+        f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
+        c_to_f = mesh.topology.connectivity(tdim, tdim - 1)
+        facets = tagged.facets(master)
+        facets = facets[facets < mesh.topology.index_map(tdim - 1).size_local]
+        dofmap = self.u.function_space.dofmap
+        layout = dofmap.dof_layout
+        topology = basix.topology(basix.CellType.tetrahedron)
+        edges = [tuple(e) for e in topology[1]]
+        quadratic = self.u.function_space.ufl_element().embedded_superdegree == 2
+        triangles = []
+        for facet in facets:
+            cell = f_to_c.links(facet)[0]
+            local = int(np.flatnonzero(c_to_f.links(cell) == facet)[0])
+            cell_dofs = dofmap.cell_dofs(cell)
+            a, b, c = topology[2][local]
+            vertex = {k: cell_dofs[layout.entity_dofs(0, k)[0]] for k in (a, b, c)}
+            if quadratic:
+                mid = {frozenset(e): cell_dofs[layout.entity_dofs(1, i)[0]]
+                       for i, e in enumerate(edges) if set(e) <= {a, b, c}}
+                ab, bc, ca = mid[frozenset((a, b))], mid[frozenset((b, c))], mid[frozenset((c, a))]
+                pieces = [(vertex[a], ab, ca), (ab, vertex[b], bc), (ca, bc, vertex[c]), (ab, bc, ca)]
+            else:
+                pieces = [(vertex[a], vertex[b], vertex[c])]
+            centroid = self.reference[cell_dofs].mean(axis=0)
+            for tri in pieces:
+                x = self.reference[list(tri)]
+                normal = np.cross(x[1] - x[0], x[2] - x[0])
+                if np.dot(normal, x.mean(axis=0) - centroid) < 0:
+                    tri = (tri[0], tri[2], tri[1])
+                triangles.append(tri)
+        local_tris = np.asarray(triangles, dtype=np.int32).reshape(-1, 3)
+        global_tris = self.imap.local_to_global(local_tris.ravel()).reshape(-1, 3)
+        self.triangles = np.vstack(self.comm.allgather(global_tris))
+        # the nodes this rank reports positions for (all local ones its triangles use)
+        self.master_local = np.unique(local_tris.ravel())
+        self.master_nodes = np.unique(self.triangles.ravel())  # sorted global node numbers
+        self.triangle_nodes = np.searchsorted(self.master_nodes, self.triangles)
+        if len(self.triangles) == 0:
+            raise MeshError(f"the master region '{master}' has no facets")
+
+    def _constrained_dofs(self, bcs) -> set[int]:
+        """Global indices of Dirichlet-constrained dofs, known on every rank."""
+        mine = []
+        for bc in bcs:
+            local, _ = bc.dof_indices()
+            blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
+            mine.append(blocks * self.bs + local % self.bs)
+        mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
+        return set(np.concatenate(self.comm.allgather(mine)).tolist())
+
+    def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
+        """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
+        matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
+
+    # -- geometry -------------------------------------------------------------------------
+    def _positions(self, blocks: np.ndarray) -> np.ndarray:
+        values = self.u.x.array.reshape(-1, self.bs)
+        return self.reference[blocks] + values[blocks]
+
+    def _master_positions(self) -> np.ndarray:
+        local_global = self.imap.local_to_global(self.master_local.astype(np.int32))
+        pieces = self.comm.allgather((local_global, self._positions(self.master_local)))
+        nodes = np.concatenate([p[0] for p in pieces])
+        points = np.vstack([p[1] for p in pieces])
+        positions = np.empty((len(self.master_nodes), 3))
+        positions[np.searchsorted(self.master_nodes, nodes)] = points
+        return positions
+
+    def search(self) -> ContactState:
+        """Global (k-d tree) then local (closest point) search at the current ``u``."""
+        with self.timings("contact_search"):
+            corners = self._master_positions()[self.triangle_nodes]  # (T, 3, 3)
+            slaves = self._positions(self.slave_blocks)
+            k = min(self.candidates, len(corners))
+            if len(slaves) == 0:
+                return ContactState(np.zeros(0, dtype=int), np.zeros(0), np.zeros((0, 3)),
+                                    np.zeros(0, dtype=int), np.zeros((0, 3)), np.inf)
+            _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
+            nearest = nearest.reshape(len(slaves), k)
+            points, _ = closest_points(slaves[:, None, :], corners[nearest])
+            distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
+            best = np.argmin(distance, axis=1)
+            rows = np.arange(len(slaves))
+            tri = self._sticky(slaves, corners, nearest, best, rows)
+            self._previous = tri.copy()
+            a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
+            shape = closest_points(slaves, corners[tri])[1]
+            normal = np.cross(b - a, c - a)
+            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            # the paper's gap G = (x_h − x_t1)·n to the triangle's plane: its Hessian
+            # in x_s vanishes, whereas the distance to a nearest edge or vertex
+            # would add a tangential stiffness α w (I − n nᵀ) that a frozen-normal
+            # Jacobian misses (Newton then oscillates)
+            gaps = np.einsum("ij,ij->i", slaves - a, normal)
+            # a pair far below the master surface is on the wrong side: not contact
+            paired = gaps > -self.search_depth
+            active = np.flatnonzero(paired & (gaps < self.smoothing))
+            min_gap = float(np.min(gaps[paired], initial=np.inf))
+            return ContactState(active, gaps[active], normal[active], tri[active],
+                                shape[active], min_gap)
+
+    def _sticky(self, slaves, corners, nearest, best, rows):
+        """Keep the previous triangle while the node's projection on its plane stays
+        inside it up to a barycentric tolerance ``STICKY``.
+
+        Slave nodes sitting over a master edge would otherwise alternate between
+        the two triangles from one Newton iterate to the next (the plane gap jumps
+        by the offset times the angle between them) and Newton cycles. The price is
+        a gap measured on the previous plane up to STICKY·h beyond its edge.
+        """
+        previous = getattr(self, "_previous", None)
+        if previous is None or len(previous) != len(rows):
+            return nearest[rows, best]
+        bary = plane_barycentric(slaves, corners[previous])
+        keep = bary.min(axis=1) >= -self.STICKY
+        return np.where(keep, previous, nearest[rows, best])
+
+    STICKY = 0.02
+
+    # -- assembly hooks -------------------------------------------------------------------
+    def _pair_dofs(self, state: ContactState) -> np.ndarray:
+        """(n, 12) global dof indices: slave node then the three master nodes."""
+        nodes = np.column_stack([self.slave_global[state.active], self.triangles[state.triangles]])
+        return (nodes[:, :, None] * self.bs + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
+
+    def _pair_vectors(self, state: ContactState) -> np.ndarray:
+        """(n, 12) D = [n, −N1 n, −N2 n, −N3 n]."""
+        factors = np.column_stack([np.ones(len(state.gaps)), -state.shape])  # (n, 4)
+        return (factors[:, :, None] * state.normals[:, None, :]).reshape(len(factors), 4 * self.bs)
+
+    def residual_hook(self, _x: PETSc.Vec, b: PETSc.Vec) -> None:
+        """F += −w p(g) D for the active pairs (u already holds the iterate)."""
+        self.state = state = self.search()
+        dofs = self._pair_dofs(state)
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        scale = -self.slave_weights[state.active] * pressure
+        values = scale[:, None] * self._pair_vectors(state)
+        keep = ~np.isin(dofs, list(self._constrained)) if self._constrained else np.ones_like(dofs, bool)
+        b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
+        b.assemblyBegin()
+        b.assemblyEnd()
+
+    def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
+        """K += −w p'(g) D Dᵀ (frozen normal) for the active pairs."""
+        state = self.search()
+        dofs = self._pair_dofs(state)
+        D = self._pair_vectors(state)
+        _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        stiffness = -self.slave_weights[state.active] * slope
+        constrained = self._constrained
+        for i in range(len(dofs)):
+            keep = np.array([d not in constrained for d in dofs[i]])
+            index = dofs[i][keep].astype(PETSc.IntType)
+            block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
+            A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
+        A.assemble()
+
+    # -- diagnostics ----------------------------------------------------------------------
+    def summary(self) -> dict[str, float]:
+        """Collective: active nodes, max penetration, contact area and normal force."""
+        state = self.state or self.search()
+        weights = self.slave_weights[state.active]
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        touching = state.gaps < 0
+        local = np.array([touching.sum(), weights[touching].sum(), (weights * pressure).sum()])
+        total = self.comm.allreduce(local, op=MPI.SUM)
+        depth = self.comm.allreduce(float(np.max(-state.gaps, initial=0.0)), op=MPI.MAX)
+        return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
+                "contact_normal_force": float(total[2]), "max_penetration": depth}
+
+    def refuse_initial_penetration(self, key: str, tolerance: float = 0.0) -> None:
+        """ParameterError naming ``key`` when slave nodes start inside the master body
+        (deeper than ``tolerance`` but within the search depth)."""
+        gap = self.min_gap()
+        if gap < -tolerance:
+            raise ParameterError(key, f"the slave surface starts {-gap:.4g} mm inside the master "
+                                      "surface (the bodies interpenetrate before any load)")
+
+    def min_gap(self) -> float:
+        """Smallest gap of any paired slave node (collective; negative = penetration)."""
+        return self.comm.allreduce(self.search().min_gap, op=MPI.MIN)
+
+
+def penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Contact pressure p(g) ≥ 0 and its slope dp/dg.
+
+    ε = 0: p = α ⟨−g⟩ (kink at g = 0). ε > 0: the kink is rounded off over
+    −ε < g < ε by p = α (ε − g)² / (4ε), which joins α(−g) and 0 with matching
+    slopes; p is then C¹, so Newton cannot cycle on a node sitting at g ≈ 0.
+    The price: a pressure up to αε/4 for gaps below ε (a stand-off ≤ ε).
+    """
+    if smoothing == 0.0:
+        return penalty * np.maximum(-gaps, 0.0), np.where(gaps < 0, -penalty, 0.0)
+    eps = smoothing
+    blend = (gaps > -eps) & (gaps < eps)
+    pressure = np.where(gaps <= -eps, -penalty * gaps, 0.0)
+    slope = np.where(gaps <= -eps, -penalty, 0.0)
+    pressure = np.where(blend, penalty * (eps - gaps) ** 2 / (4 * eps), pressure)
+    slope = np.where(blend, -penalty * (eps - gaps) / (2 * eps), slope)
+    return pressure, slope
+
+
+def plane_barycentric(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (n, 3) of the projections of ``points`` (n, 3) on the
+    planes of ``triangles`` (n, 3, 3); all ≥ 0 inside."""
+    a = triangles[:, 0]
+    e1, e2, w = triangles[:, 1] - a, triangles[:, 2] - a, points - a
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    r1, r2 = (w * e1).sum(1), (w * e2).sum(1)
+    det = d11 * d22 - d12**2
+    s = (d22 * r1 - d12 * r2) / det
+    t = (d11 * r2 - d12 * r1) / det
+    return np.column_stack([1 - s - t, s, t])
+
+
+def closest_points(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closest point on each triangle (…, 3, 3) to each point (…, 3), broadcast, and its
+    barycentric weights (N1, N2, N3): the plane projection when it falls inside,
+    else the nearest point on the three edges."""
+    shape = np.broadcast_shapes(points.shape, triangles.shape[:-2] + (3,))
+    triangles = np.broadcast_to(triangles, shape[:-1] + (3, 3))
+    a, b, c = triangles[..., 0, :], triangles[..., 1, :], triangles[..., 2, :]
+    points = np.broadcast_to(points, shape)
+    e1, e2, w = b - a, c - a, points - a
+    d11, d12, d22 = (np.einsum("...i,...i", e1, e1), np.einsum("...i,...i", e1, e2),
+                     np.einsum("...i,...i", e2, e2))
+    r1, r2 = np.einsum("...i,...i", w, e1), np.einsum("...i,...i", w, e2)
+    det = d11 * d22 - d12**2
+    s = (d22 * r1 - d12 * r2) / det
+    t = (d11 * r2 - d12 * r1) / det
+    bary = np.stack([1 - s - t, s, t], axis=-1)
+    inside = (s >= 0) & (t >= 0) & (s + t <= 1)
+    best = a + s[..., None] * e1 + t[..., None] * e2
+    if not np.all(inside):
+        candidates, weights = [], []
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            p, q = triangles[..., i, :], triangles[..., j, :]
+            edge = q - p
+            lam = np.clip(np.einsum("...i,...i", points - p, edge)
+                          / np.einsum("...i,...i", edge, edge), 0.0, 1.0)
+            candidates.append(p + lam[..., None] * edge)
+            wts = np.zeros(lam.shape + (3,))
+            wts[..., i], wts[..., j] = 1 - lam, lam
+            weights.append(wts)
+        candidates, weights = np.stack(candidates), np.stack(weights)
+        pick = np.argmin(np.linalg.norm(candidates - points[None], axis=-1), axis=0)
+        edge_best = np.take_along_axis(candidates, pick[None, ..., None], axis=0)[0]
+        edge_bary = np.take_along_axis(weights, pick[None, ..., None], axis=0)[0]
+        best = np.where(inside[..., None], best, edge_best)
+        bary = np.where(inside[..., None], bary, edge_bary)
+    return best, bary

@@ -1,0 +1,171 @@
+"""``hertz``: an elastic ball pressed onto a rigid plane — the contact benchmark.
+
+Hertz (1882; Johnson, *Contact Mechanics*, 1985, §4.2): a sphere of radius R and
+E* = E/(1 − ν²) pressed a depth d onto a rigid flat carries
+
+    F = 4/3 E* R^½ d^{3/2},   a = (R d)^½,   p(r) = p0 (1 − r²/a²)^½,  p0 = 2 E* a / (π R).
+
+Model: one quarter (x, y ≥ 0) of the lower hemisphere, compressible neo-Hooke
+(linear elastic with E, ν at these strains), P2 on curved P2 geometry, graded
+towards the pole. The equatorial face is held at u_z = 0 and the plane z = −R
+rises by d (the load parameter is the obstacle's translation). Hertz's
+half-space assumption holds for a ≪ R: the ball's own compliance adds a
+correction of order a/R, hence the small default d/R = 0.001 (a/R = 0.032).
+
+Quantities: ``contact_force`` (whole ball, from the assembled penalty traction),
+``contact_radius`` from the pressure's second moment (for the Hertz profile
+∫p r² dA / ∫p dA = 2a²/5), ``max_penetration`` (over the surface nodes), the Hertz
+values and the relative errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from eyemech.forms import compressible_neo_hooke, contact
+from eyemech.meshes.contact_bodies import quarter_hemisphere
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.rigid_contact import (NodalPenetration, refuse_initial_penetration,
+                                            resultant_force, surface_integral)
+from eyemech.problems.scene import Scene
+from eyemech.problems.spaces import global_dofs, symmetry_bcs
+
+import dolfinx
+import dolfinx.fem
+
+QUADRATURE = {"quadrature_degree": 4}
+# the penalty integrand ⟨−g⟩² has a kink at the contact edge: more points there
+CONTACT_QUADRATURE = {"quadrature_degree": 6}
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameters(SceneParameters):
+    radius: float = field(1.0, "radius of the ball", "mm")
+    youngs_modulus: float = field(1.0, "Young's modulus E", "MPa")
+    poisson_ratio: float = field(0.3, "Poisson's ratio ν", "")
+    indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm")
+    penalty: float = field(100.0, "penalty factor: α = penalty · E / mesh_size", "")
+    mesh_size: float = field(0.006, "element size in the contact zone", "mm")
+    far_size: float = field(0.25, "element size away from the contact zone", "mm")
+    initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm")
+    load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
+
+    def validate(self) -> None:
+        self.require_positive("radius", "youngs_modulus", "indentation", "penalty", "mesh_size",
+                              "far_size", "load_steps")
+        if not -1.0 < self.poisson_ratio < 0.5:
+            raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio}")
+        if self.indentation > 0.2 * self.radius:
+            raise ParameterError("indentation", "beyond 0.2·radius Hertz's small-contact law is meaningless")
+        if self.mesh_size > self.far_size:
+            raise ParameterError("mesh_size", f"must not exceed far_size ({self.far_size})")
+        if self.far_size > self.radius:
+            raise ParameterError("far_size", "is larger than the ball")
+
+    @property
+    def penalty_stiffness(self) -> float:
+        return contact.default_penalty(self.youngs_modulus, self.mesh_size, self.penalty)
+
+
+def hertz_force(params: Parameters, depth: float) -> float:
+    e_star = params.youngs_modulus / (1.0 - params.poisson_ratio**2)
+    return 4.0 / 3.0 * e_star * np.sqrt(params.radius) * max(depth, 0.0) ** 1.5
+
+
+def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
+        options: RunOptions | None = None):
+    with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        R = params.radius
+        with ctx.timings("mesh"):
+            zone = 1.5 * np.sqrt(R * params.indentation)
+            ball = quarter_hemisphere(R, params.mesh_size, params.far_size, zone, comm=ctx.comm)
+            ball.require_nonempty("contact")
+        mesh = ball.mesh
+        V = dolfinx.fem.functionspace(mesh, ("Lagrange", 2, (3,)))
+        u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
+        lift = dolfinx.fem.Constant(mesh, np.zeros(3))
+        plane = contact.Plane(point=(0.0, 0.0, -R - params.initial_gap), normal=(0.0, 0.0, 1.0),
+                              translation=lift)
+        alpha = dolfinx.fem.Constant(mesh, params.penalty_stiffness)
+        ds_contact = ball.ds(CONTACT_QUADRATURE)(ball.tag("contact"))
+        energy = (compressible_neo_hooke(u, params.youngs_modulus, params.poisson_ratio)
+                  * ball.dx(QUADRATURE) + contact.penalty_energy(plane, u, alpha, ds_contact))
+        residual = ufl.derivative(energy, u, v)
+        bcs = symmetry_bcs(V, ball, {"symmetry_x": 0, "symmetry_y": 1, "top": 2})
+
+        penetration = NodalPenetration(plane, u, ball, "contact")
+        refuse_initial_penetration(penetration, "initial_gap", 1e-9 * R)
+        solver = NonlinearSolver(residual, u, bcs, options=ctx.options.newton, timings=ctx.timings)
+
+        force_z = resultant_force(plane, u, alpha, ds_contact)[2]
+        pressure = alpha * contact.penetration(plane, u)
+        X = ufl.SpatialCoordinate(mesh)
+        moment = surface_integral(pressure * (X[0] ** 2 + X[1] ** 2), ds_contact)
+        total = surface_integral(pressure, ds_contact)
+        symmetry = 4.0  # quarter model
+
+        def quantities(depth: float) -> dict[str, float]:
+            p_total = total()
+            radius = float(np.sqrt(2.5 * moment() / p_total)) if p_total > 0 else 0.0
+            force = symmetry * force_z()
+            exact = hertz_force(params, depth)
+            values = {"contact_force": force, "contact_radius": radius,
+                      "max_penetration": penetration(), "indentation": depth,
+                      "hertz_force": exact, "hertz_radius": float(np.sqrt(R * depth))}
+            if exact > 0:
+                values["force_error"] = force / exact - 1.0
+                values["radius_error"] = radius / values["hertz_radius"] - 1.0
+            return values
+
+        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [u])
+        writer.write(0.0)
+
+        def apply(load: float, _increment: float) -> None:
+            lift.value = np.array([0.0, 0.0, params.initial_gap + load * params.indentation])
+
+        def converged(record) -> None:
+            depth = record.load * params.indentation
+            ctx.record_step(step=record.step, load_factor=record.load, newton_iterations=record.iterations,
+                            cuts=record.cuts, residuals=record.residuals, **quantities(depth))
+            with ctx.timings("output"):
+                writer.write(record.load)
+
+        try:
+            records = follow_path(solver, apply, Stepping(initial_step=1.0 / params.load_steps),
+                                  on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
+        finally:
+            writer.close()
+            ctx.result.fields = writer.files
+        ctx.result.quantities.update(quantities(params.indentation))
+        ctx.result.quantities["penalty_stiffness"] = params.penalty_stiffness
+        ctx.result.quantities["newton_iterations"] = sum(r.iterations for r in records)
+        ctx.result.quantities["load_steps"] = len(records)
+        ctx.result.quantities["dofs"] = global_dofs(u)
+        if ctx.options.pictures and ctx.out is not None:
+            with ctx.timings("output"):
+                _picture(u, plane, alpha, ctx, params)
+    return ctx.result
+
+
+def _picture(u, plane, alpha, ctx: RunContext, params: Parameters) -> None:
+    grid = gather_grid(u)
+    if grid is None:
+        return
+    grid.point_data["|u| (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+    path = ctx.out / "hertz.png"
+    render_png(grid, path, scalars="|u| (mm)", camera=(1.0, 0.6, -0.5), show_undeformed=False,
+               title=f"hertz: d = {params.indentation:g} mm, F = "
+                     f"{ctx.result.quantities['contact_force']:.4g} N")
+    ctx.result.pictures.append(path.name)
+
+
+SCENE = Scene(name="hertz", kind="benchmark", parameters=Parameters, run=run,
+              summary="elastic ball pressed onto a rigid plane, penalty contact vs Hertz's law")

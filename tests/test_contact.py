@@ -1,0 +1,257 @@
+"""Penalty contact: the rigid obstacles' signed distances, Hertz's law, the
+node-to-surface search and the retina-reattachment scene, serial and on 2 ranks,
+and the refusals of bad input.
+
+References
+- Hertz (1882); K. L. Johnson, *Contact Mechanics* (CUP 1985) §4.2: a sphere of
+  radius R, E* = E/(1 − ν²), pressed a depth d on a rigid flat carries
+  F = 4/3 E* R^½ d^{3/2} over a contact radius a = (R d)^½.
+- Seed 002 (Sun & Makinouchi) §2.3: node-to-segment penalty ½ α G², G = (x_h − x_t1)·n.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+from conftest import last_json, run_cli
+from eyemech.forms import contact
+from eyemech.meshes import MeshError
+from eyemech.problems import hertz, retina_reattachment as retina
+from eyemech.problems.context import RunOptions
+from eyemech.problems.contact_search import closest_points, penalty_pressure
+from eyemech.problems.parameters import ParameterError
+
+import dolfinx
+import dolfinx.fem
+
+QUIET = RunOptions(fields=False, pictures=False)
+
+
+# -- obstacles: signed distances against closed forms ---------------------------------------
+def _gap_at_points(obstacle, points: np.ndarray) -> np.ndarray:
+    """g(x) at the vertices of a P1 mesh moved onto ``points`` via u = points − X."""
+    mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 2, 2, 2)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    X = V.tabulate_dof_coordinates()
+    u = dolfinx.fem.Function(V)
+    rng = np.random.default_rng(1)
+    target = points(X, rng)
+    u.x.array[:] = (target - X).ravel()
+    Q = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+    g = dolfinx.fem.Function(Q)
+    g.interpolate(dolfinx.fem.Expression(obstacle.gap(contact.deformed_position(u)),
+                                         Q.element.interpolation_points))
+    return target, g.x.array
+
+
+def _random_points(X, rng):
+    return rng.uniform(-3, 3, size=X.shape)
+
+
+@pytest.fixture(scope="module")
+def moved():
+    mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1)
+    return (dolfinx.fem.Constant(mesh, np.array([0.1, -0.2, 0.3])),
+            dolfinx.fem.Constant(mesh, 0.25))
+
+
+def test_obstacle_signed_distances(moved):
+    shift, indent = moved
+    t = shift.value
+    cases = [
+        (contact.Plane((0, 0, 1), (0, 0, 2), translation=shift), lambda x: x[:, 2] - 1 - t[2]),
+        (contact.Sphere((1, 0, 0), 1.5, translation=shift),
+         lambda x: np.linalg.norm(x - t - [1, 0, 0], axis=1) - 1.5),
+        (contact.Sphere((0, 0, 0), 2.5, inside=True), lambda x: 2.5 - np.linalg.norm(x, axis=1)),
+        (contact.Cylinder(radius=2.0, inside=True, indentation=indent),
+         lambda x: 2.0 - (np.hypot(x[:, 0], x[:, 1]) + 0.25)),
+        (contact.Torus(major_radius=2.0, tube_radius=0.5, indentation=indent),
+         lambda x: np.hypot(np.hypot(x[:, 0], x[:, 1]) + 0.25 - 2.0, x[:, 2]) - 0.5),
+    ]
+    for obstacle, exact in cases:
+        points, g = _gap_at_points(obstacle, _random_points)
+        assert np.allclose(g, exact(points), atol=1e-9), type(obstacle).__name__
+
+
+def test_ring_profiles_match_their_closed_forms():
+    # a square ring (rounded rectangle, sharp corners) equals the polygon of its corners
+    rect = contact.RoundedRectangle(center=(2.0, 0.0), width=1.0, height=0.6)
+    square = contact.Polygon(((1.5, -0.3), (2.5, -0.3), (2.5, 0.3), (1.5, 0.3)))
+    points, g_rect = _gap_at_points(contact.Ring(profile=rect), _random_points)
+    _, g_poly = _gap_at_points(contact.Ring(profile=square), _random_points)
+    assert np.allclose(g_rect, g_poly, atol=1e-9)
+    # and a fully rounded rectangle (corner radius = half the height) far outside is a
+    # capsule: distance to the segment ρ ∈ [1.8, 2.2], z = 0, minus 0.3
+    capsule = contact.RoundedRectangle(center=(2.0, 0.0), width=1.0, height=0.6, corner_radius=0.3)
+    points, g = _gap_at_points(contact.Ring(profile=capsule), _random_points)
+    rho = np.hypot(points[:, 0], points[:, 1])
+    exact = np.hypot(rho - np.clip(rho, 1.8, 2.2), points[:, 2]) - 0.3
+    assert np.allclose(g, exact, atol=1e-9)
+
+
+def test_obstacle_normal_is_the_unit_gradient():
+    mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 2, 2, 2)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+    u = dolfinx.fem.Function(V)
+    u.x.array[:] = 3.0  # move the cube away from the axis and the sphere's centre
+    torus = contact.Torus(major_radius=1.0, tube_radius=0.2)
+    n = contact.obstacle_normal(torus, u)
+    W = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+    length = dolfinx.fem.Function(W)
+    length.interpolate(dolfinx.fem.Expression(ufl.sqrt(ufl.dot(n, n)), W.element.interpolation_points))
+    assert np.allclose(length.x.array, 1.0)
+
+
+def test_penalty_scaling_and_smoothing():
+    assert contact.default_penalty(2.0, 0.1, 100.0) == pytest.approx(2000.0)
+    with pytest.raises(ValueError):
+        contact.default_penalty(1.0, 0.1, 0.0)
+    g = np.linspace(-2, 2, 401)
+    p, slope = penalty_pressure(g, 3.0, 0.5)
+    assert np.allclose(p[g <= -0.5], -3.0 * g[g <= -0.5]) and np.all(p[g >= 0.5] == 0)
+    assert np.all(np.abs(np.diff(p)) < 3.0 * 0.011)  # continuous
+    assert np.allclose(np.gradient(p, g)[1:-1], slope[1:-1], atol=0.1)  # C¹
+
+
+def test_closest_point_on_triangle():
+    tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    points = np.array([[0.2, 0.2, 0.5], [2.0, 0.0, -1.0], [-1.0, -1.0, 0.0], [0.8, 0.8, 0.1]])
+    closest, bary = closest_points(points[:, None, :], tri[None])
+    expected = np.array([[0.2, 0.2, 0], [1, 0, 0], [0, 0, 0], [0.5, 0.5, 0]])
+    assert np.allclose(closest[:, 0], expected)
+    assert np.allclose(np.einsum("nj,jk->nk", bary[:, 0], tri[0]), expected)
+
+
+# -- hertz --------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def hertz_serial():
+    return hertz.run(hertz.Parameters(), options=QUIET)
+
+
+def test_hertz_force_within_three_percent(hertz_serial):
+    q = hertz_serial.quantities
+    # Johnson (1985) §4.2; the remaining error is the finite ball (O(a/R)) and the mesh
+    assert q["contact_force"] == pytest.approx(q["hertz_force"], rel=0.03)
+    assert q["contact_radius"] == pytest.approx(q["hertz_radius"], rel=0.05)
+    # the penalty penetration is the mean pressure over α: well below the indentation
+    assert 0 < q["max_penetration"] < 0.01 * q["indentation"]
+    # every load step lies on the d^{3/2} law
+    for step in hertz_serial.steps:
+        assert step["contact_force"] == pytest.approx(step["hertz_force"], rel=0.03)
+
+
+@pytest.mark.mpi
+def test_hertz_two_ranks_same_numbers(hertz_serial, tmp_path):
+    code, out, err = run_cli("run", "hertz", "--out", str(tmp_path), "--json", "--no-pictures",
+                             "--no-fields", ranks=2)
+    assert code == 0, err
+    parallel = last_json(out)["quantities"]
+    for key in ("contact_force", "contact_radius", "max_penetration"):
+        assert parallel[key] == pytest.approx(hertz_serial.quantities[key], rel=1e-6)
+
+
+def test_hertz_refuses_an_obstacle_inside_the_ball():
+    with pytest.raises(ParameterError, match="interpenetrating"):
+        hertz.run(hertz.Parameters(initial_gap=-0.01, mesh_size=0.05, far_size=0.5), options=QUIET)
+
+
+@pytest.mark.parametrize("key, value", [("penalty", 0.0), ("penalty", -1.0), ("indentation", 0.0),
+                                        ("poisson_ratio", 0.5)])
+def test_hertz_bad_parameters(key, value):
+    with pytest.raises(ParameterError, match=key):
+        hertz.Parameters(**{key: value}).validate()
+
+
+# -- node to surface ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def retina_serial():
+    return retina.run(retina.Parameters(), options=QUIET)
+
+
+def convergence_orders(residuals: list[float]) -> float:
+    """Order estimated from the last three residual norms: log(r3/r2) / log(r2/r1)."""
+    r1, r2, r3 = residuals[-3:]
+    return np.log(r3 / r2) / np.log(r2 / r1)
+
+
+def test_retina_gap_closes_without_deep_penetration(retina_serial):
+    q = retina_serial.quantities
+    params = retina.Parameters()
+    assert q["active_nodes"] > 20 and q["contact_area"] > 0.5
+    # penalty penetration: the pressure over α, times 57/24 for P2 edge nodes, whose
+    # consistent load share (A/3) exceeds their HRZ-lumped weight (8A/57)
+    assert 0 < q["max_penetration"] < 2.4 * q["expected_penetration"]
+    assert q["min_gap"] > -2.4 * q["expected_penetration"]
+    # what pushes is what the contact carries, minus the share the clamped rim holds
+    # (at most the force on the quarter cap's projected area)
+    assert 0.3 * params.pressure * q["contact_area"] < q["contact_normal_force"]
+    # the contact coupling adds nonzeros to the finite-element pattern
+    assert q["jacobian_nonzeros_with_contact"] > q["jacobian_nonzeros_fe"]
+
+
+def test_retina_newton_converges_fast_at_the_end_of_each_step(retina_serial):
+    contact_steps = [s for s in retina_serial.steps if s["active_nodes"] > 0]
+    assert len(contact_steps) >= 3
+    orders = [convergence_orders(s["residuals"]) for s in contact_steps]
+    # frozen-normal tangent: quadratic-ish once the active set has settled
+    assert np.median(orders) > 1.5, orders
+    assert convergence_orders(contact_steps[-1]["residuals"]) > 1.5
+    for step in contact_steps:
+        r = step["residuals"]
+        assert r[-1] < 0.05 * r[-2]
+
+
+@pytest.mark.mpi
+def test_retina_two_ranks_same_numbers(retina_serial, tmp_path):
+    code, out, err = run_cli("run", "retina-reattachment", "--out", str(tmp_path), "--json",
+                             "--no-pictures", "--no-fields", ranks=2)
+    assert code == 0, err
+    parallel = last_json(out)["quantities"]
+    for key in ("max_penetration", "contact_area", "contact_normal_force"):
+        assert parallel[key] == pytest.approx(retina_serial.quantities[key], rel=1e-6)
+    assert parallel["active_nodes"] == retina_serial.quantities["active_nodes"]
+
+
+@pytest.mark.parametrize("key", ["slave", "master"])
+def test_missing_contact_region_is_refused(key):
+    with pytest.raises(MeshError, match="no region 'nowhere'"):
+        retina.run(retina.Parameters(**{key: "nowhere"}, mesh_size=0.5), options=QUIET)
+
+
+def test_empty_contact_region_is_refused():
+    # the 'soft_rim' region exists; 'symmetry_x' of a region... an empty one: build it
+    from eyemech.meshes.contact_bodies import layered_caps
+    from eyemech.problems.contact_search import NodeToSurfaceContact
+
+    caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
+    caps.names["empty"] = (2, 99)
+    V = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 1, (3,)))
+    with pytest.raises(MeshError, match="'empty' is empty"):
+        NodeToSurfaceContact(dolfinx.fem.Function(V), caps, "empty", "master", 1.0)
+    with pytest.raises(ValueError, match="penalty must be > 0"):
+        NodeToSurfaceContact(dolfinx.fem.Function(V), caps, "slave", "master", 0.0)
+
+
+def test_bodies_starting_inside_each_other_are_refused():
+    from eyemech.meshes.contact_bodies import layered_caps
+    from eyemech.problems.contact_search import NodeToSurfaceContact
+
+    caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
+    V = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 1, (3,)))
+    u = dolfinx.fem.Function(V)
+    soft = dolfinx.fem.locate_dofs_topological(V, 3, caps.cells("soft"))
+    X = V.tabulate_dof_coordinates()[soft]
+    # the soft layer moved 0.15 mm outwards: 0.05 mm into the stiff one
+    u.x.array.reshape(-1, 3)[soft] = 0.15 * X / np.linalg.norm(X, axis=1)[:, None]
+    search = NodeToSurfaceContact(u, caps, "slave", "master", 1.0, search_depth=0.3)
+    assert search.min_gap() == pytest.approx(-0.05, rel=0.05)
+    with pytest.raises(ParameterError, match="'gap'.*interpenetrate"):
+        search.refuse_initial_penetration("gap")
+
+
+def test_retina_bad_penalty_is_refused():
+    with pytest.raises(ParameterError, match="penalty"):
+        retina.Parameters(penalty=0.0).validate()
