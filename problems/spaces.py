@@ -176,3 +176,22 @@ def point_value(function: dolfinx.fem.Function, point) -> np.ndarray:
     if value is None:
         raise ValueError(f"point {tuple(point)} is outside the mesh")
     return np.asarray(value)
+
+
+def lagrange_view(function: dolfinx.fem.Function, name: str):
+    """(f, update): ``function`` itself when it is (discontinuous) Lagrange, else a
+    discontinuous Lagrange copy of the same degree that ``update()`` refreshes —
+    VTX writes Lagrange functions only (DPC pressures of Q2P1 are not)."""
+    element = function.function_space.element.basix_element
+    if element.family == basix.ElementFamily.P:
+        function.name = name
+        return function, lambda: None
+    mesh = function.function_space.mesh
+    view = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", element.degree)), name=name)
+    expression = dolfinx.fem.Expression(function, view.function_space.element.interpolation_points)
+
+    def update() -> None:
+        view.interpolate(expression)
+
+    update()
+    return view, update

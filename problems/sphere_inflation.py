@@ -24,8 +24,8 @@ from eyemech.problems.output import FieldWriter, gather_grid, render_png
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
 from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, solid_fields,
-                                     symmetry_bcs, surface_mean)
+from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, lagrange_view,
+                                     solid_fields, symmetry_bcs, surface_mean)
 
 import dolfinx
 import dolfinx.fem
@@ -89,10 +89,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         u.name = "displacement"
         writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [u])
-        if len(fields) > 1:
-            fields[1].name = "pressure"
-        writer_p = FieldWriter(ctx.out if ctx.options.fields and len(fields) > 1 else None,
-                               ctx.comm, fields[1:2])
+        pressure_out = [lagrange_view(fields[1], "pressure")] if len(fields) > 1 else []
+        writer_p = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm,
+                               [view for view, _ in pressure_out])
         writer.write(0.0)
 
         def apply(load: float, _increment: float) -> None:
@@ -104,6 +103,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                             pressure=record.load * params.pressure, newton_iterations=record.iterations,
                             cuts=record.cuts, residuals=record.residuals, **values)
             with ctx.timings("output"):
+                for _, update in pressure_out:
+                    update()
                 writer.write(record.load)
                 writer_p.write(record.load)
 
