@@ -25,6 +25,7 @@ from mpi4py import MPI
 
 from eyemech.problems import cook_membrane, liquid_sphere, sphere_inflation
 from eyemech.problems.context import RunOptions
+from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import stamp
 
@@ -38,6 +39,16 @@ PUBLISHED_TIP = 6.9
 QUIET = RunOptions(fields=False, pictures=False)
 
 
+def _attempt(run, params, comm):
+    """A run, or None when Newton fails (recorded as a gap in the chart, not a crash)."""
+    try:
+        return run(params, comm=comm, options=QUIET)
+    except SolveFailure as failure:
+        if comm.rank == 0:
+            print(f"hyperelastic-convergence: skipped {params}: {failure}")
+        return None
+
+
 def _wall_time(result) -> float:
     t = result.timings
     return t.get("mesh", 0.0) + t.get("assembly", 0.0) + t.get("solve", 0.0)
@@ -47,9 +58,10 @@ def sphere_rows(quick: bool, comm) -> list[dict]:
     rows = []
     for family in FAMILIES:
         for size in (SPHERE_SIZES[family][:1] if quick else SPHERE_SIZES[family]):
-            result = sphere_inflation.run(
-                sphere_inflation.Parameters(element=family, mesh_size=size, pressure=0.02),
-                comm=comm, options=QUIET)
+            result = _attempt(sphere_inflation.run, sphere_inflation.Parameters(
+                element=family, mesh_size=size, pressure=0.02), comm)
+            if result is None:
+                continue
             q = result.quantities
             rows.append({"element": family, "mesh_size": size, "dofs": q["dofs"],
                          "displacement_error": q["displacement_error"],
@@ -62,8 +74,10 @@ def cook_rows(quick: bool, comm) -> tuple[list[dict], float]:
     rows = []
     for family in FAMILIES:
         for n in (COOK_SIDES[family][:1] if quick else COOK_SIDES[family]):
-            result = cook_membrane.run(cook_membrane.Parameters(element=family, elements_per_side=n),
-                                       comm=comm, options=QUIET)
+            result = _attempt(cook_membrane.run,
+                              cook_membrane.Parameters(element=family, elements_per_side=n), comm)
+            if result is None:
+                continue
             rows.append({"element": family, "elements_per_side": n, "dofs": result.quantities["dofs"],
                          "tip_displacement": result.quantities["tip_displacement"],
                          "wall_time_s": _wall_time(result)})
@@ -89,9 +103,10 @@ def cavity_rows(quick: bool, comm) -> list[dict]:
     rows = []
     for family, size in (CAVITY_CASES[:1] if quick else CAVITY_CASES):
         for formulation in ("real", "substituted"):
-            result = liquid_sphere.run(liquid_sphere.Parameters(
-                element=family, mesh_size=size, cavity_formulation=formulation), comm=comm,
-                options=QUIET)
+            result = _attempt(liquid_sphere.run, liquid_sphere.Parameters(
+                element=family, mesh_size=size, cavity_formulation=formulation), comm)
+            if result is None:
+                continue
             q = result.quantities
             rows.append({"element": family, "mesh_size": size, "formulation": formulation,
                          "dofs": q["dofs"], "jacobian_nonzeros": q["jacobian_nonzeros"],
