@@ -156,3 +156,42 @@ def surface_mean(integrand, measure) -> Callable[[], float]:
 def global_dofs(*functions) -> int:
     return int(sum(f.function_space.dofmap.index_map.size_global * f.function_space.dofmap.index_map_bs
                    for f in functions))
+
+
+def point_value(function: dolfinx.fem.Function, point) -> np.ndarray:
+    """Value of ``function`` at ``point`` on every rank (evaluated where a local cell
+    contains it, the lowest such rank wins)."""
+    import dolfinx.geometry
+
+    mesh = function.function_space.mesh
+    x = np.asarray(point, dtype=mesh.geometry.x.dtype).reshape(1, 3)
+    owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    tree = dolfinx.geometry.bb_tree(mesh, mesh.topology.dim,
+                                    entities=np.arange(owned, dtype=np.int32))
+    candidates = dolfinx.geometry.compute_collisions_points(tree, x)
+    cells = dolfinx.geometry.compute_colliding_cells(mesh, candidates, x).links(0)
+    local = function.eval(x, cells[:1]) if len(cells) else None
+    found = mesh.comm.allgather(local)
+    value = next((v for v in found if v is not None), None)
+    if value is None:
+        raise ValueError(f"point {tuple(point)} is outside the mesh")
+    return np.asarray(value)
+
+
+def lagrange_view(function: dolfinx.fem.Function, name: str):
+    """(f, update): ``function`` itself when it is (discontinuous) Lagrange, else a
+    discontinuous Lagrange copy of the same degree that ``update()`` refreshes —
+    VTX writes Lagrange functions only (DPC pressures of Q2P1 are not)."""
+    element = function.function_space.element.basix_element
+    if element.family == basix.ElementFamily.P:
+        function.name = name
+        return function, lambda: None
+    mesh = function.function_space.mesh
+    view = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", element.degree)), name=name)
+    expression = dolfinx.fem.Expression(function, view.function_space.element.interpolation_points)
+
+    def update() -> None:
+        view.interpolate(expression)
+
+    update()
+    return view, update

@@ -24,8 +24,8 @@ from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, ren
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
 from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, solid_fields,
-                                     symmetry_bcs, surface_mean)
+from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, lagrange_view,
+                                     solid_fields, symmetry_bcs, surface_mean)
 
 import dolfinx
 import dolfinx.fem
@@ -90,9 +90,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         u.name = "displacement"
         field_dir = ctx.out if ctx.options.fields else None
         writer = FieldWriter(field_dir, ctx.comm, [u])
-        if len(fields) > 1:
-            fields[1].name = "pressure"
-        writer_p = FieldWriter(field_dir if len(fields) > 1 else None, ctx.comm, fields[1:2])
+        pressure_out = [lagrange_view(fields[1], "pressure")] if len(fields) > 1 else []
+        writer_p = FieldWriter(field_dir, ctx.comm, [view for view, _ in pressure_out])
         series = PyvistaSeries(field_dir, ctx.comm)
         # pressure on the displacement's nodes, for pyvista (one grid, one space)
         nodal_space = dolfinx.fem.functionspace(shell.mesh, ("Lagrange", family.displacement_degree))
@@ -100,12 +99,14 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         def write_state(load: float) -> None:
             with ctx.timings("output"):
+                for _, update in pressure_out:
+                    update()
                 writer.write(load)
                 writer_p.write(load)
                 if field_dir is not None:
                     extra = {}
-                    if len(fields) > 1:
-                        nodal_pressure.interpolate(fields[1])
+                    for view, _ in pressure_out:
+                        nodal_pressure.interpolate(view)
                         extra["pressure"] = nodal_pressure
                     series.write(load, gather_grid(u, extra))
 

@@ -89,3 +89,31 @@ def test_bad_input(overrides, key):
 def test_unknown_element_rejected_when_constructed_directly():
     with pytest.raises(ParameterError, match="P2P1, P2P0, Q1P0, Q2P1, P1"):
         si.Parameters(element="Q9P7").validate()
+
+
+def test_materials_by_cell_tag_sum_to_the_single_law():
+    """{tag: law} over dx(tag) is the same residual as the law over dx when the tag
+    covers the mesh (with p = 0, twice the modulus gives twice the residual)."""
+    import dolfinx
+    import numpy as np
+    import ufl
+
+    from eyemech.forms import NeoHooke
+    from eyemech.meshes import spherical_shell
+    from eyemech.problems.solid import solid_residual
+    from eyemech.problems.spaces import ELEMENTS, solid_fields
+
+    shell = spherical_shell(10.0, 12.0, 4.0, order=1, hexahedra=True)
+    family = ELEMENTS["Q1P0"]
+    fields, tests = solid_fields(shell.mesh, family)
+    fields[0].interpolate(lambda x: 0.01 * x)  # a uniform stretch
+    dx = shell.dx({"quadrature_degree": 2})
+    tag = shell.tag("wall")
+
+    def vector(material):
+        form = ufl.extract_blocks(solid_residual(material, family, fields, tests, dx))[0]
+        return dolfinx.fem.assemble_vector(dolfinx.fem.form(form)).array.copy()
+
+    single = vector(NeoHooke(0.05))
+    assert np.allclose(vector({tag: NeoHooke(0.05)}), single, rtol=1e-12, atol=1e-14)
+    assert np.allclose(vector({tag: NeoHooke(0.1)}), 2 * single, rtol=1e-12, atol=1e-14)
