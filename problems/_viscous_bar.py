@@ -174,6 +174,20 @@ class ViscousBar:
         return self.comm.allreduce(float(local), op=MPI.MIN)
 
 
+class UnstableIntegration(SolveFailure):
+    """The explicit update made Cv lose positive definiteness: the time integration
+    blew up (the state of the step that produced it is kept, as for a SolveFailure)."""
+
+    def __init__(self, step: int, time: float, smallest_eigenvalue: float, dt_over_tau: float):
+        self.step, self.load, self.last_converged = step, time, time
+        self.residuals, self.reason = [], "unstable time integration"
+        self.time, self.smallest_eigenvalue = time, smallest_eigenvalue
+        RuntimeError.__init__(
+            self, f"time integration unstable at step {step}, t = {time:.6g}: the explicit update "
+                  f"made Cv lose positive definiteness (smallest eigenvalue {smallest_eigenvalue:.3g}) "
+                  f"at dt/tau = {dt_over_tau:.3g}. The state at t = {time:.6g} is kept.")
+
+
 def time_stops(params: BarParameters, extra: tuple[float, ...] = ()) -> tuple[float, ...]:
     """Every multiple of dt up to t_end, plus ``extra`` (e.g. the end of the ramp)."""
     count = int(np.floor(params.t_end / params.dt * (1 + 1e-12)))
@@ -208,13 +222,10 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
         record(step.load)
         smallest = bar.update_history()
         ctx.record_step(step=step.step, time=step.load, dt=step.increment,
-                        newton_iterations=step.iterations, cuts=step.cuts,
+                        newton_iterations=step.iterations, cuts=step.cuts, residuals=step.residuals,
                         smallest_cv_eigenvalue=smallest)
         if not smallest > 0:
-            raise SolveFailure(step.step, step.load, step.load, step.residuals,
-                               "the explicit update made Cv lose positive definiteness "
-                               f"(smallest eigenvalue {smallest:.3g}) at t = {step.load:.6g}: "
-                               f"forward Euler unstable at dt/τ = {params.dt / params.tau:.3g}")
+            raise UnstableIntegration(step.step, step.load, smallest, params.dt / params.tau)
 
     follow_path(solver, apply, stepping, on_converged=converged, label=label,
                 quiet=ctx.options.quiet)
