@@ -13,12 +13,14 @@ from eyemech.forms.hyperelastic import (
     incompressible_energy_density,
 )
 from eyemech.forms.cavity import enclosed_volume, follower_pressure
+from eyemech.forms.viscoelastic import Viscoelastic
 
 __all__ = [
     "Material",
     "MooneyRivlin",
     "NeoHooke",
     "PolynomialIsochoric",
+    "Viscoelastic",
     "deformation_gradient",
     "enclosed_volume",
     "follower_pressure",

@@ -155,6 +155,12 @@ class ViscousBar:
         return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._stretch_form), op=MPI.SUM)
 
     # -- history --------------------------------------------------------------------
+    def store_strain(self) -> None:
+        """C̄_n ← C̄(u) without touching Cv_n: after the instantaneous loading at t = 0,
+        forward Euler's first step must start from the loaded C̄(0+), not from C̄ = I."""
+        self._scratch.interpolate(self._Cbar_next)
+        self.Cbar_n.x.array[:] = self._scratch.x.array
+
     def update_history(self) -> float:
         """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
         Both new values are evaluated before either is stored (forward Euler's Cv_{n+1}
@@ -234,10 +240,11 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
 def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
                    apply_load: Callable[[float], None], label: str) -> None:
     """The glassy response at t = 0: the full load with dt = 0 (Cv stays Cv_0 = I),
-    reached by load steps if Newton needs them; the history is not updated."""
+    reached by load steps if Newton needs them; Cv_n is not updated, C̄_n is."""
     bar.dt.value = 0.0
     follow_path(solver, lambda factor, _inc: apply_load(factor), Stepping(initial_step=1.0),
                 label=f"{label} (t = 0)", quiet=ctx.options.quiet)
+    bar.store_strain()
 
 
 def plot_history(path: Path, times, values, reference, ylabel: str, title: str) -> None:

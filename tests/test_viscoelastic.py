@@ -283,3 +283,22 @@ def test_bad_input_on_the_command_line(tmp_path):
     code, _, err = run_cli("run", "sls-creep", "--set", "tau=0", "--out", str(tmp_path))
     assert code == 2 and "tau" in err and "> 0" in err
     assert not (tmp_path / "results.json").exists()
+
+
+# -- the stability study (quick mode) ------------------------------------------------------
+def test_stability_study_quick(tmp_path):
+    import csv
+
+    from mpi4py import MPI
+
+    from eyemech.problems.studies import studies
+
+    files = studies()["viscoelastic-stability"].run(out=tmp_path, quick=True, comm=MPI.COMM_WORLD)
+    assert {f.suffix for f in files} == {".csv", ".png"}
+    lines = [l for l in files[0].read_text().splitlines() if not l.startswith("#")]
+    rows = {(r["scheme"], float(r["dt_over_tau"])): r for r in csv.DictReader(lines)}
+    backward = [float(rows[("backward-euler", h)]["max_error"]) for h in (0.1, 0.5, 2.5)]
+    assert all(np.isfinite(backward)) and max(backward) < 0.2  # bounded at dt = 2.5 τ
+    assert 3.0 < backward[1] / backward[0] < 6.0  # first order: ×5 in dt, ≈ ×4.4 measured
+    assert rows[("forward-euler", 2.5)]["status"] == "blew up"
+    assert rows[("forward-euler", 0.1)]["status"] == "ok"
