@@ -247,7 +247,8 @@ def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
     bar.store_strain()
 
 
-def plot_history(path: Path, times, values, reference, ylabel: str, title: str) -> None:
+def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
+                 reference_label: str = "reference") -> None:
     """A small PNG of a quantity over time, with its reference when there is one."""
     import matplotlib
 
@@ -257,7 +258,7 @@ def plot_history(path: Path, times, values, reference, ylabel: str, title: str) 
     fig, ax = plt.subplots(figsize=(5.0, 3.2), dpi=100)
     ax.plot(times, values, "o", ms=2.5, label="FE (DOLFINx)")
     if reference is not None:
-        ax.plot(times, reference, "-", lw=1.0, label="reference")
+        ax.plot(times, reference, "-", lw=1.0, label=reference_label)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)

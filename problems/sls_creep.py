@@ -76,6 +76,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities["glassy_strain"] = strains[0]
         ctx.result.quantities["final_strain"] = strains[-1]
         ctx.result.quantities["retardation_time"] = params.material.retardation_time
+        sls = reference.sls_creep_strain(times, params.stress, params.mu_inf, params.mu_v, params.tau)
+        ctx.result.quantities["max_relative_error_sls"] = float(np.max(np.abs(np.array(strains) / sls - 1)))
         if ctx.options.pictures and ctx.out is not None and ctx.rank0:
             with ctx.timings("output"):
                 _picture(ctx, params, times, strains)
@@ -86,8 +88,8 @@ def _picture(ctx: RunContext, params: Parameters, times, strains) -> None:
     path = ctx.out / "axial_strain.png"
     sls = reference.sls_creep_strain(times, params.stress, params.mu_inf, params.mu_v, params.tau)
     plot_history(path, times, strains, sls, "axial strain λ − 1",
-                 f"creep at σ = {params.stress:g} MPa; reference: small-strain SLS, "
-                 f"τc = {params.material.retardation_time:g} s")
+                 f"creep at σ = {params.stress:g} MPa, τc = {params.material.retardation_time:g} s, "
+                 f"dt = {params.dt:g} s", reference_label="standard linear solid (small strain)")
     ctx.result.pictures.append(path.name)
 
 
