@@ -2,5 +2,6 @@
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh, from_gmsh
 from eyemech.meshes.sphere import spherical_shell
+from eyemech.meshes.cornea import CorneaGeometry, cornea
 
-__all__ = ["MeshError", "TaggedMesh", "from_gmsh", "spherical_shell"]
+__all__ = ["CorneaGeometry", "cornea", "MeshError", "TaggedMesh", "from_gmsh", "spherical_shell"]
