@@ -67,6 +67,57 @@ class BarParameters(SceneParameters):
         return ve.Viscoelastic(self.mu_inf, self.mu_v, self.tau)
 
 
+class ViscousHistory:
+    """The internal variable of :mod:`eyemech.forms.viscoelastic` on a mesh: Cv_n (and C̄_n
+    for forward Euler) on a tensor-valued quadrature space whose points are those of the
+    residual's rule of ``degree`` (one value per Gauss point, the seed's §3.2.2), the UFL
+    expression of Cv_{n+1} for the time scheme, and the update after a converged step."""
+
+    def __init__(self, u, material: ve.Viscoelastic, scheme: str, degree: int):
+        mesh = u.function_space.mesh
+        self.comm = mesh.comm
+        self.dt = dolfinx.fem.Constant(mesh, 0.0)
+        Q = dolfinx.fem.functionspace(mesh, basix.ufl.quadrature_element(
+            mesh.basix_cell(), value_shape=(3, 3), scheme="default", degree=degree))
+        points = Q.element.interpolation_points
+        self.Cv_n = self._identity(Q, "Cv_n")
+        self.Cbar_n = self._identity(Q, "Cbar_n")  # read by forward Euler only
+        self.Cv = ve.current_internal_variable(scheme, material, u, self.Cv_n, self.Cbar_n, self.dt)
+        F = ufl.Identity(3) + ufl.grad(u)
+        self._Cv_next = dolfinx.fem.Expression(self.Cv, points)
+        self._Cbar_next = dolfinx.fem.Expression(ve.isochoric_cauchy_green(F), points)
+        self._scratch = dolfinx.fem.Function(Q)
+
+    @staticmethod
+    def _identity(Q, name: str) -> dolfinx.fem.Function:
+        f = dolfinx.fem.Function(Q, name=name)
+        f.x.array.reshape(-1, 9)[:] = np.eye(3).ravel()
+        return f
+
+    def store_strain(self) -> None:
+        """C̄_n ← C̄(u) without touching Cv_n: after the instantaneous loading at t = 0,
+        forward Euler's first step must start from the loaded C̄(0+), not from C̄ = I."""
+        self._scratch.interpolate(self._Cbar_next)
+        self.Cbar_n.x.array[:] = self._scratch.x.array
+
+    def update(self) -> float:
+        """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
+        Both new values are evaluated before either is stored (forward Euler's Cv_{n+1}
+        reads C̄_n). Returns the smallest eigenvalue of the new Cv over all points: a
+        forward-Euler blow-up shows as Cv losing positive definiteness."""
+        self._scratch.interpolate(self._Cv_next)
+        new_Cv = self._scratch.x.array.copy()
+        self.store_strain()
+        self.Cv_n.x.array[:] = new_Cv
+        tensors = new_Cv.reshape(-1, 3, 3)
+        if not np.all(np.isfinite(tensors)):
+            local = -np.inf
+        else:
+            local = np.linalg.eigvalsh(0.5 * (tensors + tensors.transpose(0, 2, 1))).min() \
+                if len(tensors) else np.inf
+        return self.comm.allreduce(float(local), op=MPI.MIN)
+
+
 class ViscousBar:
     """The unit cube in uniaxial tension with the viscoelastic mixed u–p residual.
 
@@ -97,18 +148,10 @@ class ViscousBar:
         self.ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=tags, metadata=metadata)
 
         self.material = params.material
-        self.dt = dolfinx.fem.Constant(self.mesh, 0.0)
-        Q = dolfinx.fem.functionspace(self.mesh, basix.ufl.quadrature_element(
-            self.mesh.basix_cell(), value_shape=(3, 3), scheme="default", degree=degree))
-        points = Q.element.interpolation_points
-        self.Cv_n = self._identity(Q, "Cv_n")
-        self.Cbar_n = self._identity(Q, "Cbar_n")  # used by forward Euler only
+        self.history = ViscousHistory(self.u, self.material, params.time_scheme, degree)
+        self.dt, self.Cv = self.history.dt, self.history.Cv
+        self.update_history, self.store_strain = self.history.update, self.history.store_strain
         F = ufl.Identity(3) + ufl.grad(self.u)
-        self.Cv = ve.current_internal_variable(params.time_scheme, self.material, self.u,
-                                               self.Cv_n, self.Cbar_n, self.dt)
-        self._Cv_next = dolfinx.fem.Expression(self.Cv, points)
-        self._Cbar_next = dolfinx.fem.Expression(ve.isochoric_cauchy_green(F), points)
-        self._scratch = dolfinx.fem.Function(Q)
         self.residual = ve.residual(self.material, self.u, self.p, self.v, self.q, self.Cv, self.dx)
 
         volume = comm.allreduce(dolfinx.fem.assemble_scalar(
@@ -117,12 +160,6 @@ class ViscousBar:
         self._stress_form = dolfinx.fem.form(sigma[0, 0] / volume * self.dx)
         self._stretch_form = dolfinx.fem.form(F[0, 0] / volume * self.dx)
         self.comm = comm
-
-    @staticmethod
-    def _identity(Q, name: str) -> dolfinx.fem.Function:
-        f = dolfinx.fem.Function(Q, name=name)
-        f.x.array.reshape(-1, 9)[:] = np.eye(3).ravel()
-        return f
 
     # -- boundary conditions --------------------------------------------------------
     def symmetry_bcs(self) -> list:
@@ -153,31 +190,6 @@ class ViscousBar:
 
     def axial_stretch(self) -> float:
         return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._stretch_form), op=MPI.SUM)
-
-    # -- history --------------------------------------------------------------------
-    def store_strain(self) -> None:
-        """C̄_n ← C̄(u) without touching Cv_n: after the instantaneous loading at t = 0,
-        forward Euler's first step must start from the loaded C̄(0+), not from C̄ = I."""
-        self._scratch.interpolate(self._Cbar_next)
-        self.Cbar_n.x.array[:] = self._scratch.x.array
-
-    def update_history(self) -> float:
-        """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
-        Both new values are evaluated before either is stored (forward Euler's Cv_{n+1}
-        reads C̄_n). Returns the smallest eigenvalue of the new Cv over all points: a
-        forward-Euler blow-up shows as Cv losing positive definiteness."""
-        self._scratch.interpolate(self._Cv_next)
-        new_Cv = self._scratch.x.array.copy()
-        self._scratch.interpolate(self._Cbar_next)
-        self.Cbar_n.x.array[:] = self._scratch.x.array
-        self.Cv_n.x.array[:] = new_Cv
-        tensors = new_Cv.reshape(-1, 3, 3)
-        if not np.all(np.isfinite(tensors)):
-            local = -np.inf
-        else:
-            local = np.linalg.eigvalsh(0.5 * (tensors + tensors.transpose(0, 2, 1))).min() \
-                if len(tensors) else np.inf
-        return self.comm.allreduce(float(local), op=MPI.MIN)
 
 
 class UnstableIntegration(SolveFailure):
