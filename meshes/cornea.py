@@ -41,6 +41,12 @@ HEX8, QUAD4 = 5, 3  # gmsh element types
 FACET_NAMES = ("anterior", "posterior", "limbus", "incision")
 
 
+def _bad(key: str, message: str) -> MeshError:
+    error = MeshError(message)
+    error.key = key
+    return error
+
+
 @dataclasses.dataclass(frozen=True)
 class CorneaGeometry:
     anterior_radius: float = 7.8
@@ -57,37 +63,35 @@ class CorneaGeometry:
     layers: int = 2                 # element layers through the thickness (at least)
 
     def validate(self) -> None:
-        """MeshError naming the offending value; nothing is built before this passes."""
+        """MeshError naming the offending value (its ``key`` attribute is the field name);
+        nothing is built before this passes."""
         positive = ("anterior_radius", "posterior_radius", "central_thickness", "limbal_thickness",
                     "diameter", "mesh_size", "azimuthal_divisions", "layers")
         for key in positive:
             if not getattr(self, key) > 0:
-                raise MeshError(f"cornea {key} must be > 0, got {getattr(self, key)!r}")
+                raise _bad(key, f"cornea {key} must be > 0, got {getattr(self, key)!r}")
         if not self.diameter < 2 * self.anterior_radius:
-            raise MeshError(f"cornea diameter {self.diameter} must be smaller than the anterior "
-                            f"sphere's ({2 * self.anterior_radius})")
+            raise _bad("diameter", f"cornea diameter {self.diameter} must be smaller than the "
+                       f"anterior sphere's ({2 * self.anterior_radius})")
         if self.incisions < 0:
-            raise MeshError(f"incisions must be >= 0, got {self.incisions}")
+            raise _bad("incisions", f"incisions must be >= 0, got {self.incisions}")
         if not 0 < self.incision_depth < 1:
-            raise MeshError(f"incision_depth must lie in (0, 1) (a fraction of the local "
-                            f"thickness), got {self.incision_depth}")
+            raise _bad("incision_depth", f"incision_depth must lie in (0, 1) (a fraction of the "
+                       f"local thickness), got {self.incision_depth}")
         if not 0 < self.optical_zone < self.diameter:
-            raise MeshError(f"optical_zone {self.optical_zone} mm must be > 0 and narrower than "
-                            f"the cornea ({self.diameter} mm); at 0 the incisions would cross "
-                            "at the apex")
-        if not self.optical_zone / 2 < self.incision_end <= self.diameter / 2:
-            raise MeshError(f"incision_end {self.incision_end} mm must lie in (optical_zone/2, "
-                            f"diameter/2] = ({self.optical_zone / 2}, {self.diameter / 2}]")
+            raise _bad("optical_zone", f"optical_zone {self.optical_zone} mm must be > 0 and "
+                       f"narrower than the cornea ({self.diameter} mm); at 0 the incisions would "
+                       "cross at the apex")
         if self.optical_zone < 1.0:
-            raise MeshError(f"optical_zone {self.optical_zone} mm is below 1 mm: the incisions "
-                            "would nearly cross at the apex (and the O-grid core needs room)")
-        if self.incisions > 0 and 2 * math.pi * self.optical_zone / 2 / self.incisions < 0.05:
-            raise MeshError(f"{self.incisions} incisions are closer than 0.05 mm at the optical "
-                            "zone edge: they would merge")
+            raise _bad("optical_zone", f"optical_zone {self.optical_zone} mm is below 1 mm: the "
+                       "incisions would nearly cross at the apex (and the O-grid core needs room)")
+        if not self.optical_zone / 2 < self.incision_end <= self.diameter / 2:
+            raise _bad("incision_end", f"incision_end {self.incision_end} mm must lie in "
+                       f"(optical_zone/2, diameter/2] = ({self.optical_zone / 2}, {self.diameter / 2}]")
         theta = np.linspace(0, self.limbus_angle, 200)
         if not np.all(self.thickness(theta) > 0.05 * self.central_thickness):
-            raise MeshError("the thickness profile from these radii and thicknesses is not "
-                            "positive over the cornea (posterior surface crosses the anterior)")
+            raise _bad("posterior_radius", "the thickness profile from these radii and thicknesses "
+                       "is not positive over the cornea (posterior surface crosses the anterior)")
 
     # -- the shape --------------------------------------------------------------------
     @property
@@ -204,13 +208,16 @@ def _hexahedra(g: CorneaGeometry):
     for i in range(g.incisions):
         k = i * n_theta // g.incisions
         inner = range(j_a + 1, j_b + 1 if opens_at_limbus else j_b)
+        mine = {}  # only this cut's nodes: with cuts on neighbouring grid lines a cell
+        # lies between two cuts and must keep the other line's original nodes
         for level in range(l_d):  # the bottom level of the cut stays connected
             for j in inner:
-                copies[node3d(polar_id(j, k), level)] = len(points) + len(copies)
+                mine[node3d(polar_id(j, k), level)] = len(points) + len(copies) + len(mine)
+        copies.update(mine)
         for level in range(l_d):
             for j in range(j_a, j_b):
                 ccw, cw = polar_cell(j, k, level), polar_cell(j, k - 1, level)
-                hexes[ccw] = [copies.get(v, v) for v in hexes[ccw]]
+                hexes[ccw] = [mine.get(v, v) for v in hexes[ccw]]
                 b, t = hexes[ccw][:4], hexes[ccw][4:]
                 incision_faces.append([b[0], b[1], t[1], t[0]])
                 b, t = hexes[cw][:4], hexes[cw][4:]

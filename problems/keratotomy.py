@@ -69,18 +69,16 @@ class Parameters(SceneParameters):
     def validate(self) -> None:
         self.require_positive("mu_inf", "mu_v", "tau", "t_end", "first_dt", "iop_mmHg",
                               "fit_diameter")
+        try:
+            self.geometry(self.incisions).validate()
+        except MeshError as err:
+            raise ParameterError(getattr(err, "key", "geometry"), str(err)) from None
         if not self.dt_growth >= 1.0:
             raise ParameterError("dt_growth", f"must be >= 1, got {self.dt_growth}")
         if self.first_dt > self.t_end:
             raise ParameterError("first_dt", f"is longer than t_end ({self.t_end})")
         if not self.fit_diameter <= self.optical_zone:
             raise ParameterError("fit_diameter", f"must not exceed optical_zone ({self.optical_zone})")
-        try:
-            self.geometry(self.incisions).validate()
-        except MeshError as err:
-            key = next((k for k in ("incision_depth", "optical_zone", "incision_end", "incisions")
-                        if k in str(err)), "geometry")
-            raise ParameterError(key, str(err)) from None
 
     def geometry(self, incisions: int) -> CorneaGeometry:
         return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,

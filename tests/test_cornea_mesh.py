@@ -70,3 +70,17 @@ def test_incisions_are_real_cuts():
 def test_bad_geometry_is_one_clear_error(changes, words):
     with pytest.raises(MeshError, match=words):
         CorneaGeometry(**changes).validate()
+
+
+def test_cuts_on_neighbouring_grid_lines():
+    """8 cuts on 8 azimuthal divisions: every wedge lies between two cuts and keeps the
+    other line's original nodes (a regression: the last cut once took the first cut's
+    copies across the wrap-around, leaving nodes unused)."""
+    from eyemech.meshes.cornea import _hexahedra
+
+    coarse = CorneaGeometry(incisions=8, azimuthal_divisions=8, mesh_size=1.5)
+    points, hexes, faces = _hexahedra(coarse)
+    assert len(np.unique(hexes)) == len(points)
+    finer = CorneaGeometry(incisions=8, azimuthal_divisions=16, mesh_size=1.5)
+    assert measure(cornea(coarse), "incision") == pytest.approx(measure(cornea(finer), "incision"),
+                                                                rel=1e-9)
