@@ -16,6 +16,7 @@ from eyemech.forms.hyperelastic import (
 )
 from eyemech.forms.cavity import (axis_volumes, enclosed_volume, follower_pressure, liquid_law_residual,
                                   liquid_pressure, volume_density)
+from eyemech.forms.viscoelastic import Viscoelastic
 
 __all__ = [
     "axis_volumes",
@@ -26,6 +27,7 @@ __all__ = [
     "MooneyRivlin",
     "NeoHooke",
     "PolynomialIsochoric",
+    "Viscoelastic",
     "deformation_gradient",
     "enclosed_volume",
     "follower_pressure",
