@@ -136,3 +136,15 @@ def test_two_ranks_give_the_serial_numbers():
     assert parallel["quantities"]["center_deflection"] == pytest.approx(serial["center_deflection"],
                                                                         rel=1e-9)
     assert parallel["quantities"]["dofs"] == serial["dofs"]
+
+
+def test_penalty_study_quick(tmp_path):
+    """The study runs and writes its CSV and charts (coarse settings)."""
+    from eyemech.problems.studies import studies
+
+    files = studies()["shell-penalty"].run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
+    names = {f.name for f in files}
+    assert {"shell_penalty.csv", "shell_degree.csv", "shell_penalty.png", "shell_degree.png"} <= names
+    rows = [line for line in (tmp_path / "shell_penalty.csv").read_text().splitlines()[2:] if line]
+    conditions = [float(r.split(",")[2]) for r in rows]
+    assert conditions[-1] > 5 * conditions[1]  # a large penalty spoils the conditioning
