@@ -4,6 +4,7 @@
     eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
     eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R]
     eyemech study NAME|all|list [--quick] [--out DIR]
+    eyemech bench NAME [--out docs/bench]
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
 failed (the last converged state and results.json with status "failed" are kept).
@@ -58,6 +59,9 @@ def _parser() -> argparse.ArgumentParser:
     p_study.add_argument("name", help="study name, or 'all' (see 'eyemech study list')")
     p_study.add_argument("--out", default="docs/studies", help="output folder")
     p_study.add_argument("--quick", action="store_true", help="coarse settings (for tests)")
+    p_bench = sub.add_parser("bench", help="time a scene at its benchmark size (table in --out)")
+    p_bench.add_argument("name", help="scene name")
+    p_bench.add_argument("--out", default="docs/bench", help="output folder")
     return parser
 
 
@@ -80,6 +84,12 @@ def main(argv: list[str] | None = None) -> int:
             return _list(problems, args.verbose, say)
         if args.command == "study":
             return _study(args, comm, say)
+        if args.command == "bench":
+            from eyemech.problems.bench import run_benchmark
+
+            row = run_benchmark(problems.get(args.name), Path(args.out), comm)
+            say(f"{args.name}: {row}")
+            return 0
         scene = problems.get(args.name)
         overrides = _overrides(args)
         options = _options(args)
@@ -95,6 +105,15 @@ def main(argv: list[str] | None = None) -> int:
     except SolveFailure as err:
         say(f"eyemech: solve failed: {err}", file=sys.stderr)
         return EXIT_SOLVE_FAILED
+    except Exception:
+        if comm.size == 1:
+            raise
+        # an error on one rank would leave the others waiting in a collective call
+        import traceback
+
+        print(f"eyemech: rank {comm.rank} of {comm.size} failed:\n{traceback.format_exc()}",
+              file=sys.stderr, flush=True)
+        comm.Abort(1)
 
 
 def _list(problems, verbose: bool, say) -> int:
