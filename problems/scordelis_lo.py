@@ -26,7 +26,7 @@ from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.parameters import SceneParameters, field
 from eyemech.problems.scene import Scene
-from eyemech.problems.shells import Shell, check_shell_parameters, picture
+from eyemech.problems.shells import Shell, check_shell_parameters, newton_options, picture
 
 REFERENCE = 0.3024  # MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20
 
@@ -69,7 +69,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         residual = (ufl.derivative(shell.energy(params.kinematics), shell.u, shell.v)
                     + weight * shell.v[2] * shell.dx)
         bcs = shell.fix("diaphragm", (1, 2)) + shell.fix_where(lambda x: np.isclose(x[0], L / 2), 0)
-        solver = NonlinearSolver(residual, shell.u, bcs, options=ctx.options.newton, timings=ctx.timings)
+        solver = NonlinearSolver(residual, shell.u, bcs, options=newton_options(ctx, params.kinematics),
+                                 timings=ctx.timings)
         follow_path(solver, lambda *_: None, Stepping(initial_step=1.0), label=SCENE.name,
                     quiet=ctx.options.quiet)
         edge_mid = (L / 2, R * np.sin(half), R * np.cos(half))
