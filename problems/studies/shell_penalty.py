@@ -111,6 +111,7 @@ def _charts(out: Path, divisions: int, penalty: np.ndarray, degree_rows: list) -
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     left.loglog(penalty[:, 0], np.abs(penalty[:, 1]) * 100, "o-")
@@ -139,6 +140,7 @@ def _charts(out: Path, divisions: int, penalty: np.ndarray, degree_rows: list) -
             right.annotate(f"{int(n)}", (seconds, abs(error) * 100), fontsize=7,
                            textcoords="offset points", xytext=(3, 3))
     for axis, label in ((left, "unknowns"), (right, "assembly + solve (s)")):
+        axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # no crowded labels
         axis.axhline(0.3, color="grey", ls=":")
         axis.set(xlabel=label, ylabel="|centre deflection error| (%)")
         axis.legend()
