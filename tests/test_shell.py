@@ -158,3 +158,34 @@ def test_penalty_study_quick(tmp_path):
     rows = [line for line in (tmp_path / "shell_penalty.csv").read_text().splitlines()[2:] if line]
     conditions = [float(r.split(",")[2]) for r in rows]
     assert conditions[-1] > 5 * conditions[1]  # a large penalty spoils the conditioning
+
+
+def test_thickness_as_a_field_matches_the_constant():
+    """A thickness Function (the lens is thicker in the optic) enters the bulk and the
+    edge terms (averaged across edges); a uniform field must reproduce the constant."""
+    import dolfinx.fem
+    import ufl
+
+    from eyemech.forms.shell import ShellMaterial
+    from eyemech.meshes.surface import mapped_surface, tag_boundary
+    from eyemech.problems.driver import NewtonOptions, NonlinearSolver
+    from eyemech.problems.shells import Shell
+
+    params = plate_clamped.Parameters(divisions=8)
+    L = params.length
+    mesh = mapped_surface(lambda s, t: np.column_stack([L * s, L * t, 0 * s]), 8, 8, "crossed",
+                          MPI.COMM_WORLD)
+    tagged = tag_boundary(mesh, {"edge": lambda x: np.isclose(x[0], 0) | np.isclose(x[0], L)
+                                 | np.isclose(x[1], 0) | np.isclose(x[1], L)})
+    shell = Shell(tagged, params, lambda x: np.tile([0.0, 0.0, 1.0], (len(x), 1)), clamped=("edge",))
+    thickness = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 0)))
+    thickness.x.array[:] = params.thickness
+    shell.material = ShellMaterial(shell.material.youngs_modulus, shell.material.poisson_ratio,
+                                   thickness)
+    residual = (ufl.derivative(shell.energy("linear"), shell.u, shell.v)
+                - params.q * shell.v[2] * shell.dx)
+    solver = NonlinearSolver(residual, shell.u, shell.fix("edge"),
+                             options=NewtonOptions(petsc={"snes_type": "ksponly"}))
+    assert solver.solve()[0]
+    constant = _run(plate_clamped, divisions=8)["center_deflection"]
+    assert shell.value_at((L / 2, L / 2, 0))[2] == pytest.approx(constant, rel=1e-9)
