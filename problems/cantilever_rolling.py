@@ -45,7 +45,8 @@ from eyemech.problems.shells import Shell, check_shell_parameters, newton_option
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    moment_fraction: float = field(1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)")
+    moment_fraction: float = field(
+        1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)")
     youngs_modulus: float = field(1.2e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa")
     poisson_ratio: float = field(0.0, "Poisson's ratio (0: exact circle, no anticlastic bending)")
     length: float = field(12.0, "strip length", "mm")

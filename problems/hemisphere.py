@@ -97,7 +97,8 @@ def point_loads(shell: Shell, loads):
     x = V.tabulate_dof_coordinates()[:owned]
     entries = []
     for point, component, value in loads:
-        hits = np.flatnonzero(np.linalg.norm(x - np.asarray(point, float), axis=1) < 1e-8 * shell_size(x))
+        distance = np.linalg.norm(x - np.asarray(point, float), axis=1)
+        hits = np.flatnonzero(distance < 1e-8 * shell_size(x))
         entries += [(bs * i + component, value) for i in hits]
 
     def hook(_x, residual):

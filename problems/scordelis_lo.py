@@ -62,7 +62,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         with ctx.timings("mesh"):
             mesh = mapped_surface(roof, params.divisions, params.divisions, params.diagonal, ctx.comm)
-            tagged = tag_boundary(mesh, {"diaphragm": lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], L)})
+            ends = lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], L)  # noqa: E731
+            tagged = tag_boundary(mesh, {"diaphragm": ends})
         away_from_axis = lambda x: np.column_stack([0.0 * x[:, 0], x[:, 1], x[:, 2]])  # noqa: E731
         shell = Shell(tagged, params, away_from_axis)
         weight = shell.constant(params.gravity_load)
@@ -76,7 +77,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         edge_mid = (L / 2, R * np.sin(half), R * np.cos(half))
         deflection = -float(shell.value_at(edge_mid)[2])
         ctx.result.quantities.update(edge_deflection=deflection, edge_deflection_reference=REFERENCE,
-                                     edge_deflection_error=deflection / REFERENCE - 1.0, dofs=shell.dofs())
+                                     edge_deflection_error=deflection / REFERENCE - 1.0,
+                                     dofs=shell.dofs())
         if ctx.options.pictures and ctx.out is not None:
             with ctx.timings("output"):
                 picture(shell.u, ctx, "scordelis-lo", "-u_z", lambda d: -d[:, 2], scale=10.0)

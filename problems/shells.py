@@ -141,7 +141,8 @@ class PlateParameters(SceneParameters):
     divisions: int = field(32, "squares per side (each split in 4 triangles when crossed)")
     diagonal: Diagonal = field("crossed", "triangulation of each square: crossed|right|left|alternating")
     degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
-    kinematics: Kinematics = field("linear", "linear (small displacement) or nonlinear (total Lagrangian)")
+    kinematics: Kinematics = field("linear", "linear (small displacement) or nonlinear "
+                                                        "(total Lagrangian)")
     penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)")
 

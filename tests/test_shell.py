@@ -158,6 +158,10 @@ def test_penalty_study_quick(tmp_path):
     rows = [line for line in (tmp_path / "shell_penalty.csv").read_text().splitlines()[2:] if line]
     conditions = [float(r.split(",")[2]) for r in rows]
     assert conditions[-1] > 5 * conditions[1]  # a large penalty spoils the conditioning
+    degree_rows = [line.split(",") for line in
+                   (tmp_path / "shell_degree.csv").read_text().splitlines()[2:] if line]
+    p3 = [row for row in degree_rows if row[0] == "3"]
+    assert abs(float(p3[0][3])) < 3e-3  # the P3 option: 4 × 4 crossed already within 0.3 %
 
 
 def test_thickness_as_a_field_matches_the_constant():
