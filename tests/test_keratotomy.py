@@ -56,3 +56,19 @@ def test_bad_input_is_one_clear_error(key, value, words):
     with pytest.raises(ParameterError, match=words) as info:
         build(keratotomy.Parameters, {key: value})
     assert info.value.key == key
+
+
+@pytest.mark.mpi
+def test_two_ranks_give_the_same_numbers(tmp_path, eight_at_3mm):
+    """The coarse 8-incision case on 2 ranks, stopped after the first time step, against
+    the first two time levels of the serial run (same time grid)."""
+    from conftest import last_json, run_cli
+
+    sets = [f"{k}={v}" for k, v in {**COARSE, "t_end": 1800.0}.items()]
+    args = [a for s in sets for a in ("--set", s)]
+    code, out, err = run_cli("run", "keratotomy", *args, "--out", str(tmp_path), "--json",
+                             "--no-pictures", "--no-fields", ranks=2)
+    assert code == 0, err
+    parallel = last_json(out)["quantities"]
+    for key in ("power_change_D", "intact_power_D", "apex_displacement_mm", "wound_gape_mm"):
+        assert parallel[key] == pytest.approx(eight_at_3mm[key][:2], rel=1e-8)
