@@ -9,9 +9,8 @@ STAMP  := $(VENV)/.installed
 # Extras: the DOLFINx wheel unless told otherwise (EXTRAS=test for a conda DOLFINx).
 EXTRAS ?= dolfinx,test
 OUT    ?= results
-# The main job. Until the scleral-buckling scene lands (issue #5) it is the
-# foundation benchmark.
-MAIN   ?= sphere-inflation
+# The main job: the scleral-buckling operation (issue #5).
+MAIN   ?= scleral-buckling
 
 .PHONY: run test bench venv clean
 

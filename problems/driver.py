@@ -265,6 +265,9 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         bar.update((target - stepping.start) / span - bar.n)
         if cuts == 0 and iterations <= stepping.easy_iterations:
             increment = min(increment * stepping.grow, stepping.max_step * span)
+        if any(abs(target - s) <= 1e-12 * span for s in stops):
+            # a new stage (or output interval) starts: its difficulty is not the last one's
+            increment = max(increment, stepping.initial_step * span)
     bar.close()
     return records
 

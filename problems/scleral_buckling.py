@@ -81,7 +81,7 @@ class Parameters(SceneParameters):
     indentation: float = field(1.0, "radial inward travel of the buckle in step 2", "mm")
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
-    suture_force: float = field(0.1, "pull on each suture at the end of step 3", "N")
+    suture_force: float = field(0.05, "pull on each suture at the end of step 3", "N")
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
     suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
                                                "suture meridians, degrees from the tear", "deg")
