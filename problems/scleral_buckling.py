@@ -221,8 +221,11 @@ class BucklingModel:
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
 
         self.bcs = self._boundary_conditions()
+        # backtracking: with the buckle's contact and the sutures, plain Newton can cycle
+        # between two active sets (seen at 85 % of a 0.1 N pull); --petsc still overrides
+        newton = dataclasses.replace(ctx.options.newton, line_search="bt")
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
-                                      options=ctx.options.newton, timings=ctx.timings)
+                                      options=newton, timings=ctx.timings)
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
