@@ -301,6 +301,15 @@ class NodeToSurfaceContact:
         return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
                 "contact_normal_force": float(total[2]), "max_penetration": depth}
 
+    def nodal_pressures(self) -> tuple[np.ndarray, np.ndarray]:
+        """(reference positions (n, 3), contact pressure p(g)) of this rank's slave nodes
+        that touch (g < 0)."""
+        state = self.state or self.search()
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        touching = state.gaps < 0
+        nodes = self.slave_blocks[state.active[touching]]
+        return self.reference[nodes], pressure[touching]
+
     def refuse_initial_penetration(self, key: str, tolerance: float = 0.0) -> None:
         """ParameterError naming ``key`` when slave nodes start inside the master body
         (deeper than ``tolerance`` but within the search depth)."""
