@@ -45,7 +45,7 @@ class Parameters(SceneParameters):
     youngs_modulus: float = field(1.0, "Young's modulus of both blocks", "MPa")
     poisson_ratio: float = field(0.3, "Poisson's ratio", "")
     pressure: float = field(0.01, "pressure on the top face", "MPa")
-    penalty: float = field(100.0, "penalty factor: α = penalty · E / master_size", "")
+    penalty: float = field(30.0, "penalty factor: α = penalty · E / master_size", "")
     master_size: float = field(0.25, "element size of the lower (master) block", "mm")
     slave_size: float = field(0.17, "element size of the upper (slave) block", "mm")
     degree: int = field(1, "displacement degree (1 or 2)")

@@ -53,7 +53,7 @@ class Parameters(SceneParameters):
     stiff_modulus: float = field(0.05, "Young's modulus of the stiff layer", "MPa")
     poisson_ratio: float = field(0.3, "Poisson's ratio of both layers", "")
     pressure: float = field(2e-5, "pressure on the soft layer's inner face", "MPa")
-    penalty: float = field(100.0, "penalty factor: α = penalty · soft_modulus / mesh_size", "")
+    penalty: float = field(30.0, "penalty factor: α = penalty · soft_modulus / mesh_size", "")
     smoothing: float = field(0.5, "penalty round-off width ε as a fraction of p/α (0 = plain kink)", "")
     mesh_size: float = field(0.3, "element size", "mm")
     degree: int = field(2, "displacement degree (1 or 2)")

@@ -278,3 +278,19 @@ def test_patch_single_pass_balances_force_but_not_pressure(patch_results):
 def test_patch_two_pass_is_nearly_uniform(patch_results):
     assert patch_results[2]["stress_spread_lower"] < 0.05
     assert patch_results[2]["stress_spread_upper"] < 0.05
+
+
+# -- penalty study ---------------------------------------------------------------------------
+def test_penalty_study_quick(tmp_path):
+    import csv
+
+    from eyemech.problems.studies.contact_penalty import STUDY
+
+    files = STUDY.run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
+    assert {f.suffix for f in files} == {".csv", ".png"} and all(f.exists() for f in files)
+    lines = [line for line in files[0].read_text().splitlines() if not line.startswith("#")]
+    rows = list(csv.DictReader(lines))
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    # penetration falls like 1/α: ten times the penalty, about a tenth of the penetration
+    ratio = float(rows[1]["max_penetration"]) / float(rows[0]["max_penetration"])
+    assert 0.05 < ratio < 0.2
