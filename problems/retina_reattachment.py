@@ -166,7 +166,8 @@ def _picture(u, ctx: RunContext, params: Parameters) -> None:
         return
     grid.point_data["|u| (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
     path = ctx.out / "retina-reattachment.png"
-    render_png(grid, path, scalars="|u| (mm)", warp="displacement", camera=(1.0, 0.4, 0.15),
+    # seen across the symmetry plane y = 0: the section shows the closed gap
+    render_png(grid, path, scalars="|u| (mm)", warp="displacement", camera=(0.0, -1.0, 0.0),
                show_undeformed=False,
                title=f"retina-reattachment: gap {params.gap:g} mm closed by p = {params.pressure:g} MPa")
     ctx.result.pictures.append(path.name)
