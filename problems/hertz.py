@@ -53,7 +53,7 @@ class Parameters(SceneParameters):
     poisson_ratio: float = field(0.3, "Poisson's ratio ν", "")
     indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm")
     penalty: float = field(30.0, "penalty factor: α = penalty · E / mesh_size", "")
-    mesh_size: float = field(0.006, "element size in the contact zone", "mm")
+    mesh_size: float = field(0.012, "element size in the contact zone (a/h ≈ 2.6 at the default d)", "mm")
     far_size: float = field(0.25, "element size away from the contact zone", "mm")
     initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm")
     load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
