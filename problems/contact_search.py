@@ -81,7 +81,8 @@ class NodeToSurfaceContact:
 
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
                  penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
-                 smoothing: float = 0.0, timings: Timings | None = None):
+                 smoothing: float = 0.0, timings: Timings | None = None,
+                 block_spaces=None):
         if not penalty > 0:
             raise ValueError(f"the penalty must be > 0, got {penalty}")
         if not smoothing >= 0:
@@ -97,6 +98,7 @@ class NodeToSurfaceContact:
         if self.bs != 3 or space.ufl_element().embedded_superdegree not in (1, 2):
             raise ValueError("node-to-surface contact needs a 3D vector P1 or P2 displacement")
         self.imap = space.dofmap.index_map
+        self._layout(block_spaces)
         self.reference = space.tabulate_dof_coordinates()
         self._slave_setup(tagged, slave)
         self._master_setup(tagged, master)
@@ -176,9 +178,35 @@ class NodeToSurfaceContact:
         for bc in bcs:
             local, _ = bc.dof_indices()
             blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
-            mine.append(blocks * self.bs + local % self.bs)
+            mine.append(self._petsc_base(blocks) + local % self.bs)
         mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
         return set(np.concatenate(self.comm.allgather(mine)).tolist())
+
+    def _layout(self, block_spaces) -> None:
+        """Where each rank's displacement dofs sit in the PETSc vector.
+
+        A single field: global index = global node · bs + component. A blocked
+        system (``block_spaces`` = the spaces of ``NonlinearProblem(..., kind="mpi")``,
+        the displacement's first): each rank stores its owned dofs of every block one
+        after the other, so a node owned by rank r sits at Σ_{s<r} (owned dofs of all
+        blocks on s) + (its number on r) · bs."""
+        start = self.imap.local_range[0]
+        owned = self.bs * self.imap.size_local
+        if block_spaces is None:
+            rank_total = owned
+        else:
+            if block_spaces[0] != self.u.function_space:
+                raise ValueError("block_spaces must start with the displacement's space")
+            rank_total = sum(V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+                             for V in block_spaces)
+        self._starts = np.array(self.comm.allgather(start), dtype=np.int64)
+        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
+
+    def _petsc_base(self, global_nodes: np.ndarray) -> np.ndarray:
+        """PETSc index of component 0 of the given global node numbers."""
+        global_nodes = np.asarray(global_nodes, dtype=np.int64)
+        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
+        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
         """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
@@ -254,7 +282,8 @@ class NodeToSurfaceContact:
     def _pair_dofs(self, state: ContactState) -> np.ndarray:
         """(n, 12) global dof indices: slave node then the three master nodes."""
         nodes = np.column_stack([self.slave_global[state.active], self.triangles[state.triangles]])
-        return (nodes[:, :, None] * self.bs + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
+        base = self._petsc_base(nodes.ravel()).reshape(nodes.shape)
+        return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
 
     def _pair_vectors(self, state: ContactState) -> np.ndarray:
         """(n, 12) D = [n, −N1 n, −N2 n, −N3 n]."""

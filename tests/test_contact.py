@@ -302,3 +302,48 @@ def test_penalty_study_quick(tmp_path):
     # penetration falls like 1/α: ten times the penalty, about a tenth of the penetration
     ratio = float(rows[1]["max_penetration"]) / float(rows[0]["max_penetration"])
     assert 0.05 < ratio < 0.2
+
+
+# -- PETSc layout of a blocked (u, p) system ----------------------------------------------------
+LAYOUT_CHECK = """
+import dolfinx_solver
+import numpy as np
+import dolfinx, dolfinx.fem.petsc
+from mpi4py import MPI
+from eyemech.meshes.contact_bodies import layered_caps
+from eyemech.problems.contact_search import NodeToSurfaceContact
+
+caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
+V = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 2, (3,)))
+Q = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 1))
+u, p = dolfinx.fem.Function(V), dolfinx.fem.Function(Q)
+imap = V.dofmap.index_map
+n = imap.size_local + imap.num_ghosts
+nodes = imap.local_to_global(np.arange(n, dtype=np.int32))
+u.x.array[:] = (nodes[:, None] * 3 + np.arange(3) + 1).ravel()
+p.x.array[:] = -1.0
+x = dolfinx.fem.petsc.create_vector([V, Q], kind="mpi")
+dolfinx.fem.petsc.assign([u, p], x)
+search = NodeToSurfaceContact(u, caps, "slave", "master", 1.0, block_spaces=[V, Q])
+owned = nodes[: imap.size_local]
+index = (search._petsc_base(owned)[:, None] + np.arange(3)).ravel()
+ok = np.array_equal(x.getValues(index.astype(np.int32)), (owned[:, None] * 3 + np.arange(3) + 1).ravel())
+ok = MPI.COMM_WORLD.allreduce(bool(ok), op=MPI.LAND)
+if MPI.COMM_WORLD.rank == 0:
+    print("LAYOUT", ok)
+"""
+
+
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
+def test_blocked_system_indices(ranks, tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "layout.py"
+    script.write_text(LAYOUT_CHECK)
+    command = [sys.executable, str(script)]
+    if ranks > 1:
+        command = [str(Path(sys.executable).parent / "mpiexec"), "-n", str(ranks), *command]
+    out = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert "LAYOUT True" in out.stdout, out.stdout + out.stderr
