@@ -3,21 +3,26 @@
 driver's hooks and refreshed at every Newton iteration.
 
 Formulation (single pass, node to surface). Slave node s with lumped area w_s,
-master triangle with nodes x1, x2, x3, outward unit normal n and closest point
-x_p = Σ N_j(ξ) x_j of the deformed slave position x_s:
+master triangle with nodes x1, x2, x3 and outward unit normal n; N_j(ξ) are the
+barycentric weights of the closest point of the triangle to the deformed slave
+position x_s:
 
-    g = (x_s − x_p)·n,      Π_c = ½ α w_s ⟨−g⟩²      (paper eq. 9–10)
-    δΠ_c = α w_s g D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12, 12 entries)
-    K_c = α w_s D Dᵀ        (frozen normal and frozen ξ, eq. 13)
+    g = (x_s − x_1)·n,      Π_c = w_s ψ(g),  ψ' = −p(g)      (paper eq. 9–10)
+    δΠ_c = −w_s p(g) D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12)
+    K_c = −w_s p'(g) D Dᵀ      (frozen normal and frozen ξ, eq. 13)
 
-For a closest-point projection the gradient is exact (x_s − x_p ∥ n, so the
-normal's variation drops out of δg); K_c omits only the terms of order α g
-(normal and ξ rotation), small because the penalty penetration is small, so
-Newton converges nearly quadratically once the active set has settled.
+with p(g) = α⟨−g⟩ (Π_c = ½ α w_s ⟨−g⟩², the paper's) or its C¹ round-off
+(:func:`penalty_pressure`). The gap is the distance to the triangle's plane,
+whose gradient in x_s is exactly n; K_c omits the terms from the rotation of n
+and the motion of ξ, of relative size g/h — small because the penalty
+penetration is small — so Newton converges nearly quadratically once the
+active set has settled.
 
 Search: a global step (a k-d tree on the master triangles' centroids gives the
 nearest few candidates) and a local step (the exact closest point on each
-candidate triangle, vectorised); the candidate nearest in distance wins.
+candidate triangle, vectorised); the candidate nearest in distance wins, except
+that a node keeps its previous triangle while it still projects inside it (up to
+a small tolerance) — otherwise nodes over an edge swap triangles every iterate.
 
 Parallel: each rank treats the slave nodes it owns. The master surface (its
 triangles as global node numbers, its current node positions) is gathered on all
@@ -71,12 +76,14 @@ class ContactState:
 class NodeToSurfaceContact:
     """Penalty contact of the ``slave`` facets' nodes against the ``master`` facets.
 
-    ``u`` is the displacement (vector Lagrange P1 or P2, the only unknown of the
-    system), ``penalty`` α in force per area per length (MPa/mm), ``bcs`` the
-    Dirichlet conditions (their rows and columns are left alone),
-    ``search_depth`` the deepest penetration still counted as contact (deeper
-    pairs are taken to be on the wrong side), ``candidates`` the triangles tested
-    per slave node.
+    ``u`` is the displacement (vector Lagrange P1 or P2), ``penalty`` α in force
+    per area per length (MPa/mm), ``bcs`` the Dirichlet conditions (their rows and
+    columns are left alone), ``search_depth`` the deepest penetration still
+    counted as contact (deeper pairs are taken to be on the wrong side),
+    ``candidates`` the triangles tested per slave node, ``smoothing`` ε the width
+    over which the penalty pressure is rounded off (:func:`penalty_pressure`; 0 =
+    the plain ⟨−g⟩ law), ``block_spaces`` the spaces of a blocked system
+    (``kind="mpi"``, displacement first) when ``u`` is one block of it.
     """
 
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
