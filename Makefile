@@ -13,7 +13,7 @@ OUT    ?= results
 # foundation benchmark.
 MAIN   ?= sphere-inflation
 
-.PHONY: run test venv clean
+.PHONY: run test bench venv clean
 
 venv: $(STAMP)
 
@@ -33,6 +33,11 @@ run: $(STAMP)
 
 test: $(STAMP)
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m pytest -ra --timeout=1800 $(PYTEST_ARGS)
+
+# Performance of the main job at the paper's resolution, on 1 and 2 ranks.
+bench: $(STAMP)
+	$(VENV)/bin/eyemech bench scleral-buckling --out docs/bench
+	$(VENV)/bin/mpiexec -n 2 $(VENV)/bin/eyemech bench scleral-buckling --out docs/bench
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

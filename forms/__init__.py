@@ -11,19 +11,30 @@ from eyemech.forms.hyperelastic import (
     NeoHooke,
     PolynomialIsochoric,
     incompressible_energy_density,
+    nearly_incompressible_energy_density,
+    volumetric_energy,
 )
-from eyemech.forms.cavity import enclosed_volume, follower_pressure
+from eyemech.forms.cavity import (axis_volumes, enclosed_volume, follower_pressure, liquid_law_residual,
+                                  liquid_pressure, volume_density)
+from eyemech.forms.viscoelastic import Viscoelastic
 
 __all__ = [
+    "axis_volumes",
+    "liquid_law_residual",
+    "liquid_pressure",
+    "volume_density",
     "Material",
     "MooneyRivlin",
     "NeoHooke",
     "PolynomialIsochoric",
+    "Viscoelastic",
     "deformation_gradient",
     "enclosed_volume",
     "follower_pressure",
     "incompressible_energy_density",
     "isochoric_invariants",
+    "nearly_incompressible_energy_density",
+    "volumetric_energy",
 ]
 
 from eyemech.forms import contact  # noqa: E402  (obstacles: contact.Plane, contact.Ring, ...)

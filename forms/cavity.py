@@ -18,6 +18,17 @@ def _nanson(u):
     return ufl.det(F) * ufl.inv(F).T
 
 
+def volume_density(u, outward_sign: float = -1.0, axis: int | None = None):
+    """Integrand (per reference wall area) of the enclosed volume: 1/3 x·n da, or with
+    ``axis`` = k the field x_k e_k (also of divergence 1): x_k n_k da."""
+    x = ufl.SpatialCoordinate(u.ufl_function_space().mesh) + u
+    N = ufl.FacetNormal(u.ufl_function_space().mesh)
+    area_vector = _nanson(u) * N
+    if axis is None:
+        return outward_sign / 3.0 * ufl.dot(x, area_vector)
+    return outward_sign * x[axis] * area_vector[axis]
+
+
 def enclosed_volume(u, wall_measure, outward_sign: float = -1.0):
     """Volume enclosed by the deformed wall, as a UFL functional.
 
@@ -25,9 +36,43 @@ def enclosed_volume(u, wall_measure, outward_sign: float = -1.0):
     facet normal N points away from the solid, i.e. into the cavity, so the cavity's
     outward normal is −N and ``outward_sign`` defaults to −1.
     """
-    x = ufl.SpatialCoordinate(u.ufl_function_space().mesh) + u
-    N = ufl.FacetNormal(u.ufl_function_space().mesh)
-    return outward_sign / 3.0 * ufl.dot(x, _nanson(u) * N) * wall_measure
+    return volume_density(u, outward_sign) * wall_measure
+
+
+def axis_volumes(u, wall_measure, outward_sign: float = -1.0):
+    """The enclosed volume computed with each of the fields x_k e_k (k = 0, 1, 2).
+
+    Every field with divergence 1 gives the same volume for a closed wall, and
+    x_k e_k·n also vanishes on any coordinate plane through the origin, so for a
+    wall closed by such symmetry planes the three values agree. For an open wall
+    each misses a different flux through the hole: they differ (the same
+    origin-dependence as 1/3 ∮ (x − c)·n da, tested without moving the origin off
+    the symmetry planes).
+    """
+    dim = len(u)
+    return [volume_density(u, outward_sign, axis=k) * wall_measure for k in range(dim)]
+
+
+def liquid_pressure(volume, initial_volume, initial_pressure, bulk_modulus):
+    """The static liquid's law (seed 002, eq. 5): P = P_ini − K (V − V_ini) / V_ini.
+    Works on floats and on UFL expressions alike."""
+    return initial_pressure - bulk_modulus * (volume - initial_volume) / initial_volume
+
+
+def liquid_law_residual(pressure, test, u, wall_measure, wall_area, initial_volume,
+                        initial_pressure, bulk_modulus, outward_sign: float = -1.0):
+    """Row of the cavity pressure P (a Real-space unknown with test function ``test``):
+
+        r_P = (V − V_ini) + V_ini (P − P_ini) / K = 0,
+
+    the liquid law scaled by V_ini / K so that the row is a volume, its coupling to
+    the wall displacements ∂V/∂u is an area like the wall's pressure column, and the
+    diagonal V_ini/K stays finite as K → ∞ (incompressible liquid). Constant terms
+    are spread over the reference wall area ``wall_area`` to write r_P as one wall
+    integral.
+    """
+    constant = (initial_volume * (pressure - initial_pressure) / bulk_modulus - initial_volume) / wall_area
+    return (volume_density(u, outward_sign) + constant) * test * wall_measure
 
 
 def follower_pressure(pressure, u, v, wall_measure):

@@ -63,3 +63,25 @@ def incompressible_energy_density(material: Material, u, p):
     incompressible equilibrium and p the Lagrange multiplier."""
     F = ufl.Identity(len(u)) + ufl.grad(u)
     return material.strain_energy(F) + p * (ufl.det(F) - 1)
+
+
+def volumetric_energy(J, bulk_modulus, kind: str = "log"):
+    """Volumetric (bulk) energy U(J) of the nearly incompressible variant.
+
+    ``"quadratic"``: U = K/2 (J − 1)²;  ``"log"``: U = K/4 (J² − 1 − 2 ln J)
+    (Simo–Taylor; U → ∞ as J → 0 and as J → ∞). Both give p = U'(J) ≈ K (J − 1)
+    for small volume change, K the small-strain bulk modulus.
+    """
+    if kind == "quadratic":
+        return 0.5 * bulk_modulus * (J - 1) ** 2
+    if kind == "log":
+        return 0.25 * bulk_modulus * (J**2 - 1 - 2 * ufl.ln(J))
+    raise ValueError(f"unknown volumetric energy {kind!r}: quadratic | log")
+
+
+def nearly_incompressible_energy_density(material: Material, u, bulk_modulus, kind: str = "log"):
+    """Displacement-only energy density W(F) + U(J): the isochoric law (invariants
+    of C̄ = J^(-2/3) C) plus a bulk penalty. With K ≫ μ and low-order elements it
+    locks volumetrically (the point of the ``P1`` family)."""
+    F = ufl.Identity(len(u)) + ufl.grad(u)
+    return material.strain_energy(F) + volumetric_energy(ufl.det(F), bulk_modulus, kind)

@@ -34,18 +34,29 @@ class TaggedMesh:
     cell_tags: dolfinx.mesh.MeshTags | None
     facet_tags: dolfinx.mesh.MeshTags | None
     names: dict[str, tuple[int, int]]  # physical name -> (dim, tag)
+    # named unions of regions, e.g. "cavity_wall" = every face the liquid wets
+    unions: dict[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
 
-    def tag(self, name: str) -> int:
+    def tag(self, name: str) -> int | tuple[int, ...]:
+        """The integer tag of a region (a tuple for a union, usable in ``ds(...)``)."""
+        if name in self.unions:
+            return tuple(self.names[part][1] for part in self.unions[name])
         if name not in self.names:
-            raise MeshError(f"the mesh has no region '{name}'; it has: {', '.join(sorted(self.names))}")
+            known = sorted(set(self.names) | set(self.unions))
+            raise MeshError(f"the mesh has no region '{name}'; it has: {', '.join(known)}")
         return self.names[name][1]
 
+    def _find(self, tags, name: str) -> np.ndarray:
+        values = self.tag(name)
+        values = values if isinstance(values, tuple) else (values,)
+        return np.unique(np.concatenate([tags.find(v) for v in values])).astype(np.int32)
+
     def facets(self, name: str) -> np.ndarray:
-        """Local indices of the facets tagged ``name``."""
-        return self.facet_tags.find(self.tag(name))
+        """Local indices of the facets tagged ``name`` (or any part of a union)."""
+        return self._find(self.facet_tags, name)
 
     def cells(self, name: str) -> np.ndarray:
-        return self.cell_tags.find(self.tag(name))
+        return self._find(self.cell_tags, name)
 
     def ds(self, metadata: dict | None = None) -> ufl.Measure:
         return ufl.Measure("ds", domain=self.mesh, subdomain_data=self.facet_tags, metadata=metadata)
@@ -55,9 +66,10 @@ class TaggedMesh:
 
     def count(self, name: str) -> int:
         """Global number of entities tagged ``name`` (owned entities only)."""
-        dim, _ = self.names[name]
-        tags = self.cell_tags if dim == self.mesh.topology.dim else self.facet_tags
-        entities = tags.find(self.tag(name))
+        first = self.unions.get(name, (name,))[0]
+        self.tag(name)
+        dim, _ = self.names[first]
+        entities = self.cells(name) if dim == self.mesh.topology.dim else self.facets(name)
         owned = self.mesh.topology.index_map(dim).size_local
         return self.mesh.comm.allreduce(int(np.sum(entities < owned)), op=MPI.SUM)
 

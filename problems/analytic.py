@@ -55,3 +55,37 @@ def sphere_inner_radius(pressure: float, A: float, B: float, c10: float) -> floa
 
 def sphere_outer_radius(a: float, A: float, B: float) -> float:
     return float(np.cbrt(a**3 + B**3 - A**3))
+
+
+# Thick sphere around a liquid, squeezed by an external pressure
+# ----------------------------------------------------------------
+# The same radial deformation holds (incompressible wall, a ≤ r ≤ b), now with
+# σrr(a) = −P (the liquid) and σrr(b) = −p_ext, so the wall relation above reads
+#
+#     P − p_ext = f(a),   f(a) = ∫_a^b 2μ/r (λ² − λ⁻⁴) dr   (sphere_pressure).
+#
+# The liquid fills the cavity: V/V_ini = (a/A)³ with V_ini the stress-free cavity,
+# and its law (seed 002, eq. 5) closes the problem,
+#
+#     P = P_ini − K ((a/A)³ − 1).
+#
+# Eliminating P leaves one scalar equation for a,
+#
+#     h(a) = f(a) + p_ext − P_ini + K ((a/A)³ − 1) = 0,
+#
+# with h increasing in a below the limit point of f (f' > 0 there, K > 0), so the
+# root is unique and bracketed by [A/2, a_max]; then P follows from the law.
+
+def liquid_sphere(A: float, B: float, c10: float, bulk_modulus: float, initial_pressure: float,
+                  external_pressure: float) -> tuple[float, float]:
+    """(a, P): deformed inner radius and cavity pressure of the liquid-filled sphere."""
+    def h(a):
+        return (sphere_pressure(a, A, B, c10) + external_pressure - initial_pressure
+                + bulk_modulus * ((a / A) ** 3 - 1.0))
+
+    a_max, _ = sphere_limit_point(A, B, c10)
+    if h(a_max) < 0:
+        raise ValueError("no equilibrium below the limit point (the liquid pushes too hard)")
+    a = float(optimize.brentq(h, 0.5 * A, a_max, xtol=1e-14, rtol=1e-14))
+    pressure = initial_pressure - bulk_modulus * ((a / A) ** 3 - 1.0)
+    return a, float(pressure)

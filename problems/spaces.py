@@ -4,7 +4,7 @@ and small integral helpers for quantities of interest."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Callable, Literal, get_args
 
 import basix.ufl
 import numpy as np
@@ -57,17 +57,42 @@ ELEMENTS: dict[str, ElementFamily] = {
                           "the buckling paper's element: 8 displacement nodes, 1 pressure"),
     "Q2P1": ElementFamily("Q2P1", "hexahedron", 2, "DPC", 1,
                           "Q2 displacement, discontinuous P1 (DPC) pressure: LBB-stable (cornea paper)"),
+    "P1": ElementFamily("P1", "tetrahedron", 1, None, 0,
+                        "linear tetrahedra, displacement only with a bulk penalty: locks"),
 }
 
 
-def mixed_displacement_pressure(mesh: dolfinx.mesh.Mesh, family: ElementFamily):
-    """Functions (u, p) and test functions (v, q) on separate spaces (blocked system)."""
-    cell = mesh.basix_cell()
-    gdim = mesh.geometry.dim
-    V = dolfinx.fem.functionspace(
-        mesh, basix.ufl.element("Lagrange", cell, family.displacement_degree, shape=(gdim,)))
+ElementName = Literal["P2P1", "P2P0", "Q1P0", "Q2P1", "P1"]
+assert set(get_args(ElementName)) == set(ELEMENTS)
+
+
+def check_element(name: str, key: str = "element") -> None:
+    """ParameterError (before anything is built) for a family not in :data:`ELEMENTS`."""
+    from eyemech.problems.parameters import ParameterError
+
+    if name not in ELEMENTS:
+        raise ParameterError(key, f"unknown element family {name!r}; valid: {', '.join(ELEMENTS)}")
+
+
+def element_family(name: str) -> ElementFamily:
+    """The family called ``name``; a ValueError listing the valid names otherwise."""
+    if name not in ELEMENTS:
+        raise ValueError(f"unknown element family {name!r}; valid: {', '.join(ELEMENTS)}")
+    return ELEMENTS[name]
+
+
+def displacement_space(mesh: dolfinx.mesh.Mesh, family: ElementFamily) -> dolfinx.fem.FunctionSpace:
+    if mesh.basix_cell().name != family.cell:
+        raise ValueError(f"{family.name} needs {family.cell} cells, the mesh has {mesh.basix_cell().name}")
+    return dolfinx.fem.functionspace(
+        mesh, basix.ufl.element("Lagrange", mesh.basix_cell(), family.displacement_degree,
+                                shape=(mesh.geometry.dim,)))
+
+
+def pressure_space(mesh: dolfinx.mesh.Mesh, family: ElementFamily) -> dolfinx.fem.FunctionSpace:
     if family.pressure_family is None:
         raise ValueError(f"{family.name} has no pressure field")
+    cell = mesh.basix_cell()
     discontinuous = family.pressure_family in ("DG", "DPC")
     lagrange = basix.LagrangeVariant.legendre if discontinuous else basix.LagrangeVariant.unset
     element = {
@@ -77,9 +102,25 @@ def mixed_displacement_pressure(mesh: dolfinx.mesh.Mesh, family: ElementFamily):
         "DPC": lambda: basix.ufl.element("DPC", cell, family.pressure_degree, discontinuous=True,
                                          dpc_variant=basix.DPCVariant.legendre),
     }[family.pressure_family]()
-    Q = dolfinx.fem.functionspace(mesh, element)
+    return dolfinx.fem.functionspace(mesh, element)
+
+
+def mixed_displacement_pressure(mesh: dolfinx.mesh.Mesh, family: ElementFamily):
+    """Functions (u, p) and test functions (v, q) on separate spaces (blocked system)."""
+    V, Q = displacement_space(mesh, family), pressure_space(mesh, family)
     u, p = dolfinx.fem.Function(V), dolfinx.fem.Function(Q)
     return (u, p), test_functions(V, Q)
+
+
+def solid_fields(mesh: dolfinx.mesh.Mesh, family: ElementFamily, *extra: dolfinx.fem.FunctionSpace):
+    """Unknowns and test functions of a solid of ``family``: [u, p] (mixed families)
+    or [u] (displacement only), followed by one per ``extra`` space (e.g. a Real
+    space for a cavity pressure), all in one blocked system."""
+    spaces = [displacement_space(mesh, family)]
+    if family.pressure_family is not None:
+        spaces.append(pressure_space(mesh, family))
+    spaces += list(extra)
+    return [dolfinx.fem.Function(V) for V in spaces], list(test_functions(*spaces))
 
 
 def test_functions(*spaces: dolfinx.fem.FunctionSpace):
@@ -115,3 +156,42 @@ def surface_mean(integrand, measure) -> Callable[[], float]:
 def global_dofs(*functions) -> int:
     return int(sum(f.function_space.dofmap.index_map.size_global * f.function_space.dofmap.index_map_bs
                    for f in functions))
+
+
+def point_value(function: dolfinx.fem.Function, point) -> np.ndarray:
+    """Value of ``function`` at ``point`` on every rank (evaluated where a local cell
+    contains it, the lowest such rank wins)."""
+    import dolfinx.geometry
+
+    mesh = function.function_space.mesh
+    x = np.asarray(point, dtype=mesh.geometry.x.dtype).reshape(1, 3)
+    owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    tree = dolfinx.geometry.bb_tree(mesh, mesh.topology.dim,
+                                    entities=np.arange(owned, dtype=np.int32))
+    candidates = dolfinx.geometry.compute_collisions_points(tree, x)
+    cells = dolfinx.geometry.compute_colliding_cells(mesh, candidates, x).links(0)
+    local = function.eval(x, cells[:1]) if len(cells) else None
+    found = mesh.comm.allgather(local)
+    value = next((v for v in found if v is not None), None)
+    if value is None:
+        raise ValueError(f"point {tuple(point)} is outside the mesh")
+    return np.asarray(value)
+
+
+def lagrange_view(function: dolfinx.fem.Function, name: str):
+    """(f, update): ``function`` itself when it is (discontinuous) Lagrange, else a
+    discontinuous Lagrange copy of the same degree that ``update()`` refreshes —
+    VTX writes Lagrange functions only (DPC pressures of Q2P1 are not)."""
+    element = function.function_space.element.basix_element
+    if element.family == basix.ElementFamily.P:
+        function.name = name
+        return function, lambda: None
+    mesh = function.function_space.mesh
+    view = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", element.degree)), name=name)
+    expression = dolfinx.fem.Expression(function, view.function_space.element.interpolation_points)
+
+    def update() -> None:
+        view.interpolate(expression)
+
+    update()
+    return view, update

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, incompressible_energy_density
+from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure
 from eyemech.meshes import spherical_shell
 from eyemech.problems import analytic
 from eyemech.problems.context import RunContext, RunOptions
@@ -24,7 +23,9 @@ from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, fol
 from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, render_png
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure, symmetry_bcs, surface_mean
+from eyemech.problems.solid import solid_residual
+from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, lagrange_view,
+                                     solid_fields, symmetry_bcs, surface_mean)
 
 import dolfinx
 import dolfinx.fem
@@ -37,11 +38,14 @@ class Parameters(SceneParameters):
     c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa")
     pressure: float = field(0.01, "internal pressure (follower load)", "MPa")
     mesh_size: float = field(1.0, "target element size", "mm")
-    element: Literal["P2P1"] = field("P2P1", "element family (displacement/pressure)")
+    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
+    bulk_modulus: float = field(100.0, "bulk modulus of the displacement-only P1 family "
+                                "(U = K/4 (J² − 1 − 2 ln J)); unused by mixed families", "MPa")
     load_steps: int = field(4, "initial number of load steps (cut and grown as needed)")
 
     def validate(self) -> None:
-        self.require_positive("inner_radius", "c10", "mesh_size", "load_steps")
+        self.require_positive("inner_radius", "c10", "mesh_size", "load_steps", "bulk_modulus")
+        check_element(self.element)
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius}), "
                                  f"got {self.outer_radius}")
@@ -59,16 +63,17 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             shell = spherical_shell(params.inner_radius, params.outer_radius, params.mesh_size,
                                     order=family.geometry_order, hexahedra=family.hexahedral,
                                     comm=ctx.comm)
-        (u, p), (v, q) = mixed_displacement_pressure(shell.mesh, family)
+        fields, tests = solid_fields(shell.mesh, family)
+        u, v = fields[0], tests[0]
         metadata = {"quadrature_degree": family.quadrature_degree}
         ds, dx = shell.ds(metadata), shell.dx(metadata)
         pressure = dolfinx.fem.Constant(shell.mesh, 0.0)
-        energy = incompressible_energy_density(NeoHooke(params.c10), u, p) * dx
-        residual = (ufl.derivative(energy, u, v) + ufl.derivative(energy, p, q)
+        residual = (solid_residual(NeoHooke(params.c10), family, fields, tests, dx,
+                                   params.bulk_modulus)
                     + follower_pressure(pressure, u, v, ds(shell.tag("cavity_wall"))))
         bcs = symmetry_bcs(u.function_space, shell, {"symmetry_x": 0, "symmetry_y": 1,
                                                      "symmetry_z": 2})
-        solver = NonlinearSolver(list(ufl.extract_blocks(residual)), [u, p], bcs,
+        solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings)
 
         volume_form = dolfinx.fem.form(8.0 * enclosed_volume(u, ds(shell.tag("cavity_wall"))))
@@ -82,10 +87,11 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     "outer_radius_deformed": outer_mean(),
                     "cavity_volume": ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form))}
 
-        u.name, p.name = "displacement", "pressure"
+        u.name = "displacement"
         field_dir = ctx.out if ctx.options.fields else None
         writer = FieldWriter(field_dir, ctx.comm, [u])
-        writer_p = FieldWriter(field_dir, ctx.comm, [p])
+        pressure_out = [lagrange_view(fields[1], "pressure")] if len(fields) > 1 else []
+        writer_p = FieldWriter(field_dir, ctx.comm, [view for view, _ in pressure_out])
         series = PyvistaSeries(field_dir, ctx.comm)
         # pressure on the displacement's nodes, for pyvista (one grid, one space)
         nodal_space = dolfinx.fem.functionspace(shell.mesh, ("Lagrange", family.displacement_degree))
@@ -93,11 +99,16 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         def write_state(load: float) -> None:
             with ctx.timings("output"):
+                for _, update in pressure_out:
+                    update()
                 writer.write(load)
                 writer_p.write(load)
                 if field_dir is not None:
-                    nodal_pressure.interpolate(p)
-                    series.write(load, gather_grid(u, {"pressure": nodal_pressure}))
+                    extra = {}
+                    for view, _ in pressure_out:
+                        nodal_pressure.interpolate(view)
+                        extra["pressure"] = nodal_pressure
+                    series.write(load, gather_grid(u, extra))
 
         write_state(0.0)
 
@@ -124,20 +135,36 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.result.fields = writer.files + writer_p.files + series.files
         ctx.result.quantities.update(quantities())
         ctx.result.quantities["jacobian_nonzeros"] = solver.jacobian_nonzeros()
-        ctx.result.quantities["dofs"] = sum(f.function_space.dofmap.index_map.size_global
-                                            * f.function_space.dofmap.index_map_bs for f in (u, p))
+        ctx.result.quantities["dofs"] = global_dofs(*fields)
         try:
             exact = analytic.sphere_inner_radius(params.pressure, params.inner_radius,
                                                  params.outer_radius, params.c10)
             ctx.result.quantities["inner_radius_exact"] = exact
             ctx.result.quantities["inner_radius_error"] = (
                 ctx.result.quantities["inner_radius_deformed"] / exact - 1.0)
+            ctx.result.quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
         except ValueError:
             pass
         if ctx.options.pictures and ctx.out is not None:
             with ctx.timings("output"):
                 _picture(u, ctx, params)
     return ctx.result
+
+
+def _displacement_error(u, shell, params: Parameters, a: float) -> float:
+    """‖u − u_exact‖ / ‖u_exact‖ in L² over the wall; u_exact = (r(R)/R − 1) X with
+    r³ = R³ − A³ + a³ (incompressible radial map, :mod:`analytic`)."""
+    X = ufl.SpatialCoordinate(shell.mesh)
+    R = ufl.sqrt(ufl.dot(X, X))
+    r = (R**3 - params.inner_radius**3 + a**3) ** (1.0 / 3.0)
+    exact = (r / R - 1.0) * X
+    dx = shell.dx({"quadrature_degree": 2 * u.function_space.element.basix_element.degree + 2})
+    comm = shell.mesh.comm
+    error = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
+        ufl.dot(u - exact, u - exact) * dx)), op=MPI.SUM)
+    norm = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(ufl.dot(exact, exact) * dx)),
+                          op=MPI.SUM)
+    return float(np.sqrt(error / norm))
 
 
 def _picture(u, ctx: RunContext, params: Parameters) -> None:

@@ -1,0 +1,406 @@
+"""A layered half eye for scleral buckling: hexahedral tissue shells with a detached
+retina, a causative tear and an optic-nerve stub.
+
+Coordinates: the optic axis is z (anterior +z, posterior pole at z = −R), the model is
+the half x ≥ 0 and the symmetry plane x = 0 passes through the tear at the top (+y),
+as in Sun & Makinouchi (seed 002, §3.1).
+
+Construction
+- The eye wall is a structured layered shell: a half cubed sphere (equiangular
+  gnomonic patches, so no degenerate cells at the poles) gives the surface grid, and
+  radial levels give the layers: ``coat_layers`` for the sclera/cornea, one for the
+  choroid (ciliary body anterior of the ora serrata), one for the retina. Each cell's
+  tissue follows from its layer and its polar angle θ from the anterior pole.
+- The outer surface is the scleral sphere (radius ``sclera_radius``) and, anterior of
+  the limbus, the corneal sphere (radius ``cornea_radius``) that meets it on the limbus
+  circle of diameter ``cornea_diameter``.
+- In the detached zone the retina's outer nodes are duplicated and the retina is lifted
+  inward by a smooth bump of height ``detachment_height``: a subretinal space that the
+  liquid fills through the tear. The zone ends where the bump reaches zero, so the
+  retina is attached at its rim.
+- The tear removes the retina cells within ``tear_radius`` of its centre (on the
+  symmetry plane, so the model holds half of it).
+- The optic-nerve stub is the outer-surface patch within ``optic_nerve_radius`` of the
+  posterior pole extruded backwards; its end is where the eye is held.
+
+Why not gmsh's CAD kernel: revolving a meridian profile about the optic axis gives
+degenerate wedges on the axis, and O-grid blocking of eight layered tissues in OCC is
+brittle. The structured grid is computed here and handed to gmsh as a discrete model,
+so that it is a gmsh mesh (``.msh`` export, gmsh's viewer) distributed by DOLFINx like
+every other mesh of the project.
+
+Default dimensions (mm) and sources
+- Scleral outer radius 11.5 and corneal radius 7.8 with corneal diameter 11.7 give an
+  axial length ≈ 24 mm (Atchison & Smith, *Optics of the Human Eye*, 2000).
+- Scleral thickness ≈ 0.8 at the limbus, 0.5 near the equator, 1.0 at the posterior pole
+  (Olsen et al., Am J Ophthalmol 125:237, 1998); central corneal thickness 0.52 rising to
+  0.67 at the limbus; choroid ≈ 0.25, retina ≈ 0.2 (Alamouti & Funk, Br J Ophthalmol 87, 2003).
+- The ora serrata ≈ 7 mm posterior of the limbus (θ ≈ 65°); the ciliary body between.
+- Optic nerve ≈ 3 mm in diameter.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from mpi4py import MPI
+
+from eyemech.meshes.tagged import MeshError, TaggedMesh, from_gmsh
+
+TISSUES = ("cornea", "sclera", "ciliary_body", "choroid", "retina", "optic_nerve")
+FACETS = ("symmetry", "cornea_outer", "sclera_outer", "optic_nerve_side", "optic_nerve_end",
+          "retina_inner", "retina_detached", "choroid_detached", "tear_edge")
+# every face the liquid wets: the vitreous side, the subretinal space, the tear's edges
+CAVITY_WALL = ("retina_inner", "retina_detached", "choroid_detached", "tear_edge")
+RESOLUTIONS = {"coarse": 8, "default": 12, "paper": 26}  # cells along a cube edge
+
+
+@dataclasses.dataclass(frozen=True)
+class EyeGeometry:
+    sclera_radius: float = 11.5
+    cornea_radius: float = 7.8
+    cornea_diameter: float = 11.7
+    cornea_thickness_center: float = 0.52
+    cornea_thickness_limbus: float = 0.67
+    sclera_thickness_limbus: float = 0.8
+    sclera_thickness_equator: float = 0.5
+    sclera_thickness_posterior: float = 1.0
+    choroid_thickness: float = 0.25
+    ciliary_body_thickness: float = 0.6
+    retina_thickness: float = 0.2
+    ora_serrata_angle: float = 65.0        # degrees from the anterior pole
+    detachment_from: float = 72.0          # polar angles bounding the detached zone (deg)
+    detachment_to: float = 115.0
+    detachment_half_width: float = 40.0    # azimuth half-width about the tear (deg)
+    detachment_height: float = 0.5         # subretinal gap at the centre (mm)
+    tear_angle: float = 88.0               # polar angle of the tear centre (deg)
+    tear_radius: float = 1.6               # mm
+    optic_nerve_radius: float = 1.5
+    optic_nerve_length: float = 3.0
+    coat_layers: int = 2
+    cells_per_edge: int = 12               # cubed-sphere cells along a cube edge (even)
+
+    def validate(self) -> None:
+        if self.cells_per_edge % 2 or self.cells_per_edge < 4:
+            raise MeshError("cells_per_edge must be an even number >= 4")
+        if not self.ora_serrata_angle < self.detachment_from < self.tear_angle < self.detachment_to:
+            raise MeshError("need ora serrata < detachment start < tear angle < detachment end")
+        if self.cornea_diameter / 2 >= self.sclera_radius or self.cornea_radius <= self.cornea_diameter / 2:
+            raise MeshError("the cornea must be a cap smaller than the scleral sphere")
+        element = 0.5 * math.pi * self.sclera_radius / self.cells_per_edge
+        if element / self.retina_thickness > 12.0:
+            raise MeshError(
+                f"resolution too coarse to resolve the retina: elements of {element:.2f} mm on a "
+                f"{self.retina_thickness} mm layer (aspect ratio > 12); raise cells_per_edge")
+        zone = math.radians(self.detachment_to - self.detachment_from) * self.sclera_radius
+        if zone / element < 3:
+            raise MeshError(f"resolution too coarse: the detached zone spans {zone / element:.1f} "
+                            "elements (need at least 3)")
+
+    # -- derived geometry ---------------------------------------------------------
+    @property
+    def limbus(self) -> tuple[float, float]:
+        """(ρ, z) of the limbus circle, where the corneal and scleral spheres meet."""
+        rho = self.cornea_diameter / 2
+        return rho, math.sqrt(self.sclera_radius**2 - rho**2)
+
+    @property
+    def cornea_center(self) -> float:
+        rho, z = self.limbus
+        return z - math.sqrt(self.cornea_radius**2 - rho**2)
+
+    @property
+    def limbus_angle(self) -> float:
+        rho, z = self.limbus
+        return math.degrees(math.atan2(rho, z))
+
+    @property
+    def axial_length(self) -> float:
+        return self.cornea_center + self.cornea_radius + self.sclera_radius
+
+
+def _smoothstep(t):
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def _half_cubed_sphere(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit directions and quads of the half sphere x ≥ 0, equiangular patches."""
+    t = np.tan(np.linspace(-np.pi / 4, np.pi / 4, n + 1))
+    half = t[n // 2:]
+    patches = [  # (direction maker, first-parameter values)
+        (lambda a, b: np.stack([np.ones_like(a), a, b], -1), t),     # +x
+        (lambda a, b: np.stack([a, np.ones_like(a), b], -1), half),  # +y, x = a ≥ 0
+        (lambda a, b: np.stack([a, -np.ones_like(a), b], -1), half),  # −y
+        (lambda a, b: np.stack([a, b, np.ones_like(a)], -1), half),  # +z
+        (lambda a, b: np.stack([a, b, -np.ones_like(a)], -1), half),  # −z
+    ]
+    points, quads, offset = [], [], 0
+    for make, first in patches:
+        a, b = np.meshgrid(first, t, indexing="ij")
+        p = make(a, b)
+        p /= np.linalg.norm(p, axis=-1, keepdims=True)
+        na, nb = a.shape
+        index = offset + np.arange(na * nb).reshape(na, nb)
+        quads.append(np.stack([index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]],
+                              -1).reshape(-1, 4))
+        points.append(p.reshape(-1, 3))
+        offset += na * nb
+    points = np.vstack(points)
+    quads = np.vstack(quads)
+    # patches share their edges: merge coincident directions
+    _, first_index, inverse = np.unique(np.round(points, 9), axis=0, return_index=True,
+                                        return_inverse=True)
+    return points[first_index], inverse.ravel()[quads]
+
+
+def _outer_radius(geo: EyeGeometry, theta: np.ndarray) -> np.ndarray:
+    """Distance from the origin to the outer surface along polar angle θ (radians)."""
+    zc = geo.cornea_center
+    cornea = zc * np.cos(theta) + np.sqrt(geo.cornea_radius**2 - (zc * np.sin(theta))**2)
+    return np.where(theta < math.radians(geo.limbus_angle), cornea, geo.sclera_radius)
+
+
+def _layer_thicknesses(geo: EyeGeometry, theta: np.ndarray) -> np.ndarray:
+    """(n, 3) thicknesses of coat, choroid layer and retina layer along θ (radians).
+
+    Anterior of the limbus the three layers are thirds of the cornea; posterior they are
+    sclera, choroid (ciliary body before the ora) and retina. The tissue jumps at the
+    limbus and the ora are blended over a few degrees so the cells stay regular."""
+    deg = np.degrees(theta)
+    limbus, ora = geo.limbus_angle, geo.ora_serrata_angle
+    cornea = geo.cornea_thickness_center + (geo.cornea_thickness_limbus - geo.cornea_thickness_center) \
+        * (deg / limbus) ** 2
+    sclera = np.interp(deg, [limbus, 90.0, 180.0], [geo.sclera_thickness_limbus,
+                                                     geo.sclera_thickness_equator,
+                                                     geo.sclera_thickness_posterior])
+    middle = geo.ciliary_body_thickness + (geo.choroid_thickness - geo.ciliary_body_thickness) \
+        * _smoothstep((deg - ora + 3.0) / 6.0)
+    posterior = np.stack([sclera, middle, np.full_like(deg, geo.retina_thickness)], -1)
+    anterior = np.stack([0.5 * cornea, 0.25 * cornea, 0.25 * cornea], -1)
+    blend = _smoothstep((deg - limbus + 2.0) / 4.0)[:, None]
+    return (1 - blend) * anterior + blend * posterior
+
+
+def _detachment(geo: EyeGeometry, directions: np.ndarray) -> np.ndarray:
+    """Subretinal gap (mm) at each surface direction: a smooth bump, zero outside."""
+    theta = np.degrees(np.arccos(np.clip(directions[:, 2], -1, 1)))
+    azimuth = np.degrees(np.abs(np.arctan2(directions[:, 0], directions[:, 1])))  # 0 on +y
+    ramp = 6.0  # degrees over which the retina rises
+    bump = (_smoothstep((theta - geo.detachment_from) / ramp)
+            * _smoothstep((geo.detachment_to - theta) / ramp)
+            * _smoothstep((geo.detachment_half_width - azimuth) / ramp))
+    return geo.detachment_height * bump
+
+
+@dataclasses.dataclass
+class EyeGrid:
+    """The structured mesh before it becomes a gmsh model (all numpy, rank 0)."""
+
+    points: np.ndarray            # (n, 3)
+    hexes: np.ndarray             # (m, 8) gmsh ordering
+    tissue: np.ndarray            # (m,) index into TISSUES
+    faces: dict[str, np.ndarray]  # facet name -> (k, 4) quads
+
+
+def build_grid(geo: EyeGeometry) -> EyeGrid:
+    geo.validate()
+    directions, quads = _half_cubed_sphere(geo.cells_per_edge)
+    n_dir = len(directions)
+    theta = np.arccos(np.clip(directions[:, 2], -1, 1))
+    thickness = _layer_thicknesses(geo, theta)
+    gap = _detachment(geo, directions)
+    detached = gap > 1e-12
+
+    # radial levels from outside in: coat levels, choroid/retina interface, retina inner
+    outer = _outer_radius(geo, theta)
+    coat_levels = [outer - thickness[:, 0] * k / geo.coat_layers for k in range(geo.coat_layers + 1)]
+    interface = coat_levels[-1] - thickness[:, 1]
+    retina_inner = interface - thickness[:, 2] - gap
+    radii = coat_levels + [interface, retina_inner]  # choroid side of the interface
+    points = [directions * r[:, None] for r in radii]
+    level_index = [np.arange(n_dir) + k * n_dir for k in range(len(radii))]
+    # the retina side of the interface: new nodes only where the retina is lifted
+    lifted = np.flatnonzero(detached)
+    retina_outer_index = level_index[-2].copy()
+    retina_outer_index[lifted] = len(radii) * n_dir + np.arange(len(lifted))
+    points.append(directions[lifted] * (interface[lifted] - gap[lifted])[:, None])
+    points = np.vstack(points)
+
+    layers = [(level_index[k], level_index[k + 1]) for k in range(geo.coat_layers)]
+    layers.append((level_index[-3], level_index[-2]))        # choroid layer
+    layers.append((retina_outer_index, level_index[-1]))     # retina layer
+    hexes, tissue, layer_of = [], [], []
+    quad_theta = np.degrees(theta[quads].mean(axis=1))
+    for number, (out_idx, in_idx) in enumerate(layers):
+        hexes.append(np.hstack([in_idx[quads], out_idx[quads]]))
+        layer_of.append(np.full(len(quads), number))
+        tissue.append(_tissue(geo, number, quad_theta))
+    hexes, tissue, layer_of = np.vstack(hexes), np.concatenate(tissue), np.concatenate(layer_of)
+
+    keep = ~_tear_cells(geo, points, hexes, layer_of == geo.coat_layers + 1)
+    hexes, tissue = hexes[keep], tissue[keep]
+    points, hexes, tissue = _add_optic_nerve(geo, points, hexes, tissue, level_index[0], quads)
+    hexes = _orient(points, hexes)
+    faces = _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index, lifted)
+    # the tear leaves nodes no cell uses; DOLFINx expects every node to be in a cell
+    used, renumber = np.unique(hexes, return_inverse=True)
+    old_to_new = np.full(len(points), -1)
+    old_to_new[used] = np.arange(len(used))
+    return EyeGrid(points[used], renumber.reshape(hexes.shape), tissue,
+                   {name: old_to_new[quads] for name, quads in faces.items()})
+
+
+def _tissue(geo: EyeGeometry, layer: int, theta_deg: np.ndarray) -> np.ndarray:
+    index = {name: i for i, name in enumerate(TISSUES)}
+    anterior = theta_deg < geo.limbus_angle
+    ciliary = theta_deg < geo.ora_serrata_angle
+    if layer < geo.coat_layers:
+        inner = np.full(len(theta_deg), index["sclera"])
+    else:
+        inner = np.full(len(theta_deg), index["choroid" if layer == geo.coat_layers else "retina"])
+        inner[ciliary] = index["ciliary_body"]
+    inner[anterior] = index["cornea"]
+    return inner
+
+
+def _tear_cells(geo: EyeGeometry, points, hexes, retina: np.ndarray) -> np.ndarray:
+    centre_dir = np.array([0.0, math.sin(math.radians(geo.tear_angle)),
+                           math.cos(math.radians(geo.tear_angle))])
+    centroids = points[hexes].mean(axis=1)
+    unit = centroids / np.linalg.norm(centroids, axis=1, keepdims=True)
+    distance = geo.sclera_radius * np.arccos(np.clip(unit @ centre_dir, -1, 1))
+    tear = retina & (distance < geo.tear_radius)
+    if not tear.any():
+        raise MeshError(f"resolution too coarse to resolve the tear (radius {geo.tear_radius} mm): "
+                        "no retina cell falls inside it; raise cells_per_edge or tear_radius")
+    return tear
+
+
+def _add_optic_nerve(geo, points, hexes, tissue, outer_level, quads):
+    """Extrude the outer-surface quads near the posterior pole backwards."""
+    outer_quads = outer_level[quads]
+    centres = points[outer_quads].mean(axis=1)
+    off_axis = np.where(centres[:, 2] < 0, np.hypot(centres[:, 0], centres[:, 1]), np.inf)
+    # at coarse resolutions the nerve is at least the ring of quads around the pole
+    selected = outer_quads[off_axis < max(geo.optic_nerve_radius, 1.01 * off_axis.min())]
+    base = np.unique(selected)
+    layers = 2
+    new_points, current = [points], {int(n): int(n) for n in base}
+    level_maps = [current]
+    z_end = points[base, 2].min() - geo.optic_nerve_length
+    count = len(points)
+    for k in range(1, layers + 1):
+        mapping = {}
+        for n in base:
+            p = points[n].copy()
+            p[2] = p[2] + (z_end - p[2]) * k / layers
+            mapping[int(n)] = count
+            new_points.append(p[None, :])
+            count += 1
+        level_maps.append(mapping)
+    stub = []
+    for k in range(layers):
+        top, bottom = level_maps[k], level_maps[k + 1]
+        for quad in selected:
+            stub.append([top[int(n)] for n in quad] + [bottom[int(n)] for n in quad])
+    stub = np.array(stub)
+    nerve = TISSUES.index("optic_nerve")
+    return (np.vstack(new_points), np.vstack([hexes, stub]),
+            np.concatenate([tissue, np.full(len(stub), nerve)]))
+
+
+def _orient(points, hexes):
+    """Flip hexes whose (first corner) Jacobian is negative into gmsh's orientation."""
+    p = points[hexes]
+    det = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 3] - p[:, 0]), p[:, 4] - p[:, 0])
+    flipped = hexes.copy()
+    bad = det < 0
+    flipped[bad] = hexes[bad][:, [0, 3, 2, 1, 4, 7, 6, 5]]
+    return flipped
+
+
+_HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6],
+                       [3, 0, 4, 7]])
+
+
+def _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index, lifted):
+    """Boundary faces (faces of exactly one cell), named by where they lie."""
+    faces = hexes[:, _HEX_FACES].reshape(-1, 4)
+    owner = np.repeat(np.arange(len(hexes)), 6)
+    key = np.sort(faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = counts[inverse.ravel()] == 1
+    faces, owner = faces[boundary], owner[boundary]
+
+    n_dir = len(level_index[0])
+    level = np.full(len(points), -1)
+    for k, index in enumerate(level_index):
+        level[index] = k
+    retina_side = np.zeros(len(points), bool)
+    retina_side[retina_outer_index[lifted]] = True
+    nerve = tissue[owner] == TISSUES.index("optic_nerve")
+    x = points[faces]
+    theta = np.degrees(np.arccos(np.clip(
+        x.mean(1)[:, 2] / np.linalg.norm(x.mean(1), axis=1), -1, 1)))
+    face_levels = level[faces]
+    last = len(level_index) - 1
+    names = np.full(len(faces), "", dtype=object)
+    names[np.all(np.abs(x[:, :, 0]) < 1e-9, axis=1)] = "symmetry"
+    todo = names == ""
+    end = nerve & np.all(np.abs(x[:, :, 2] - x[:, :, 2].min()) < 1e-9, axis=1)
+    names[todo & end] = "optic_nerve_end"
+    names[todo & nerve & ~end] = "optic_nerve_side"
+    todo = names == ""
+    on_outer = np.all(face_levels == 0, axis=1)
+    names[todo & on_outer & (theta < geo.limbus_angle)] = "cornea_outer"
+    names[todo & on_outer & (theta >= geo.limbus_angle)] = "sclera_outer"
+    todo = names == ""
+    names[todo & np.all(face_levels == last, axis=1)] = "retina_inner"
+    todo = names == ""
+    interface = np.all((face_levels == last - 1) | retina_side[faces], axis=1)
+    retina_cell = tissue[owner] == TISSUES.index("retina")
+    names[todo & interface & retina_cell] = "retina_detached"
+    names[todo & interface & ~retina_cell] = "choroid_detached"
+    todo = names == ""
+    names[todo] = "tear_edge"
+    return {name: faces[names == name] for name in FACETS}
+
+
+def to_gmsh(grid: EyeGrid, model) -> None:
+    """Hand the grid to gmsh as a discrete model with physical groups."""
+    node_tags = np.arange(1, len(grid.points) + 1)
+    model.addDiscreteEntity(3, 1)
+    model.mesh.addNodes(3, 1, node_tags, grid.points.ravel())
+    next_tag = 1
+    for number, name in enumerate(TISSUES, start=1):
+        cells = grid.hexes[grid.tissue == number - 1]
+        if len(cells) == 0:
+            continue
+        entity = 100 + number
+        model.addDiscreteEntity(3, entity)
+        tags = np.arange(next_tag, next_tag + len(cells))
+        model.mesh.addElementsByType(entity, 5, tags, (cells + 1).ravel())
+        next_tag += len(cells)
+        model.addPhysicalGroup(3, [entity], tag=number, name=name)
+    for number, name in enumerate(FACETS, start=1):
+        quads = grid.faces[name]
+        if len(quads) == 0:
+            continue
+        entity = 200 + number
+        model.addDiscreteEntity(2, entity)
+        tags = np.arange(next_tag, next_tag + len(quads))
+        model.mesh.addElementsByType(entity, 3, tags, (quads + 1).ravel())
+        next_tag += len(quads)
+        model.addPhysicalGroup(2, [entity], tag=number, name=name)
+
+
+def half_eye(geometry: EyeGeometry | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """The half eye as a DOLFINx mesh; ``cavity_wall`` is the union of the wetted faces."""
+    geometry = geometry or EyeGeometry()
+    geometry.validate()  # on every rank: the same clear error everywhere
+    tagged = from_gmsh(lambda model: to_gmsh(build_grid(geometry), model), comm)
+    tagged.unions["cavity_wall"] = tuple(n for n in CAVITY_WALL if n in tagged.names)
+    return tagged

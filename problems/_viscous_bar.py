@@ -1,0 +1,281 @@
+"""What the viscoelastic bar scenes (``uniaxial-relaxation``, ``sls-creep``) share: the
+parameters of the material and the time stepping, a box of hexahedra (or tetrahedra)
+in homogeneous uniaxial tension, the internal variable Cv_n at the quadrature points
+and its update after each converged step.
+
+The bar is [0, L]³ with the symmetry conditions u_x = 0 on x = 0, u_y = 0 on y = 0,
+u_z = 0 on z = 0; the load acts on x = L (a prescribed u_x or an axial traction), the
+other faces are free. The exact solution is homogeneous uniaxial tension, so a single
+element is as accurate as any mesh: these scenes test the constitutive update and the
+time stepping, not the spatial discretisation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Callable, Literal
+
+import basix.ufl
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from eyemech.forms import viscoelastic as ve
+from eyemech.problems.context import RunContext
+from eyemech.problems.driver import NonlinearSolver, SolveFailure, StepRecord, Stepping, follow_path
+from eyemech.problems.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.mesh
+
+LOADED_FACE = 1  # facet tag of x = L
+
+
+@dataclasses.dataclass(frozen=True)
+class BarParameters(SceneParameters):
+    mu_inf: float = field(0.05, "equilibrium shear modulus μ∞ (Ψ∞ = μ∞/2 (tr C̄ − 3))", "MPa")
+    mu_v: float = field(0.05, "viscous-branch shear modulus μv (Ψv = μv/2 (tr(C̄ Cv⁻¹) − 3))", "MPa")
+    tau: float = field(100.0, "relaxation time τ of the evolution τ Ċv = C̄ − ⅓ tr(C̄ Cv⁻¹) Cv", "s")
+    t_end: float = field(300.0, "end time", "s")
+    dt: float = field(1.0, "time step (fixed; a step that Newton cannot solve is cut)", "s")
+    time_scheme: Literal["backward-euler", "forward-euler"] = field(
+        "backward-euler", "integration of the evolution law (forward Euler: stability study only)")
+    element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)")
+    mesh_divisions: int = field(1, "elements (hexahedra; ×6 tetrahedra) along each edge of the cube")
+    length: float = field(1.0, "edge of the cube", "mm")
+
+    def validate(self) -> None:
+        self.require_positive("mu_inf", "mu_v", "tau", "t_end", "dt", "mesh_divisions", "length")
+        for key in ("mu_inf", "mu_v", "tau", "t_end", "dt", "length"):
+            if not np.isfinite(getattr(self, key)):
+                raise ParameterError(key, "must be finite")
+        if self.time_scheme not in ve.TIME_SCHEMES:
+            raise ParameterError("time_scheme", f"unknown scheme {self.time_scheme!r}; choose one of "
+                                 f"{', '.join(ve.TIME_SCHEMES)}")
+        if self.element not in ("Q2P1", "P2P1"):
+            raise ParameterError("element", f"must be Q2P1 or P2P1, got {self.element!r}")
+        if self.dt > self.t_end:
+            raise ParameterError("dt", f"is longer than t_end ({self.t_end})")
+        if self.t_end / self.dt > 20000:
+            raise ParameterError("dt", f"gives {self.t_end / self.dt:.0f} steps; at most 20000")
+
+    @property
+    def material(self) -> ve.Viscoelastic:
+        return ve.Viscoelastic(self.mu_inf, self.mu_v, self.tau)
+
+
+class ViscousHistory:
+    """The internal variable of :mod:`eyemech.forms.viscoelastic` on a mesh: Cv_n (and C̄_n
+    for forward Euler) on a tensor-valued quadrature space whose points are those of the
+    residual's rule of ``degree`` (one value per Gauss point, the seed's §3.2.2), the UFL
+    expression of Cv_{n+1} for the time scheme, and the update after a converged step."""
+
+    def __init__(self, u, material: ve.Viscoelastic, scheme: str, degree: int):
+        mesh = u.function_space.mesh
+        self.comm = mesh.comm
+        self.dt = dolfinx.fem.Constant(mesh, 0.0)
+        Q = dolfinx.fem.functionspace(mesh, basix.ufl.quadrature_element(
+            mesh.basix_cell(), value_shape=(3, 3), scheme="default", degree=degree))
+        points = Q.element.interpolation_points
+        self.Cv_n = self._identity(Q, "Cv_n")
+        self.Cbar_n = self._identity(Q, "Cbar_n")  # read by forward Euler only
+        self.Cv = ve.current_internal_variable(scheme, material, u, self.Cv_n, self.Cbar_n, self.dt)
+        F = ufl.Identity(3) + ufl.grad(u)
+        self._Cv_next = dolfinx.fem.Expression(self.Cv, points)
+        self._Cbar_next = dolfinx.fem.Expression(ve.isochoric_cauchy_green(F), points)
+        self._scratch = dolfinx.fem.Function(Q)
+
+    @staticmethod
+    def _identity(Q, name: str) -> dolfinx.fem.Function:
+        f = dolfinx.fem.Function(Q, name=name)
+        f.x.array.reshape(-1, 9)[:] = np.eye(3).ravel()
+        return f
+
+    def store_strain(self) -> None:
+        """C̄_n ← C̄(u) without touching Cv_n: after the instantaneous loading at t = 0,
+        forward Euler's first step must start from the loaded C̄(0+), not from C̄ = I."""
+        self._scratch.interpolate(self._Cbar_next)
+        self.Cbar_n.x.array[:] = self._scratch.x.array
+
+    def update(self) -> float:
+        """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
+        Both new values are evaluated before either is stored (forward Euler's Cv_{n+1}
+        reads C̄_n). Returns the smallest eigenvalue of the new Cv over all points: a
+        forward-Euler blow-up shows as Cv losing positive definiteness."""
+        self._scratch.interpolate(self._Cv_next)
+        new_Cv = self._scratch.x.array.copy()
+        self.store_strain()
+        self.Cv_n.x.array[:] = new_Cv
+        tensors = new_Cv.reshape(-1, 3, 3)
+        if not np.all(np.isfinite(tensors)):
+            local = -np.inf
+        else:
+            local = np.linalg.eigvalsh(0.5 * (tensors + tensors.transpose(0, 2, 1))).min() \
+                if len(tensors) else np.inf
+        return self.comm.allreduce(float(local), op=MPI.MIN)
+
+
+class ViscousBar:
+    """The unit cube in uniaxial tension with the viscoelastic mixed u–p residual.
+
+    ``self.residual`` has no load; the scene adds a traction or a Dirichlet condition.
+    Cv_n (and C̄_n for forward Euler) are functions on a quadrature space whose points
+    are the integration points of ``self.dx``: one value of the internal variable per
+    Gauss point, as in the seed's §3.2.2.
+    """
+
+    def __init__(self, params: BarParameters, comm: MPI.Comm):
+        self.params = params
+        self.family = ELEMENTS[params.element]
+        cell = dolfinx.mesh.CellType.hexahedron if self.family.hexahedral \
+            else dolfinx.mesh.CellType.tetrahedron
+        n, L = params.mesh_divisions, params.length
+        self.mesh = dolfinx.mesh.create_box(comm, [np.zeros(3), np.full(3, L)], [n, n, n], cell)
+        (self.u, self.p), (self.v, self.q) = mixed_displacement_pressure(self.mesh, self.family)
+        degree = self.family.quadrature_degree
+        metadata = {"quadrature_degree": degree, "quadrature_rule": "default"}
+        self.dx = ufl.Measure("dx", domain=self.mesh, metadata=metadata)
+        fdim = self.mesh.topology.dim - 1
+        self.faces = {axis: dolfinx.mesh.locate_entities_boundary(
+            self.mesh, fdim, lambda x, a=axis: np.isclose(x[a], 0.0)) for axis in range(3)}
+        self.loaded_facets = dolfinx.mesh.locate_entities_boundary(
+            self.mesh, fdim, lambda x: np.isclose(x[0], L))
+        tags = dolfinx.mesh.meshtags(self.mesh, fdim, self.loaded_facets,
+                                     np.full(len(self.loaded_facets), LOADED_FACE, dtype=np.int32))
+        self.ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=tags, metadata=metadata)
+
+        self.material = params.material
+        self.history = ViscousHistory(self.u, self.material, params.time_scheme, degree)
+        self.dt, self.Cv = self.history.dt, self.history.Cv
+        self.update_history, self.store_strain = self.history.update, self.history.store_strain
+        F = ufl.Identity(3) + ufl.grad(self.u)
+        self.residual = ve.residual(self.material, self.u, self.p, self.v, self.q, self.Cv, self.dx)
+
+        volume = comm.allreduce(dolfinx.fem.assemble_scalar(
+            dolfinx.fem.form(1.0 * self.dx)), op=MPI.SUM)
+        sigma = ve.cauchy_stress(self.material, self.u, self.p, self.Cv)
+        self._stress_form = dolfinx.fem.form(sigma[0, 0] / volume * self.dx)
+        self._stretch_form = dolfinx.fem.form(F[0, 0] / volume * self.dx)
+        self.comm = comm
+
+    # -- boundary conditions --------------------------------------------------------
+    def symmetry_bcs(self) -> list:
+        fdim = self.mesh.topology.dim - 1
+        V = self.u.function_space
+        return [dolfinx.fem.dirichletbc(
+            0.0, dolfinx.fem.locate_dofs_topological(V.sub(a), fdim, self.faces[a]), V.sub(a))
+            for a in range(3)]
+
+    def end_displacement_bc(self, value: dolfinx.fem.Constant):
+        V = self.u.function_space
+        dofs = dolfinx.fem.locate_dofs_topological(V.sub(0), self.mesh.topology.dim - 1,
+                                                   self.loaded_facets)
+        return dolfinx.fem.dirichletbc(value, dofs, V.sub(0))
+
+    def axial_cauchy_traction(self, stress: dolfinx.fem.Constant):
+        """−∫ σ0 n da · v on x = L, pulled back with Nanson (cof F N dA): a constant
+        true (Cauchy) axial stress σ0 however much the face shrinks."""
+        F = ufl.Identity(3) + ufl.grad(self.u)
+        N = ufl.FacetNormal(self.mesh)
+        nanson = ufl.det(F) * ufl.inv(F).T * N
+        return -stress * ufl.dot(nanson, self.v) * self.ds(LOADED_FACE)
+
+    # -- quantities -----------------------------------------------------------------
+    def axial_cauchy_stress(self) -> float:
+        """Volume mean of σ_xx (the state is homogeneous, so this is σ_xx itself)."""
+        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._stress_form), op=MPI.SUM)
+
+    def axial_stretch(self) -> float:
+        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._stretch_form), op=MPI.SUM)
+
+
+class UnstableIntegration(SolveFailure):
+    """The explicit update made Cv lose positive definiteness: the time integration
+    blew up (the state of the step that produced it is kept, as for a SolveFailure)."""
+
+    def __init__(self, step: int, time: float, smallest_eigenvalue: float, dt_over_tau: float):
+        self.step, self.load, self.last_converged = step, time, time
+        self.residuals, self.reason = [], "unstable time integration"
+        self.time, self.smallest_eigenvalue = time, smallest_eigenvalue
+        RuntimeError.__init__(
+            self, f"time integration unstable at step {step}, t = {time:.6g}: the explicit update "
+                  f"made Cv lose positive definiteness (smallest eigenvalue {smallest_eigenvalue:.3g}) "
+                  f"at dt/tau = {dt_over_tau:.3g}. The state at t = {time:.6g} is kept.")
+
+
+def time_stops(params: BarParameters, extra: tuple[float, ...] = ()) -> tuple[float, ...]:
+    """Every multiple of dt up to t_end, plus ``extra`` (e.g. the end of the ramp)."""
+    count = int(np.floor(params.t_end / params.dt * (1 + 1e-12)))
+    grid = [k * params.dt for k in range(1, count + 1)]
+    return tuple(sorted(set(grid) | {t for t in extra if 0 < t <= params.t_end} | {params.t_end}))
+
+
+def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: BarParameters,
+          apply_load: Callable[[float], None], record: Callable[[float], None], label: str,
+          extra_stops: tuple[float, ...] = ()) -> None:
+    """Time stepping with fixed dt from 0 to t_end: ``apply_load(t)`` sets the load,
+    ``record(t)`` stores outputs of the converged step, before the history update.
+
+    Cv_n is touched only in on_converged, so a cut (failed) step leaves it intact. For
+    forward Euler no cut is allowed: the step size is the experiment, and halving it
+    would hide the instability; a Cv that loses positive definiteness stops the run
+    with a SolveFailure naming the time.
+    """
+    explicit = params.time_scheme == "forward-euler"
+    fraction = params.dt / params.t_end
+    stepping = Stepping(start=0.0, end=params.t_end, initial_step=fraction, max_step=fraction,
+                        min_step=fraction / 64, max_cuts=0 if explicit else 6,
+                        stops=time_stops(params, extra_stops))
+
+    def apply(t: float, increment: float) -> None:
+        bar.dt.value = increment
+        apply_load(t)
+
+    def converged(step: StepRecord) -> None:
+        # outputs first: the stress expression reads Cv_{n+1}(u, Cv_n) and must see the
+        # Cv_n this step was solved with, not the updated one
+        record(step.load)
+        smallest = bar.update_history()
+        ctx.record_step(step=step.step, time=step.load, dt=step.increment,
+                        newton_iterations=step.iterations, cuts=step.cuts, residuals=step.residuals,
+                        smallest_cv_eigenvalue=smallest)
+        if not smallest > 0:
+            raise UnstableIntegration(step.step, step.load, smallest, params.dt / params.tau)
+
+    follow_path(solver, apply, stepping, on_converged=converged, label=label,
+                quiet=ctx.options.quiet)
+
+
+def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
+                   apply_load: Callable[[float], None], label: str) -> None:
+    """The glassy response at t = 0: the full load with dt = 0 (Cv stays Cv_0 = I),
+    reached by load steps if Newton needs them; Cv_n is not updated, C̄_n is."""
+    bar.dt.value = 0.0
+    follow_path(solver, lambda factor, _inc: apply_load(factor), Stepping(initial_step=1.0),
+                label=f"{label} (t = 0)", quiet=ctx.options.quiet)
+    bar.store_strain()
+
+
+def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
+                 reference_label: str = "reference") -> None:
+    """A small PNG of a quantity over time, with its reference when there is one."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.0, 3.2), dpi=100)
+    ax.plot(times, values, "o", ms=2.5, label="FE (DOLFINx)")
+    if reference is not None:
+        ax.plot(times, reference, "-", lw=1.0, label=reference_label)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

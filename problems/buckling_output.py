@@ -1,0 +1,101 @@
+"""Fields and pictures of the scleral-buckling scene: VTX for ParaView, a pyvista
+series, and per step a view of the half eye coloured by von Mises stress and a
+section through the buckle on the symmetry plane (which passes through the tear)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, render_png
+
+STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing"}
+
+
+class Writer:
+    def __init__(self, model, ctx):
+        self.model, self.ctx = model, ctx
+        folder = ctx.out if ctx.options.fields else None
+        model.u.name = "displacement"
+        self.vtx = FieldWriter(folder, ctx.comm, [model.u])
+        self.series = PyvistaSeries(folder, ctx.comm)
+        self.pictures = ctx.options.pictures and ctx.out is not None
+
+    def state(self, load: float, stage: int, picture: bool = False) -> None:
+        if not (self.vtx.files or self.pictures):
+            return
+        with self.ctx.timings("output"):
+            self.vtx.write(load)
+            model = self.model
+            model.von_mises.update()
+            mesh = model.eye.mesh
+            cells = mesh.topology.index_map(3).size_local
+            dofmap = model.von_mises.field.function_space.dofmap.list[:cells, 0]
+            grid = gather_grid(model.u, cell_data={
+                "von_mises": model.von_mises.field.x.array[dofmap],
+                "c": model.stiffness.x.array[dofmap]})
+            self.series.write(load, grid)
+            if picture and self.pictures and grid is not None:
+                self._pictures(grid, stage)
+
+    def _pictures(self, grid, stage: int) -> None:
+        name = STAGE_NAMES[stage]
+        out = self.ctx.out
+        whole = out / f"step{stage}_{name}_von_mises.png"
+        render_png(grid, whole, scalars="von_mises", warp="displacement", camera=(0.6, 1.0, 0.35),
+                   title=f"step {stage} ({name}): von Mises stress (MPa)", show_undeformed=False,
+                   cmap="inferno")
+        section = out / f"step{stage}_{name}_section.png"
+        self._section(grid, section, f"step {stage} ({name}): section through the tear")
+        self.ctx.result.pictures += [whole.name, section.name]
+
+    def _section(self, grid, path, title: str) -> None:
+        """The symmetry plane x = 0 seen from −x, zoomed on the buckle, with the
+        buckle's outline drawn at its current position."""
+        import pyvista
+
+        model = self.model
+        # a slice just inside the symmetry plane: the layers, the subretinal gap, the tear
+        section = grid.slice(normal=(1.0, 0.0, 0.0), origin=(0.02, 0.0, 0.0))
+        warped = section.warp_by_vector("displacement")
+        plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
+        plotter.add_mesh(warped, scalars="c", show_edges=True, cmap="tab10", log_scale=True,
+                         scalar_bar_args={"title": "tissue c (MPa)"})
+        outline = _buckle_outline(model)
+        if outline is not None:
+            plotter.add_lines(outline, color="red", width=4)
+        centre_y = model.geometry.sclera_radius * math.sin(math.radians(model.buckle_angle))
+        plotter.camera.focal_point = (0.0, centre_y, model.axial_position)
+        plotter.camera.position = (-30.0, centre_y, model.axial_position)
+        plotter.camera.up = (0.0, 0.0, 1.0)
+        plotter.camera.parallel_projection = True
+        plotter.camera.parallel_scale = 6.0
+        plotter.add_text(title, font_size=11)
+        plotter.screenshot(str(path))
+        plotter.close()
+
+    def close(self) -> None:
+        self.vtx.close()
+        self.ctx.result.fields = self.vtx.files + self.series.files
+
+
+def _buckle_outline(model):
+    """The buckle's cross-section in the symmetry plane (x = −0.01, in front of the
+    mesh), as a closed polyline; None before the buckle is placed."""
+    base = float(model.base_radius.value) - float(model.indentation.value)
+    if base > 1.5 * model.geometry.sclera_radius:
+        return None
+    shape = model.params.buckle_shape()
+    z0 = model.axial_position
+    tire = [(base, -shape.tire_width / 2), (base + shape.tire_height, -shape.tire_width / 2),
+            (base + shape.tire_height, shape.tire_width / 2), (base, shape.tire_width / 2)]
+    top = base + shape.tire_height
+    band = [(top, -shape.band_width / 2), (top + shape.band_thickness, -shape.band_width / 2),
+            (top + shape.band_thickness, shape.band_width / 2), (top, shape.band_width / 2)]
+    points = []
+    for polygon in (tire, band):
+        closed = polygon + polygon[:1]
+        for a, b in zip(closed[:-1], closed[1:]):
+            points += [(-0.01, a[0], z0 + a[1]), (-0.01, b[0], z0 + b[1])]
+    return np.array(points)

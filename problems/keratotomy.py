@@ -1,0 +1,248 @@
+"""``keratotomy``: radial keratotomy on a viscoelastic cornea under intra-ocular pressure,
+creeping over hours (issue 6, item 5 — a first version, see docs/viscoelastic.md).
+
+Two runs on the same mesh (same cells, same time grid): the intact cornea and the cornea
+with ``incisions`` real cuts (meshes/cornea.py). Both are loaded at t = 0 by the IOP as a
+follower pressure on the posterior surface (glassy response, Cv = I), the limbus clamped,
+then creep with backward Euler on a geometric time grid (``first_dt`` growing by
+``dt_growth``) to ``t_end``. The keratometric power is 337.5 / R with R from a least-
+squares sphere through the deformed anterior nodes inside the central ``fit_diameter``;
+``power_change_D`` = incised − intact at the same time and IOP (negative = flattening).
+
+Simplification: the incisions exist from the start of loading; cutting a cornea that is
+already pressurised (the surgical sequence) would need the pre-stressed state carried over
+to the cut mesh, which is not done.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from eyemech.forms import follower_pressure
+from eyemech.forms import viscoelastic as ve
+from eyemech.meshes import MeshError
+from eyemech.meshes.cornea import CorneaGeometry, cornea
+from eyemech.problems._viscous_bar import ViscousHistory
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.output import gather_grid, render_png
+from eyemech.problems.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.scene import Scene
+from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure
+
+import dolfinx
+
+MMHG = 1.33322e-4  # MPa
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameters(SceneParameters):
+    incisions: int = field(8, "number of radial incisions (0 = intact only)")
+    incision_depth: float = field(0.9, "incision depth, fraction of the local thickness")
+    optical_zone: float = field(3.0, "clear central zone diameter", "mm")
+    incision_end: float = field(5.35, "planform radius where the incisions stop", "mm")
+    iop_mmHg: float = field(15.0, "intra-ocular pressure on the posterior surface", "mmHg")
+    mu_inf: float = field(0.04, "equilibrium shear modulus μ∞", "MPa")
+    mu_v: float = field(0.03, "viscous-branch shear modulus μv", "MPa")
+    tau: float = field(3600.0, "relaxation time τ", "s")
+    t_end: float = field(4 * 3600.0, "end of the creep period", "s")
+    first_dt: float = field(300.0, "first time step (then growing)", "s")
+    dt_growth: float = field(1.6, "growth factor of successive time steps")
+    anterior_radius: float = field(7.8, "anterior radius of curvature", "mm")
+    posterior_radius: float = field(6.5, "posterior apical radius of curvature", "mm")
+    central_thickness: float = field(0.52, "central thickness", "mm")
+    limbal_thickness: float = field(0.67, "thickness at the limbus", "mm")
+    diameter: float = field(11.7, "planform diameter at the limbus", "mm")
+    support: Literal["clamped"] = field("clamped", "limbus support (elastic scleral ring: not yet)")
+    mesh_size: float = field(1.0, "radial element size in the planform", "mm")
+    azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))")
+    layers: int = field(2, "element layers through the thickness (at least)")
+    fit_diameter: float = field(3.0, "central zone of the anterior sphere fit", "mm")
+    element: Literal["Q2P1"] = field("Q2P1", "element family (hexahedra)")
+
+    def validate(self) -> None:
+        self.require_positive("mu_inf", "mu_v", "tau", "t_end", "first_dt", "iop_mmHg",
+                              "fit_diameter")
+        try:
+            self.geometry(self.incisions).validate()
+        except MeshError as err:
+            raise ParameterError(getattr(err, "key", "geometry"), str(err)) from None
+        if not self.dt_growth >= 1.0:
+            raise ParameterError("dt_growth", f"must be >= 1, got {self.dt_growth}")
+        if self.first_dt > self.t_end:
+            raise ParameterError("first_dt", f"is longer than t_end ({self.t_end})")
+        if not self.fit_diameter <= self.optical_zone:
+            raise ParameterError("fit_diameter", f"must not exceed optical_zone ({self.optical_zone})")
+
+    def geometry(self, incisions: int) -> CorneaGeometry:
+        return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,
+                              self.limbal_thickness, self.diameter, incisions, self.incision_depth,
+                              self.optical_zone, self.incision_end, self.mesh_size,
+                              self.azimuthal_divisions, self.layers)
+
+    def time_grid(self) -> tuple[float, ...]:
+        times, dt, t = [], self.first_dt, 0.0
+        while t < self.t_end * (1 - 1e-12):
+            t = min(t + dt, self.t_end)
+            times.append(t)
+            dt *= self.dt_growth
+        return tuple(times)
+
+
+class Cornea:
+    """One cornea (intact or incised): mesh, mixed u–p viscoelastic residual with the IOP
+    as a follower load, clamped limbus, and the quantities of interest."""
+
+    def __init__(self, params: Parameters, incisions: int, comm: MPI.Comm,
+                 azimuths: int):
+        geometry = dataclasses.replace(params.geometry(incisions), azimuthal_divisions=azimuths)
+        self.tagged = cornea(geometry, comm)
+        mesh = self.tagged.mesh
+        family = ELEMENTS[params.element]
+        (self.u, self.p), (v, q) = mixed_displacement_pressure(mesh, family)
+        metadata = {"quadrature_degree": family.quadrature_degree, "quadrature_rule": "default"}
+        dx, ds = self.tagged.dx(metadata), self.tagged.ds(metadata)
+        material = ve.Viscoelastic(params.mu_inf, params.mu_v, params.tau)
+        self.history = ViscousHistory(self.u, material, "backward-euler", family.quadrature_degree)
+        self.pressure = dolfinx.fem.Constant(mesh, 0.0)
+        residual = (ve.residual(material, self.u, self.p, v, q, self.history.Cv, dx)
+                    + follower_pressure(self.pressure, self.u, v, ds(self.tagged.tag("posterior"))))
+        V = self.u.function_space
+        fdim = mesh.topology.dim - 1
+        clamp = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(
+            V, fdim, self.tagged.facets("limbus")), V)
+        self.residual_blocks, self.bcs = list(ufl.extract_blocks(residual)), [clamp]
+        self._central_anterior(V, fdim, params.fit_diameter / 2)
+        self.has_cuts = incisions > 0
+        if self.has_cuts:
+            N = ufl.FacetNormal(mesh)
+            cut = ds(self.tagged.tag("incision"))
+            area = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(1.0 * cut)))
+            self._gape = dolfinx.fem.form(-2.0 / area * ufl.dot(self.u, N) * cut)
+        self.comm = comm
+
+    def _central_anterior(self, V, fdim: int, radius: float) -> None:
+        blocks = dolfinx.fem.locate_dofs_topological(V, fdim, self.tagged.facets("anterior"))
+        owned = V.dofmap.index_map.size_local
+        blocks = blocks[blocks < owned]
+        x = V.tabulate_dof_coordinates()[blocks]
+        inside = np.hypot(x[:, 0], x[:, 1]) <= radius * (1 + 1e-9)
+        self._fit_blocks, self._fit_x = blocks[inside], x[inside]
+        apex = np.linalg.norm(x, axis=1) < 1e-9
+        self._apex_block = blocks[apex]
+
+    def solver(self, ctx: RunContext) -> NonlinearSolver:
+        return NonlinearSolver(self.residual_blocks, [self.u, self.p], self.bcs,
+                               options=ctx.options.newton, timings=ctx.timings)
+
+    # -- quantities ---------------------------------------------------------------------
+    def power_D(self) -> float:
+        """337.5 / R of the least-squares sphere through the deformed central anterior nodes."""
+        displaced = self._fit_x + self.u.x.array.reshape(-1, 3)[self._fit_blocks]
+        points = np.vstack(self.comm.allgather(displaced))
+        A = np.hstack([2 * points, np.ones((len(points), 1))])
+        b = (points**2).sum(axis=1)
+        (cx, cy, cz, d), *_ = np.linalg.lstsq(A, b, rcond=None)
+        return 337.5 / np.sqrt(d + cx * cx + cy * cy + cz * cz)
+
+    def apex_displacement(self) -> float:
+        local = self.u.x.array.reshape(-1, 3)[self._apex_block, 2]
+        return self.comm.allreduce(float(local.sum()))
+
+    def gape(self) -> float:
+        """Mean normal opening of the cuts (mm): −∫ u·N dA over both lips / one lip's area."""
+        if not self.has_cuts:
+            return 0.0
+        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._gape))
+
+
+def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> dict[str, list]:
+    """IOP at t = 0 (glassy), then creep on the time grid; quantities at every time."""
+    solver = body.solver(ctx)
+    series: dict[str, list] = {"times": [], "power_D": [], "apex_displacement_mm": [],
+                               "wound_gape_mm": []}
+
+    def record(t: float) -> None:
+        series["times"].append(t)
+        series["power_D"].append(body.power_D())
+        series["apex_displacement_mm"].append(body.apex_displacement())
+        series["wound_gape_mm"].append(body.gape())
+
+    body.history.dt.value = 0.0
+    follow_path(solver, lambda f, _i: setattr(body.pressure, "value", f * params.iop_mmHg * MMHG),
+                Stepping(initial_step=1.0), label=f"{label} IOP", quiet=ctx.options.quiet)
+    record(0.0)
+
+    def apply(t: float, increment: float) -> None:
+        body.history.dt.value = increment
+
+    def converged(step) -> None:
+        record(step.load)  # before the update: the outputs read Cv_n of this step
+        body.history.update()
+        ctx.record_step(run=label, time=step.load, dt=step.increment,
+                        newton_iterations=step.iterations, cuts=step.cuts)
+
+    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, initial_step=1.0,
+                                        max_step=1.0, min_step=1e-6, stops=params.time_grid()),
+                on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet)
+    return series
+
+
+def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
+        options: RunOptions | None = None):
+    with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        azimuths = params.geometry(params.incisions).azimuths  # the same cells for both runs
+        with ctx.timings("mesh"):
+            intact = Cornea(params, 0, ctx.comm, azimuths)
+        reference = _simulate(ctx, intact, params, "intact")
+        q = ctx.result.quantities
+        q["times"] = reference["times"]
+        q["intact_power_D"] = reference["power_D"]
+        q["intact_apex_displacement_mm"] = reference["apex_displacement_mm"]
+        q["unloaded_power_D"] = 337.5 / params.anterior_radius
+        if params.incisions > 0:
+            with ctx.timings("mesh"):
+                incised = Cornea(params, params.incisions, ctx.comm, azimuths)
+            series = _simulate(ctx, incised, params, "incised")
+            q["power_D"] = series["power_D"]
+            q["power_change_D"] = [a - b for a, b in zip(series["power_D"], reference["power_D"])]
+            q["apex_displacement_mm"] = series["apex_displacement_mm"]
+            q["wound_gape_mm"] = series["wound_gape_mm"]
+            q["power_change_initial_D"] = q["power_change_D"][0]
+            q["power_change_final_D"] = q["power_change_D"][-1]
+            q["creep_power_change_D"] = q["power_change_final_D"] - q["power_change_initial_D"]
+            shown = incised
+        else:
+            q["power_D"] = reference["power_D"]
+            shown = intact
+        q["cells"] = shown.tagged.mesh.topology.index_map(3).size_global
+        if ctx.options.pictures and ctx.out is not None:
+            with ctx.timings("output"):
+                _picture(ctx, shown, params)
+    return ctx.result
+
+
+def _picture(ctx: RunContext, body: Cornea, params: Parameters) -> None:
+    nodal = dolfinx.fem.functionspace(body.tagged.mesh, ("Lagrange", 1, (3,)))
+    u1 = dolfinx.fem.Function(nodal, name="displacement")
+    u1.interpolate(body.u)
+    grid = gather_grid(u1)
+    if grid is None:
+        return
+    grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+    path = ctx.out / "cornea.png"
+    render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.3, -1.0, 1.4),
+               title=f"{params.incisions} incisions, OZ {params.optical_zone:g} mm, "
+                     f"t = {params.t_end / 3600:g} h")
+    ctx.result.pictures.append(path.name)
+
+
+SCENE = Scene(name="keratotomy", kind="scene", parameters=Parameters, run=run,
+              summary="radial keratotomy on a viscoelastic cornea under IOP: power change "
+                      "over hours (first version)")

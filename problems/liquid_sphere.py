@@ -1,0 +1,171 @@
+"""``liquid-sphere``: the thick incompressible neo-Hookean sphere filled with a static
+liquid and squeezed by an external follower pressure — the cavity model of seed 002
+§2.1 on a problem with an exact answer (:func:`eyemech.problems.analytic.liquid_sphere`).
+
+The liquid pressure is either a Real-space unknown with the liquid law as its row
+(``cavity_formulation = real``) or substituted into the wall load (``substituted``,
+the paper's previous formulation, a dense wall×wall Jacobian block); see
+:mod:`eyemech.problems.cavity`. The reference cavity volume V_ini is the stress-free
+one; the initial and external pressures are ramped together from zero.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
+from eyemech.meshes import spherical_shell
+from eyemech.problems import analytic
+from eyemech.problems.cavity import SubstitutedCavity, check_closed, real_pressure_space
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.scene import Scene
+from eyemech.problems.solid import solid_residual
+from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, solid_fields,
+                                     symmetry_bcs, surface_mean)
+
+import dolfinx
+import dolfinx.fem
+
+SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameters(SceneParameters):
+    inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm")
+    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
+    c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa")
+    bulk_modulus: float = field(0.2, "liquid bulk modulus K (seed 002 uses 2083.3 for the "
+                                "vitreous; the default is soft so the wall and liquid share the load)",
+                                "MPa")
+    initial_pressure: float = field(0.002, "liquid pressure P_ini at the stress-free cavity volume",
+                                    "MPa")
+    external_pressure: float = field(0.05, "external pressure on the outer surface (follower)", "MPa")
+    mesh_size: float = field(2.0, "target element size", "mm")
+    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
+    cavity_formulation: Literal["real", "substituted"] = field(
+        "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)")
+    load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
+    cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid")
+
+    def validate(self) -> None:
+        self.require_positive("inner_radius", "c10", "mesh_size", "load_steps", "bulk_modulus")
+        check_element(self.element)
+        if self.cavity_formulation not in ("real", "substituted"):
+            raise ParameterError("cavity_formulation", f"must be real or substituted, got "
+                                 f"{self.cavity_formulation!r}")
+        if not self.outer_radius > self.inner_radius:
+            raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius})")
+        if self.mesh_size > self.outer_radius:
+            raise ParameterError("mesh_size", "is larger than the sphere")
+        for key in ("initial_pressure", "external_pressure"):
+            if not np.isfinite(getattr(self, key)):
+                raise ParameterError(key, "must be finite")
+
+
+def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
+        options: RunOptions | None = None):
+    with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        family = ELEMENTS[params.element]
+        with ctx.timings("mesh"):
+            shell = spherical_shell(params.inner_radius, params.outer_radius, params.mesh_size,
+                                    order=family.geometry_order, hexahedra=family.hexahedral,
+                                    comm=ctx.comm)
+        real = params.cavity_formulation == "real"
+        extra = [real_pressure_space(shell.mesh)] if real else []
+        fields, tests = solid_fields(shell.mesh, family, *extra)
+        u, v = fields[0], tests[0]
+        metadata = {"quadrature_degree": family.quadrature_degree}
+        ds, dx = shell.ds(metadata), shell.dx(metadata)
+        wall = ds(shell.tag(params.cavity_tag))
+        initial_volume = check_closed(u, wall, f"wall '{params.cavity_tag}'")
+        wall_area = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
+            dolfinx.fem.Constant(shell.mesh, 1.0) * wall)), op=MPI.SUM)
+
+        initial_pressure = dolfinx.fem.Constant(shell.mesh, 0.0)
+        external = dolfinx.fem.Constant(shell.mesh, 0.0)
+        bcs = symmetry_bcs(u.function_space, shell, SYMMETRY)
+        residual = (solid_residual(NeoHooke(params.c10), family, fields, tests, dx)
+                    + follower_pressure(external, u, v, ds(shell.tag("outer"))))
+        if real:
+            P, qP = fields[-1], tests[-1]
+            residual += (follower_pressure(P, u, v, wall)
+                         + liquid_law_residual(P, qP, u, wall, wall_area, initial_volume,
+                                               initial_pressure, params.bulk_modulus))
+            cavity = None
+        else:
+            cavity = SubstitutedCavity(u, v, wall, bcs, initial_volume, initial_pressure,
+                                       params.bulk_modulus)
+            residual += follower_pressure(cavity.pressure, u, v, wall)
+        solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
+                                 options=ctx.options.newton, timings=ctx.timings)
+        if cavity is not None:
+            cavity.install(solver)
+
+        volume_form = dolfinx.fem.form(enclosed_volume(u, wall))
+        x = ufl.SpatialCoordinate(shell.mesh) + u
+        inner_mean = surface_mean(ufl.sqrt(ufl.dot(x, x)), wall)
+
+        def cavity_pressure() -> float:
+            if real:  # the one Real dof is owned by one rank
+                owned = P.function_space.dofmap.index_map.size_local
+                return float(ctx.comm.allreduce(float(np.sum(P.x.array[:owned])), op=MPI.SUM))
+            return cavity.current_pressure()
+
+        def quantities() -> dict[str, float]:
+            octant = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form), op=MPI.SUM)
+            return {"cavity_pressure": cavity_pressure(), "inner_radius_deformed": inner_mean(),
+                    "cavity_volume": 8.0 * octant}
+
+        def apply(load: float, _increment: float) -> None:
+            initial_pressure.value = load * params.initial_pressure
+            external.value = load * params.external_pressure
+            if cavity is not None:  # keep P consistent with the state for the next residual
+                cavity.pressure.value = cavity.current_pressure()
+
+        newton = {"iterations": 0}
+
+        def converged(record) -> None:
+            newton["iterations"] += record.iterations
+            ctx.record_step(step=record.step, load_factor=record.load,
+                            newton_iterations=record.iterations, cuts=record.cuts,
+                            residuals=record.residuals, **quantities())
+
+        if real:
+            P.x.array[:] = 0.0
+        started = time.perf_counter()
+        follow_path(solver, apply, Stepping(initial_step=1.0 / params.load_steps),
+                    on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
+        solve_seconds = time.perf_counter() - started
+        q = ctx.result.quantities
+        q.update(quantities())
+        q["jacobian_nonzeros"] = cavity.nonzeros() if cavity is not None else solver.jacobian_nonzeros()
+        q["dofs"] = global_dofs(*fields)
+        q["newton_iterations"] = newton["iterations"]
+        q["seconds_per_newton_step"] = solve_seconds / max(1, newton["iterations"])
+        _exact(q, params)
+    return ctx.result
+
+
+def _exact(q: dict, params: Parameters) -> None:
+    try:
+        a, pressure = analytic.liquid_sphere(params.inner_radius, params.outer_radius, params.c10,
+                                             params.bulk_modulus, params.initial_pressure,
+                                             params.external_pressure)
+    except ValueError:
+        return
+    q["inner_radius_exact"], q["cavity_pressure_exact"] = a, pressure
+    q["inner_radius_error"] = q["inner_radius_deformed"] / a - 1.0
+    q["cavity_pressure_error"] = q["cavity_pressure"] / pressure - 1.0
+
+
+SCENE = Scene(name="liquid-sphere", kind="benchmark", parameters=Parameters, run=run,
+              summary="thick incompressible sphere around a static liquid, squeezed (exact solution)")

@@ -1,0 +1,405 @@
+"""``scleral-buckling``: the encircling buckling operation of Sun & Makinouchi (seed
+002, §3) on the layered half eye of :mod:`eyemech.meshes.eye`.
+
+Three steps along one load path s ∈ [0, 3]:
+
+1. s ∈ [0, 1] — intra-ocular pressure: 15 mmHg ramped as a follower pressure on every
+   wetted face (vitreous side, subretinal space, tear edges). The Real-space pressure
+   unknown P is pinned to the ramp.
+2. s ∈ [1, 2] — buckling: the liquid is coupled (P_ini = IOP, V_ini = the volume after
+   step 1, bulk modulus K; seed 002 eq. 5 as P's row) while the rigid buckle (tire on
+   an encircling band) moves radially inward by ``indentation``; penalty contact on the
+   sclera's outer surface.
+3. s ∈ [2, 3] — suturing: forces at the suture points, tangent to the buckle's
+   outline, directions from the last converged step (seed 002, §2.2), spread over each
+   suture's bite (radius ``suture_bite_radius``) rather than put on one node, whose
+   point-load response does not converge under mesh refinement.
+
+Every soft tissue is neo-Hookean, W = c (Ī1 − 3), with c per tissue (paper Table 1) held
+in a cellwise-constant field; incompressibility by a pressure multiplier (Q1P0 as in
+the paper, or Q2P1). The eye is held at the end of the optic-nerve stub; the
+symmetry plane x = 0 passes through the tear.
+
+Not modelled yet (see README): the lens and the zonules (they carry no load in this
+operation: the liquid pressure acts on all sides of the lens), and retina–choroid
+contact, which waits for the deformable contact of issue #4 — the gap is measured and
+a negative gap (retina through choroid) is reported, not prevented.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
+from eyemech.forms.buckle import Buckle, BuckleShape
+from eyemech.forms.contact import penalty_energy
+from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye
+from eyemech.problems.cavity import check_closed, real_pressure_space
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
+from eyemech.problems.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.probes import CellField, NodeProbe, SurfacePairing, facet_nodes
+from eyemech.problems.scene import Scene
+from eyemech.problems.solid import solid_residual
+from eyemech.problems.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
+from eyemech.problems.sutures import SutureForces, SuturePoint
+from eyemech.problems import buckling_output
+
+import dolfinx
+import dolfinx.fem
+
+MMHG = 1.33322e-4  # MPa
+# `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
+BENCHMARK = {"resolution": "paper"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameters(SceneParameters):
+    resolution: Literal["coarse", "default", "paper"] = field(
+        "default", "mesh: coarse (tests), default, paper (>= the paper's 7,421 hexahedra)")
+    element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
+    iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
+    bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
+    c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa")
+    c_sclera: float = field(0.0833, "neo-Hooke c of the sclera", "MPa")
+    c_ciliary_body: float = field(0.01, "neo-Hooke c of the ciliary body", "MPa")
+    c_choroid: float = field(0.0083, "neo-Hooke c of the choroid", "MPa")
+    c_retina: float = field(0.0008, "neo-Hooke c of the retina", "MPa")
+    c_optic_nerve: float = field(0.05, "neo-Hooke c of the optic nerve", "MPa")
+    buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
+    band_width: float = field(2.5, "encircling band width (axial)", "mm")
+    band_thickness: float = field(0.6, "encircling band thickness", "mm")
+    tire_width: float = field(7.0, "silicone tire width (axial)", "mm")
+    tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
+    indentation: float = field(1.0, "radial inward travel of the buckle in step 2", "mm")
+    buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
+    suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
+    suture_force: float = field(0.1, "pull on each suture at the end of step 3", "N")
+    suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
+    suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
+                                               "suture meridians, degrees from the tear", "deg")
+    detachment_height: float = field(0.5, "subretinal gap at the detachment's centre", "mm")
+    retina_thickness: float = field(0.2, "retina thickness", "mm")
+    penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
+    tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
+                                          "mm")
+
+    def validate(self) -> None:
+        self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
+                              "c_choroid", "c_retina", "c_optic_nerve", "band_width",
+                              "band_thickness", "tire_width", "suture_width", "penalty_factor",
+                              "suture_bite_radius",
+                              "tear_closure_tolerance", "retina_thickness")
+        self.require_nonnegative("tire_height", "indentation", "suture_force", "detachment_height")
+        if self.buckle_clearance < 0:
+            raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
+                                 f"({self.buckle_clearance} mm); it must be >= 0")
+        shape = self.buckle_shape()
+        if self.suture_width < shape.footprint:
+            raise ParameterError("suture_width", f"{self.suture_width} mm is narrower than the buckle "
+                                 f"({shape.footprint} mm): the sutures would pass through it")
+        if self.suture_width > shape.footprint + 4.0:
+            raise ParameterError("suture_width", f"{self.suture_width} mm is wider than the band "
+                                 f"region (buckle {shape.footprint} mm + 2 mm each side)")
+        geometry = self.geometry()
+        arc_to_pole = math.radians(180.0 - geometry.limbus_angle) * geometry.sclera_radius
+        if not shape.footprint < self.buckle_position < arc_to_pole - 2 * geometry.optic_nerve_radius:
+            raise ParameterError("buckle_position", f"must put the buckle on the sclera between the "
+                                 f"limbus and the optic nerve ({shape.footprint:.1f}–"
+                                 f"{arc_to_pole - 2 * geometry.optic_nerve_radius:.1f} mm)")
+        if any(not 0 <= a <= 180 for a in self.suture_azimuths) or not self.suture_azimuths:
+            raise ParameterError("suture_azimuths", "need angles in [0, 180] degrees (the half eye)")
+        try:
+            geometry.validate()
+        except Exception as err:
+            raise ParameterError("resolution", str(err)) from None
+
+    def geometry(self) -> EyeGeometry:
+        return EyeGeometry(cells_per_edge=RESOLUTIONS[self.resolution],
+                           detachment_height=self.detachment_height,
+                           retina_thickness=self.retina_thickness)
+
+    def buckle_shape(self) -> BuckleShape:
+        return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height)
+
+    def stiffness(self) -> dict[str, float]:
+        return {t: getattr(self, f"c_{t}") for t in TISSUES}
+
+
+def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
+        options: RunOptions | None = None):
+    with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        model = _build(params, ctx)
+        writer = buckling_output.Writer(model, ctx)
+        writer.state(0.0, stage=0)
+        try:
+            follow_path(model.solver, model.apply, Stepping(0.0, 3.0, initial_step=1 / 12,
+                                                            max_step=1 / 4, stops=(1.0, 2.0)),
+                        on_converged=lambda record: _converged(model, ctx, writer, record),
+                        label=SCENE.name, quiet=ctx.options.quiet)
+        except SolveFailure:
+            ctx.result.quantities.update(model.measure())
+            raise
+        finally:
+            writer.close()
+        ctx.result.quantities.update(model.measure())
+        ctx.result.quantities.update(model.summary())
+    return ctx.result
+
+
+def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
+    stage = model.stage_of(record.load)
+    if abs(record.load - 1.0) < 1e-12:
+        model.couple_liquid()
+    values = model.measure()
+    ctx.record_step(step=record.step, load=record.load, stage=stage,
+                    newton_iterations=record.iterations, cuts=record.cuts,
+                    residuals=record.residuals, **values)
+    model.sutures.update_directions(model.u, model.suture_anchors())
+    if abs(record.load - round(record.load)) < 1e-12:
+        model.stage_results[int(round(record.load))] = values
+    writer.state(record.load, stage, picture=abs(record.load - round(record.load)) < 1e-12)
+
+
+class BucklingModel:
+    """Everything the path follower and the measurements need, built once."""
+
+    def __init__(self, params: Parameters, ctx: RunContext):
+        self.params, self.ctx = params, ctx
+        self.geometry = params.geometry()
+        with ctx.timings("mesh"):
+            self.eye = half_eye(self.geometry, ctx.comm)
+        family = ELEMENTS[params.element]
+        self.family = family
+        mesh = self.eye.mesh
+        fields, tests = solid_fields(mesh, family, real_pressure_space(mesh))
+        self.fields, self.u, self.P = fields, fields[0], fields[-1]
+        v, qP = tests[0], tests[-1]
+        metadata = {"quadrature_degree": family.quadrature_degree}
+        dx, ds = self.eye.dx(metadata), self.eye.ds(metadata)
+        self.wall = ds(self.eye.tag("cavity_wall"))
+        self.stiffness = self._stiffness_field()
+
+        # step 1 pins P to the ramp; from step 2 on P obeys the liquid law
+        self.iop = params.iop_mmHg * MMHG
+        self.pressure_target = dolfinx.fem.Constant(mesh, 0.0)
+        self.coupled = dolfinx.fem.Constant(mesh, 0.0)
+        self.initial_volume = dolfinx.fem.Constant(mesh, 1.0)
+        self.initial_pressure = dolfinx.fem.Constant(mesh, self.iop)
+        volume0 = check_closed(self.u, self.wall, "cavity wall of the eye")
+        self.initial_volume.value = volume0
+        area = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
+            dolfinx.fem.Constant(mesh, 1.0) * self.wall)), op=MPI.SUM)
+        liquid = liquid_law_residual(self.P, qP, self.u, self.wall, area, self.initial_volume,
+                                     self.initial_pressure, params.bulk_modulus)
+        pinned = self.initial_volume / params.bulk_modulus * (self.P - self.pressure_target) \
+            / area * qP * self.wall
+        residual = (solid_residual(NeoHooke(self.stiffness), family, fields, tests, dx)
+                    + follower_pressure(self.P, self.u, v, self.wall)
+                    + self.coupled * liquid + (1 - self.coupled) * pinned)
+
+        # the buckle: placed after step 1 at the clearance from the inflated sclera
+        self.axial_position, self.buckle_angle = self._buckle_axial_position()
+        self.base_radius = dolfinx.fem.Constant(mesh, 2 * self.geometry.sclera_radius)
+        self.indentation = dolfinx.fem.Constant(mesh, 0.0)
+        self.buckle = Buckle(params.buckle_shape(), self.axial_position, self.base_radius,
+                             self.indentation)
+        element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
+        self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
+        contact = penalty_energy(self.buckle, self.u, self.penalty, ds(self.eye.tag("sclera_outer")))
+        residual += ufl.derivative(contact, self.u, v)
+        self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
+        self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
+                                    self.sclera_nodes, params.suture_bite_radius)
+        residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
+
+        self.bcs = self._boundary_conditions()
+        self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
+                                      options=ctx.options.newton, timings=ctx.timings)
+        self._probes()
+        self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
+        self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
+        self.stage_results: dict[int, dict] = {}
+        self.reference_positions: dict[str, np.ndarray] = {}
+
+    # -- set-up pieces --------------------------------------------------------------
+    def _stiffness_field(self) -> dolfinx.fem.Function:
+        space = dolfinx.fem.functionspace(self.eye.mesh, ("DG", 0))
+        c = dolfinx.fem.Function(space, name="c")
+        for tissue, value in self.params.stiffness().items():
+            if tissue in self.eye.names:
+                cells = self.eye.cells(tissue)
+                c.x.array[space.dofmap.list[cells, 0]] = value
+        return c
+
+    def _buckle_axial_position(self) -> tuple[float, float]:
+        angle = self.geometry.limbus_angle + math.degrees(self.params.buckle_position
+                                                          / self.geometry.sclera_radius)
+        return self.geometry.sclera_radius * math.cos(math.radians(angle)), angle
+
+    def _boundary_conditions(self):
+        V = self.u.function_space
+        bcs = symmetry_bcs(V, self.eye, {"symmetry": 0})
+        held = dolfinx.fem.locate_dofs_topological(V, 2, self.eye.facets("optic_nerve_end"))
+        bcs.append(dolfinx.fem.dirichletbc(np.zeros(3), held, V))
+        return bcs
+
+    def _probes(self) -> None:
+        V, geo = self.u.function_space, self.geometry
+        outer = self.sclera_nodes
+        cornea = facet_nodes(V, self.eye.facets("cornea_outer"))
+        inner = facet_nodes(V, self.eye.facets("retina_inner"))
+        apex = np.array([[0.0, 0.0, geo.cornea_center + geo.cornea_radius]])
+        pole = np.array([[0.0, 0.0, -geo.sclera_radius]])
+        self.apex = NodeProbe(V, apex, cornea)
+        self.pole = NodeProbe(V, pole, inner)
+        theta = math.radians(self.buckle_angle)
+        under = np.array([[0.0, geo.sclera_radius * math.sin(theta), self.axial_position]])
+        self.under_buckle = NodeProbe(V, under, outer)
+        self.pairing = SurfacePairing(V, self.eye.facets("retina_detached"),
+                                      self.eye.facets("choroid_detached"))
+        tear = facet_nodes(V, self.eye.facets("tear_edge"))
+        owned = V.dofmap.index_map.size_local
+        tear_global = V.dofmap.index_map.local_to_global(tear[tear < owned].astype(np.int32))
+        tear_global = set(np.concatenate(self.ctx.comm.allgather(tear_global)).tolist())
+        self.tear_rim = np.array([g in tear_global for g in self.pairing.slave_g])
+
+    def _suture_points(self) -> list[SuturePoint]:
+        """Both bites of each suture, ``suture_width`` apart along the meridian,
+        centred on the buckle, on the sclera's outer surface."""
+        geo, theta = self.geometry, math.radians(self.buckle_angle)
+        half = self.params.suture_width / 2 / geo.sclera_radius
+        points = []
+        for azimuth in self.params.suture_azimuths:
+            psi = math.radians(azimuth)
+            for side in (-1, 1):
+                t = theta - side * half  # anterior (+1) is the smaller polar angle
+                rho = geo.sclera_radius * math.sin(t)
+                centre = (rho * math.sin(psi), rho * math.cos(psi), geo.sclera_radius * math.cos(t))
+                points.append(SuturePoint(azimuth, side, centre))
+        return points
+
+    # -- the load path --------------------------------------------------------------
+    @staticmethod
+    def stage_of(load: float) -> int:
+        return 1 if load <= 1.0 + 1e-12 else (2 if load <= 2.0 + 1e-12 else 3)
+
+    def apply(self, load: float, _increment: float) -> None:
+        self.pressure_target.value = min(load, 1.0) * self.iop
+        self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
+        self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
+
+    def couple_liquid(self) -> None:
+        """End of step 1: V_ini and P_ini from the inflated eye, liquid law on, and the
+        buckle put ``buckle_clearance`` outside the sclera under it."""
+        self.initial_volume.value = self.volume()
+        self.initial_pressure.value = self.cavity_pressure()
+        self.coupled.value = 1.0
+        self.base_radius.value = self._sclera_radius_under_buckle() + self.params.buckle_clearance
+        self.reference_positions = {"apex": self.apex.positions(self.u),
+                                    "pole": self.pole.positions(self.u),
+                                    "under_buckle": self.under_buckle.positions(self.u)}
+
+    def _sclera_radius_under_buckle(self) -> float:
+        """Largest distance from the optic axis of the deformed sclera within the
+        buckle's axial span: the buckle's flat inner face must clear all of it."""
+        V = self.u.function_space
+        owned = V.dofmap.index_map.size_local
+        blocks = self.sclera_nodes[self.sclera_nodes < owned]
+        x = V.tabulate_dof_coordinates()[blocks] + self.u.x.array.reshape(-1, 3)[blocks]
+        half = 0.5 * self.params.buckle_shape().footprint
+        near = np.abs(x[:, 2] - self.axial_position) <= half
+        local = float(np.hypot(x[near, 0], x[near, 1]).max()) if near.any() else 0.0
+        return self.ctx.comm.allreduce(local, op=MPI.MAX)
+
+    def suture_anchors(self) -> np.ndarray:
+        """Where each suture leaves the buckle: the tire's outer corner on its side,
+        in the suture's meridional plane (directions for the next step)."""
+        shape = self.params.buckle_shape()
+        rho = float(self.base_radius.value) - float(self.indentation.value) + shape.tire_height
+        anchors = []
+        for point in self.sutures.points:
+            psi = math.radians(point.azimuth_deg)
+            z = self.axial_position + point.side * 0.5 * shape.footprint
+            anchors.append([rho * math.sin(psi), rho * math.cos(psi), z])
+        return np.array(anchors)
+
+    # -- measurements ---------------------------------------------------------------
+    def volume(self) -> float:
+        return self.ctx.comm.allreduce(dolfinx.fem.assemble_scalar(self.volume_form), op=MPI.SUM)
+
+    def cavity_pressure(self) -> float:
+        owned = self.P.function_space.dofmap.index_map.size_local
+        return float(self.ctx.comm.allreduce(float(np.sum(self.P.x.array[:owned])), op=MPI.SUM))
+
+    def measure(self) -> dict:
+        with self.ctx.timings("contact_search"):
+            gaps = self.pairing.gaps(self.u)
+        apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
+        axial = apex[2] - pole[2]
+        reference_axial = self.apex.nodes[0][2] - self.pole.nodes[0][2]
+        under = self.under_buckle.positions(self.u)[0]
+        before = self.reference_positions.get("under_buckle", self.under_buckle.nodes)[0]
+        indentation = math.hypot(before[0], before[1]) - math.hypot(under[0], under[1])
+        in_contact = gaps < self.params.tear_closure_tolerance
+        detached_area = self.detached_area()
+        return {
+            "axial_length_mm": axial,
+            "axial_length_change_mm": axial - reference_axial,
+            "buckle_indentation_mm": indentation,
+            "buckle_travel_mm": float(self.indentation.value),
+            "iop_mmHg": self.cavity_pressure() / MMHG,
+            "cavity_volume_mm3": 2.0 * self.volume(),
+            "retina_choroid_gap_min_mm": float(gaps.min()),
+            "retina_choroid_gap_max_mm": float(gaps.max()),
+            # nodal estimate: the share of lifted retina nodes back on the choroid
+            "retina_contact_area_mm2": 2.0 * detached_area * float(in_contact.mean()),
+            "retina_choroid_gap_mean_mm": float(gaps.mean()),
+            # closed: every lifted retina node on the tear's rim is back on the choroid
+            "tear_closed": bool(self.tear_rim.any()
+                                and np.all(gaps[self.tear_rim] < self.params.tear_closure_tolerance)),
+            "von_mises_max_MPa": self.von_mises.update(),
+            "suture_force_N": float(self.sutures.magnitude),
+        }
+
+    def detached_area(self) -> float:
+        if not hasattr(self, "_detached_area"):
+            form = dolfinx.fem.form(dolfinx.fem.Constant(self.eye.mesh, 1.0)
+                                    * self.eye.ds()(self.eye.tag("retina_detached")))
+            self._detached_area = self.ctx.comm.allreduce(dolfinx.fem.assemble_scalar(form),
+                                                          op=MPI.SUM)
+        return self._detached_area
+
+    def summary(self) -> dict:
+        names = {1: "iop", 2: "buckling", 3: "suturing"}
+        out = {f"after_{names[k]}": v for k, v in sorted(self.stage_results.items())}
+        out["dofs"] = global_dofs(*self.fields)
+        out["cells"] = self.eye.mesh.topology.index_map(3).size_global
+        out["jacobian_nonzeros"] = self.solver.jacobian_nonzeros()
+        out["contact_penalty"] = self.penalty
+        return out
+
+
+def _von_mises(u, stiffness):
+    """Von Mises stress of the neo-Hookean tissues: σ_dev = (2c/J) dev(b̄)
+    (the pressure multiplier is hydrostatic and drops out)."""
+    F = ufl.Identity(3) + ufl.grad(u)
+    J = ufl.det(F)
+    b_bar = J ** (-2.0 / 3.0) * F * F.T
+    deviator = 2 * stiffness / J * (b_bar - ufl.tr(b_bar) / 3 * ufl.Identity(3))
+    return ufl.sqrt(1.5 * ufl.inner(deviator, deviator))
+
+
+def _build(params: Parameters, ctx: RunContext) -> BucklingModel:
+    return BucklingModel(params, ctx)
+
+
+SCENE = Scene(name="scleral-buckling", kind="scene", parameters=Parameters, run=run,
+              summary="encircling scleral buckling on a half eye: IOP, buckle, sutures (seed 002)")

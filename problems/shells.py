@@ -1,0 +1,233 @@
+"""What the shell benchmarks share: the space, the energy with its constants, the
+supports, point values in parallel, and the plate scenes' parameters and run."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Callable, Literal
+
+import basix.ufl
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+import dolfinx.fem
+
+from eyemech.forms.shell import Kinematics, ShellMaterial, shell_energy
+from eyemech.meshes.surface import Diagonal, mapped_surface, orientation, require_surface, tag_boundary
+from eyemech.meshes.tagged import TaggedMesh
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.driver import NewtonOptions, NonlinearSolver, Stepping, follow_path
+from eyemech.problems.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.parameters import ParameterError, SceneParameters, field
+
+
+def newton_options(ctx: RunContext, kinematics: Kinematics) -> NewtonOptions:
+    """The linear shell is solved by one linear solve (SNES ``ksponly``): a Newton
+    convergence test on an ill-conditioned system (a large penalty) can stall at
+    round-off above the absolute tolerance although the solve is exact."""
+    options = ctx.options.newton
+    if kinematics != "linear":
+        return options
+    return dataclasses.replace(options, petsc={"snes_type": "ksponly", **options.petsc})
+
+
+def check_shell_parameters(params: SceneParameters, in_plane_size: float) -> None:
+    """The checks every shell scene makes (named keys, before any mesh is built)."""
+    params.require_positive("youngs_modulus", "thickness", "penalty_factor")
+    if not -1.0 < params.poisson_ratio < 0.5:
+        raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {params.poisson_ratio!r}")
+    if not params.thickness < in_plane_size:
+        raise ParameterError("thickness", f"must be smaller than the in-plane size ({in_plane_size:g}) "
+                             f"for a shell, got {params.thickness!r}")
+    if params.degree not in (2, 3):
+        raise ParameterError("degree", f"must be 2 or 3, got {params.degree!r}")
+
+
+class Shell:
+    """A Kirchhoff–Love shell on a tagged surface mesh: displacement space, material
+    constants (so one compiled form serves every parameter value) and measures."""
+
+    def __init__(self, tagged: TaggedMesh, params, direction: Callable[[np.ndarray], np.ndarray],
+                 clamped: tuple[str, ...] = ()):
+        mesh = tagged.mesh
+        require_surface(mesh)
+        self.tagged, self.mesh, self.degree = tagged, mesh, params.degree
+        element = basix.ufl.element("Lagrange", "triangle", params.degree, shape=(3,))
+        self.V = dolfinx.fem.functionspace(mesh, element)
+        self.u = dolfinx.fem.Function(self.V, name="displacement")
+        self.v = ufl.TestFunction(self.V)
+        self.orientation = orientation(mesh, direction)
+
+        def constant(value: float):
+            return dolfinx.fem.Constant(mesh, dolfinx.default_scalar_type(value))
+
+        self.constant = constant
+        self.material = ShellMaterial(constant(params.youngs_modulus), constant(params.poisson_ratio),
+                                      constant(params.thickness))
+        self.penalty_factor = constant(params.penalty_factor)
+        # P2: strains of degree 1 (linear) or 2 (nonlinear, squared in the energy);
+        # a fixed degree keeps UFL from estimating ~20 for the rational integrand
+        metadata = {"quadrature_degree": 2 * params.degree}
+        self.dx = ufl.Measure("dx", mesh, metadata=metadata)
+        self.dS = ufl.Measure("dS", mesh, metadata=metadata)
+        self.ds = tagged.ds(metadata)
+        self.clamped = None
+        for name in clamped:
+            measure = self.ds(tagged.tag(name))
+            self.clamped = measure if self.clamped is None else self.clamped + measure
+
+    def energy(self, kinematics: Kinematics):
+        return shell_energy(self.u, self.material, self.orientation, degree=self.degree,
+                            penalty_factor=self.penalty_factor, dx=self.dx, dS=self.dS,
+                            ds_clamped=self.clamped, kinematics=kinematics)
+
+    def fix(self, name: str, components: tuple[int, ...] = (0, 1, 2)) -> list:
+        """Dirichlet u_i = 0 on the tagged edges ``name`` for the given components."""
+        facets = self.tagged.facets(name)
+        bcs = []
+        for i in components:
+            sub, _ = self.V.sub(i).collapse()
+            dofs = dolfinx.fem.locate_dofs_topological((self.V.sub(i), sub), 1, facets)
+            bcs.append(dolfinx.fem.dirichletbc(dolfinx.default_scalar_type(0.0), dofs[0], self.V.sub(i)))
+        return bcs
+
+    def fix_where(self, inside: Callable[[np.ndarray], np.ndarray], component: int) -> list:
+        """Dirichlet u_i = 0 at the nodes where ``inside(x)`` holds (e.g. a symmetry line)."""
+        sub, _ = self.V.sub(component).collapse()
+        dofs = dolfinx.fem.locate_dofs_geometrical((self.V.sub(component), sub), inside)
+        return [dolfinx.fem.dirichletbc(dolfinx.default_scalar_type(0.0), dofs[0],
+                                        self.V.sub(component))]
+
+    def value_at(self, point) -> np.ndarray:
+        """Displacement at the degree of freedom nearest to ``point`` (a node of the
+        mesh in the benchmarks), the same on every rank."""
+        return nodal_value(self.u, np.asarray(point, dtype=float))
+
+    def dofs(self) -> int:
+        index_map = self.V.dofmap.index_map
+        return index_map.size_global * self.V.dofmap.index_map_bs
+
+
+def nodal_value(u: dolfinx.fem.Function, point: np.ndarray) -> np.ndarray:
+    V = u.function_space
+    owned = V.dofmap.index_map.size_local
+    x = V.tabulate_dof_coordinates()[:owned]
+    bs = V.dofmap.index_map_bs
+    if owned:
+        i = int(np.argmin(np.linalg.norm(x - point, axis=1)))
+        local = (float(np.linalg.norm(x[i] - point)), u.x.array[bs * i: bs * i + bs].copy())
+    else:
+        local = (np.inf, np.zeros(bs))
+    candidates = V.mesh.comm.allgather(local)
+    return min(candidates, key=lambda c: c[0])[1]
+
+
+# -- the plate benchmarks -------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class PlateParameters(SceneParameters):
+    q: float = field(1.0, "uniform transverse load (dead load, per reference area)", "MPa")
+    youngs_modulus: float = field(1.092e6, "Young's modulus (the shell paper's test)", "MPa")
+    poisson_ratio: float = field(0.3, "Poisson's ratio")
+    length: float = field(10.0, "side of the square plate", "mm")
+    thickness: float = field(0.1, "plate thickness", "mm")
+    divisions: int = field(32, "squares per side (each split in 4 triangles when crossed)")
+    diagonal: Diagonal = field("crossed", "triangulation of each square: crossed|right|left|alternating")
+    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
+    kinematics: Kinematics = field("linear", "linear (small displacement) or nonlinear "
+                                                        "(total Lagrangian)")
+    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
+    load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)")
+
+    def validate(self) -> None:
+        self.require_positive("length", "divisions", "load_steps")
+        check_shell_parameters(self, self.length)
+        if not np.isfinite(self.q):
+            raise ParameterError("q", "must be finite")
+
+
+# centre deflection of a uniformly loaded square plate, w = c q L⁴ / D, ν = 0.3:
+# Timoshenko & Woinowsky-Krieger, Theory of Plates and Shells (1959), Table 35
+# (clamped, c = 0.00126) and Table 8 (simply supported, c = 0.00406); the digits
+# 0.00126532 and 0.00406235 are the converged series values.
+PLATE_COEFFICIENT = {"clamped": 0.00126532, "simply-supported": 0.00406235}
+
+
+def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
+              params: PlateParameters, comm: MPI.Comm | None, out, options: RunOptions | None):
+    with RunContext(scene_name, params, comm, out, options) as ctx:
+        L = params.length
+        with ctx.timings("mesh"):
+            mesh = mapped_surface(lambda s, t: np.column_stack([L * s, L * t, 0.0 * s]),
+                                  params.divisions, params.divisions, params.diagonal, ctx.comm)
+            on_edge = (lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], L)
+                       | np.isclose(x[1], 0.0) | np.isclose(x[1], L))
+            tagged = tag_boundary(mesh, {"edge": on_edge})
+        up = lambda x: np.tile([0.0, 0.0, 1.0], (len(x), 1))  # noqa: E731
+        shell = Shell(tagged, params, up, clamped=("edge",) if support == "clamped" else ())
+        load = shell.constant(0.0)
+        residual = (ufl.derivative(shell.energy(params.kinematics), shell.u, shell.v)
+                    - load * shell.v[2] * shell.dx)
+        # immovable edges (w = 0 and no in-plane motion) for both supports; the
+        # clamped one also fixes the rotation (weakly, in the energy)
+        solver = NonlinearSolver(residual, shell.u, shell.fix("edge"),
+                                 options=newton_options(ctx, params.kinematics),
+                                 timings=ctx.timings)
+        centre = (L / 2, L / 2, 0.0)
+        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [shell.u])
+
+        def apply(value: float, _increment: float) -> None:
+            load.value = value * params.q
+
+        def converged(record) -> None:
+            ctx.record_step(step=record.step, load_factor=record.load, q=record.load * params.q,
+                            center_deflection=float(shell.value_at(centre)[2]),
+                            newton_iterations=record.iterations, cuts=record.cuts)
+            with ctx.timings("output"):
+                writer.write(record.load)
+
+        steps = 1 if params.kinematics == "linear" else params.load_steps
+        try:
+            follow_path(solver, apply, Stepping(initial_step=1.0 / steps), on_converged=converged,
+                        label=scene_name, quiet=ctx.options.quiet)
+        finally:
+            writer.close()
+            ctx.result.fields = writer.files
+        D = params.youngs_modulus * params.thickness ** 3 / (12 * (1 - params.poisson_ratio ** 2))
+        deflection = float(shell.value_at(centre)[2])
+        quantities = ctx.result.quantities
+        quantities["center_deflection"] = deflection
+        quantities["dofs"] = shell.dofs()
+        if np.isclose(params.poisson_ratio, 0.3):  # the tabulated coefficients are for ν = 0.3
+            linear = PLATE_COEFFICIENT[support] * params.q * L ** 4 / D
+            quantities["center_deflection_linear_reference"] = linear
+            if params.kinematics == "linear":
+                quantities["center_deflection_error"] = deflection / linear - 1.0
+        if ctx.options.pictures and ctx.out is not None:
+            with ctx.timings("output"):
+                picture(shell.u, ctx, f"{scene_name}, q = {params.q:g} MPa", "w (mm)",
+                        lambda d: d[:, 2], scale=0.2 * L / max(abs(deflection), 1e-30))
+    return ctx.result
+
+
+def picture(u: dolfinx.fem.Function, ctx: RunContext, title: str, label: str,
+            scalar: Callable[[np.ndarray], np.ndarray], scale: float = 1.0,
+            camera="iso", name: str = "deformed.png") -> None:
+    """Deformed surface (displacement times ``scale``) coloured by ``scalar``."""
+    grid = gather_grid(u)
+    if grid is None:
+        return
+    displacement = grid.point_data[u.name]
+    grid.point_data[label] = scalar(displacement)
+    grid.point_data["shown"] = displacement * scale
+    path = Path(ctx.out) / name
+    suffix = f" (displacement × {scale:.3g})" if not np.isclose(scale, 1.0) else ""
+    render_png(grid, path, scalars=label, warp="shown", title=title + suffix, camera=camera)
+    ctx.result.pictures.append(path.name)

@@ -1,0 +1,36 @@
+"""The hyperelastic solid residual for any element family of :mod:`spaces`:
+mixed u–p (incompressible, pressure multiplier) or displacement only (bulk penalty).
+A mesh may carry several materials by cell tag."""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import ufl
+
+from eyemech.forms import Material, incompressible_energy_density, nearly_incompressible_energy_density
+from eyemech.problems.spaces import ElementFamily
+
+
+def solid_residual(material: Material | Mapping[int, Material], family: ElementFamily, fields,
+                   tests, dx, bulk_modulus: float | None = None):
+    """Residual (sum over blocks) of the stored energy; ``fields``/``tests`` start with
+    u (and p for mixed families) as returned by :func:`spaces.solid_fields`.
+
+    ``material`` is one law for the whole mesh, or ``{cell_tag: law}`` integrated over
+    ``dx(cell_tag)`` (``dx`` must then carry the cell tags as subdomain data)."""
+    u, v = fields[0], tests[0]
+    parts = material.items() if isinstance(material, Mapping) else [(None, material)]
+    if family.pressure_family is None and (bulk_modulus is None or not bulk_modulus > 0):
+        raise ValueError(f"{family.name} is displacement-only and needs a bulk modulus > 0")
+    energy = 0
+    for tag, law in parts:
+        measure = dx if tag is None else dx(tag)
+        if family.pressure_family is None:
+            energy += nearly_incompressible_energy_density(law, u, bulk_modulus) * measure
+        else:
+            energy += incompressible_energy_density(law, u, fields[1]) * measure
+    residual = ufl.derivative(energy, u, v)
+    if family.pressure_family is not None:
+        residual += ufl.derivative(energy, fields[1], tests[1])
+    return residual

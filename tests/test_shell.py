@@ -1,0 +1,195 @@
+"""Kirchhoff–Love shell (forms/shell.py) against plate and large-rotation references.
+
+References
+- Square plate under uniform load q, ν = 0.3, centre deflection w = c q L⁴/D with
+  c = 0.00126532 (clamped) and c = 0.00406235 (simply supported): Timoshenko &
+  Woinowsky-Krieger, *Theory of Plates and Shells*, 2nd ed. (1959), Tables 35 and 8.
+- Cantilever rolled by an end moment M = f · 2πEI/L: exact circular arc of radius
+  EI/M (Euler–Bernoulli pure bending, ν = 0); Sze, Liu & Lo, Finite Elem. Anal. Des.
+  40 (2004) 1551–1569, problem 3.1.
+
+- Scordelis–Lo roof: 0.3024 at the free-edge midpoint, MacNeal & Harder, Finite
+  Elem. Anal. Des. 1 (1985) 3–20 (deep-shell converged values are ~0.301).
+- Pinched hemisphere with an 18° hole: radial displacement ≈ 0.093 under the loads
+  (MacNeal & Harder 1985 give 0.094; converged thin-shell values 0.0924-0.093).
+
+Tolerances: 0.3 % for the plates at the default mesh (issue 7; the measured errors
+are -0.25 % and -0.06 %), 1 % of L for the rolled tip (measured 0.35 %), 2 % for
+the Scordelis–Lo roof and the hemisphere (issue 7; measured -0.86 % and -0.09 %).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from eyemech.meshes import MeshError
+from eyemech.problems import (cantilever_rolling, hemisphere, plate_clamped, plate_simply_supported,
+                              scordelis_lo)
+from eyemech.problems.context import RunOptions
+from eyemech.problems.parameters import ParameterError
+
+QUIET = RunOptions(fields=False, pictures=False)
+
+
+def _run(module, **overrides):
+    return module.run(module.Parameters(**overrides), options=QUIET).quantities
+
+
+@pytest.fixture(scope="module")
+def clamped_default():
+    return _run(plate_clamped)
+
+
+def test_clamped_plate_within_0p3_percent(clamped_default):
+    assert clamped_default["center_deflection_linear_reference"] == pytest.approx(0.126532, rel=1e-5)
+    assert abs(clamped_default["center_deflection_error"]) < 3e-3
+
+
+def test_simply_supported_plate_within_0p3_percent():
+    q = _run(plate_simply_supported)
+    assert abs(q["center_deflection_error"]) < 3e-3
+
+
+def test_clamped_plate_converges_under_refinement(clamped_default):
+    errors = [abs(_run(plate_clamped, divisions=n)["center_deflection_error"]) for n in (8, 16)]
+    errors.append(abs(clamped_default["center_deflection_error"]))
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[0] / errors[2] > 8.0  # about second order in h (measured 15)
+
+
+def test_nonlinear_plate_agrees_at_small_load_and_stiffens_at_large():
+    """Membrane action: the nonlinear shell equals the linear one for w << h and is
+    stiffer at w ≈ h (at q = 1 the linear deflection is 1.27 h)."""
+    small = _run(plate_clamped, divisions=8, q=0.01, kinematics="nonlinear")
+    linear = _run(plate_clamped, divisions=8, q=0.01)
+    assert small["center_deflection"] == pytest.approx(linear["center_deflection"], rel=5e-3)
+    large = _run(plate_clamped, divisions=8, q=1.0, kinematics="nonlinear")
+    assert large["center_deflection"] < 0.8 * 100 * linear["center_deflection"]
+
+
+def test_cantilever_rolls_into_a_full_circle():
+    result = cantilever_rolling.run(cantilever_rolling.Parameters(), options=QUIET)
+    q = result.quantities
+    assert q["tip_error"] < 0.01  # tip back at the root within 1 % of L
+    assert q["end_rotation"] == pytest.approx(2 * np.pi, rel=0.01)
+    params = cantilever_rolling.Parameters()
+    for step in result.steps:  # every intermediate arc too
+        exact_u, exact_w = cantilever_rolling.exact_tip(
+            cantilever_rolling.Parameters(moment_fraction=step["load_factor"]))
+        assert np.hypot(step["tip_u"] - exact_u, step["tip_w"] - exact_w) < 0.01 * params.length
+
+
+def test_scordelis_lo_roof_within_2_percent():
+    q = _run(scordelis_lo)
+    assert abs(q["edge_deflection_error"]) < 0.02
+
+
+def test_pinched_hemisphere_within_2_percent():
+    q = _run(hemisphere)
+    assert abs(q["radial_displacement_error"]) < 0.02
+    # the loading is symmetric: outward at ±x and inward at ±y move alike
+    assert q["radial_displacement_y"] == pytest.approx(q["radial_displacement_x"], rel=1e-6)
+
+
+@pytest.mark.parametrize("module, key, value", [
+    (plate_clamped, "thickness", 0.0),
+    (plate_clamped, "thickness", -0.1),
+    (plate_clamped, "thickness", 12.0),
+    (plate_simply_supported, "poisson_ratio", 0.5),
+    (plate_simply_supported, "poisson_ratio", -1.0),
+    (cantilever_rolling, "thickness", 1.5),   # thicker than the strip is wide
+    (cantilever_rolling, "degree", 1),
+])
+def test_bad_input_is_refused_before_solving(module, key, value):
+    with pytest.raises(ParameterError, match=key):
+        module.run(module.Parameters(**{key: value}), options=QUIET)
+
+
+def test_a_mesh_that_is_not_a_surface_is_refused():
+    import dolfinx.mesh
+
+    from eyemech.meshes.surface import require_surface
+
+    flat = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)  # gdim 2: not in 3D
+    with pytest.raises(MeshError, match="surface in 3D"):
+        require_surface(flat)
+    solid = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1)
+    with pytest.raises(MeshError, match="surface in 3D"):
+        require_surface(solid)
+
+
+def test_cli_bad_input_exit_code():
+    eyemech = Path(sys.executable).parent / "eyemech"
+    run = subprocess.run([str(eyemech), "run", "plate-clamped", "--set", "thickness=0"],
+                         capture_output=True, text=True)
+    assert run.returncode == 2
+    assert "thickness" in run.stderr
+
+
+@pytest.mark.mpi
+def test_two_ranks_give_the_serial_numbers():
+    bin_dir = Path(sys.executable).parent
+    args = ["run", "plate-clamped", "--set", "divisions=16", "--json"]
+    serial = _run(plate_clamped, divisions=16)
+    run = subprocess.run([str(bin_dir / "mpiexec"), "-n", "2", str(bin_dir / "eyemech"), *args],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    parallel = json.loads(run.stdout.strip().splitlines()[-1])
+    assert parallel["mpi_size"] == 2
+    assert parallel["quantities"]["center_deflection"] == pytest.approx(serial["center_deflection"],
+                                                                        rel=1e-9)
+    assert parallel["quantities"]["dofs"] == serial["dofs"]
+
+
+def test_penalty_study_quick(tmp_path):
+    """The study runs and writes its CSV and charts (coarse settings)."""
+    from eyemech.problems.studies import studies
+
+    files = studies()["shell-penalty"].run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
+    names = {f.name for f in files}
+    assert {"shell_penalty.csv", "shell_degree.csv", "shell_penalty.png", "shell_degree.png"} <= names
+    rows = [line for line in (tmp_path / "shell_penalty.csv").read_text().splitlines()[2:] if line]
+    conditions = [float(r.split(",")[2]) for r in rows]
+    assert conditions[-1] > 5 * conditions[1]  # a large penalty spoils the conditioning
+    degree_rows = [line.split(",") for line in
+                   (tmp_path / "shell_degree.csv").read_text().splitlines()[2:] if line]
+    p3 = [row for row in degree_rows if row[0] == "3"]
+    assert abs(float(p3[0][3])) < 3e-3  # the P3 option: 4 × 4 crossed already within 0.3 %
+
+
+def test_thickness_as_a_field_matches_the_constant():
+    """A thickness Function (the lens is thicker in the optic) enters the bulk and the
+    edge terms (averaged across edges); a uniform field must reproduce the constant."""
+    import dolfinx.fem
+    import ufl
+
+    from eyemech.forms.shell import ShellMaterial
+    from eyemech.meshes.surface import mapped_surface, tag_boundary
+    from eyemech.problems.driver import NewtonOptions, NonlinearSolver
+    from eyemech.problems.shells import Shell
+
+    params = plate_clamped.Parameters(divisions=8)
+    L = params.length
+    mesh = mapped_surface(lambda s, t: np.column_stack([L * s, L * t, 0 * s]), 8, 8, "crossed",
+                          MPI.COMM_WORLD)
+    tagged = tag_boundary(mesh, {"edge": lambda x: np.isclose(x[0], 0) | np.isclose(x[0], L)
+                                 | np.isclose(x[1], 0) | np.isclose(x[1], L)})
+    shell = Shell(tagged, params, lambda x: np.tile([0.0, 0.0, 1.0], (len(x), 1)), clamped=("edge",))
+    thickness = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 0)))
+    thickness.x.array[:] = params.thickness
+    shell.material = ShellMaterial(shell.material.youngs_modulus, shell.material.poisson_ratio,
+                                   thickness)
+    residual = (ufl.derivative(shell.energy("linear"), shell.u, shell.v)
+                - params.q * shell.v[2] * shell.dx)
+    solver = NonlinearSolver(residual, shell.u, shell.fix("edge"),
+                             options=NewtonOptions(petsc={"snes_type": "ksponly"}))
+    assert solver.solve()[0]
+    constant = _run(plate_clamped, divisions=8)["center_deflection"]
+    assert shell.value_at((L / 2, L / 2, 0))[2] == pytest.approx(constant, rel=1e-9)
