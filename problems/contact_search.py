@@ -3,21 +3,26 @@
 driver's hooks and refreshed at every Newton iteration.
 
 Formulation (single pass, node to surface). Slave node s with lumped area w_s,
-master triangle with nodes x1, x2, x3, outward unit normal n and closest point
-x_p = Σ N_j(ξ) x_j of the deformed slave position x_s:
+master triangle with nodes x1, x2, x3 and outward unit normal n; N_j(ξ) are the
+barycentric weights of the closest point of the triangle to the deformed slave
+position x_s:
 
-    g = (x_s − x_p)·n,      Π_c = ½ α w_s ⟨−g⟩²      (paper eq. 9–10)
-    δΠ_c = α w_s g D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12, 12 entries)
-    K_c = α w_s D Dᵀ        (frozen normal and frozen ξ, eq. 13)
+    g = (x_s − x_1)·n,      Π_c = w_s ψ(g),  ψ' = −p(g)      (paper eq. 9–10)
+    δΠ_c = −w_s p(g) D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12)
+    K_c = −w_s p'(g) D Dᵀ      (frozen normal and frozen ξ, eq. 13)
 
-For a closest-point projection the gradient is exact (x_s − x_p ∥ n, so the
-normal's variation drops out of δg); K_c omits only the terms of order α g
-(normal and ξ rotation), small because the penalty penetration is small, so
-Newton converges nearly quadratically once the active set has settled.
+with p(g) = α⟨−g⟩ (Π_c = ½ α w_s ⟨−g⟩², the paper's) or its C¹ round-off
+(:func:`penalty_pressure`). The gap is the distance to the triangle's plane,
+whose gradient in x_s is exactly n; K_c omits the terms from the rotation of n
+and the motion of ξ, of relative size g/h — small because the penalty
+penetration is small — so Newton converges nearly quadratically once the
+active set has settled.
 
 Search: a global step (a k-d tree on the master triangles' centroids gives the
 nearest few candidates) and a local step (the exact closest point on each
-candidate triangle, vectorised); the candidate nearest in distance wins.
+candidate triangle, vectorised); the candidate nearest in distance wins, except
+that a node keeps its previous triangle while it still projects inside it (up to
+a small tolerance) — otherwise nodes over an edge swap triangles every iterate.
 
 Parallel: each rank treats the slave nodes it owns. The master surface (its
 triangles as global node numbers, its current node positions) is gathered on all
@@ -71,17 +76,20 @@ class ContactState:
 class NodeToSurfaceContact:
     """Penalty contact of the ``slave`` facets' nodes against the ``master`` facets.
 
-    ``u`` is the displacement (vector Lagrange P1 or P2, the only unknown of the
-    system), ``penalty`` α in force per area per length (MPa/mm), ``bcs`` the
-    Dirichlet conditions (their rows and columns are left alone),
-    ``search_depth`` the deepest penetration still counted as contact (deeper
-    pairs are taken to be on the wrong side), ``candidates`` the triangles tested
-    per slave node.
+    ``u`` is the displacement (vector Lagrange P1 or P2), ``penalty`` α in force
+    per area per length (MPa/mm), ``bcs`` the Dirichlet conditions (their rows and
+    columns are left alone), ``search_depth`` the deepest penetration still
+    counted as contact (deeper pairs are taken to be on the wrong side),
+    ``candidates`` the triangles tested per slave node, ``smoothing`` ε the width
+    over which the penalty pressure is rounded off (:func:`penalty_pressure`; 0 =
+    the plain ⟨−g⟩ law), ``block_spaces`` the spaces of a blocked system
+    (``kind="mpi"``, displacement first) when ``u`` is one block of it.
     """
 
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
                  penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
-                 smoothing: float = 0.0, timings: Timings | None = None):
+                 smoothing: float = 0.0, timings: Timings | None = None,
+                 block_spaces=None):
         if not penalty > 0:
             raise ValueError(f"the penalty must be > 0, got {penalty}")
         if not smoothing >= 0:
@@ -97,6 +105,7 @@ class NodeToSurfaceContact:
         if self.bs != 3 or space.ufl_element().embedded_superdegree not in (1, 2):
             raise ValueError("node-to-surface contact needs a 3D vector P1 or P2 displacement")
         self.imap = space.dofmap.index_map
+        self._layout(block_spaces)
         self.reference = space.tabulate_dof_coordinates()
         self._slave_setup(tagged, slave)
         self._master_setup(tagged, master)
@@ -176,9 +185,35 @@ class NodeToSurfaceContact:
         for bc in bcs:
             local, _ = bc.dof_indices()
             blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
-            mine.append(blocks * self.bs + local % self.bs)
+            mine.append(self._petsc_base(blocks) + local % self.bs)
         mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
         return set(np.concatenate(self.comm.allgather(mine)).tolist())
+
+    def _layout(self, block_spaces) -> None:
+        """Where each rank's displacement dofs sit in the PETSc vector.
+
+        A single field: global index = global node · bs + component. A blocked
+        system (``block_spaces`` = the spaces of ``NonlinearProblem(..., kind="mpi")``,
+        the displacement's first): each rank stores its owned dofs of every block one
+        after the other, so a node owned by rank r sits at Σ_{s<r} (owned dofs of all
+        blocks on s) + (its number on r) · bs."""
+        start = self.imap.local_range[0]
+        owned = self.bs * self.imap.size_local
+        if block_spaces is None:
+            rank_total = owned
+        else:
+            if block_spaces[0] != self.u.function_space:
+                raise ValueError("block_spaces must start with the displacement's space")
+            rank_total = sum(V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+                             for V in block_spaces)
+        self._starts = np.array(self.comm.allgather(start), dtype=np.int64)
+        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
+
+    def _petsc_base(self, global_nodes: np.ndarray) -> np.ndarray:
+        """PETSc index of component 0 of the given global node numbers."""
+        global_nodes = np.asarray(global_nodes, dtype=np.int64)
+        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
+        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
         """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
@@ -254,7 +289,8 @@ class NodeToSurfaceContact:
     def _pair_dofs(self, state: ContactState) -> np.ndarray:
         """(n, 12) global dof indices: slave node then the three master nodes."""
         nodes = np.column_stack([self.slave_global[state.active], self.triangles[state.triangles]])
-        return (nodes[:, :, None] * self.bs + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
+        base = self._petsc_base(nodes.ravel()).reshape(nodes.shape)
+        return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
 
     def _pair_vectors(self, state: ContactState) -> np.ndarray:
         """(n, 12) D = [n, −N1 n, −N2 n, −N3 n]."""
@@ -281,12 +317,14 @@ class NodeToSurfaceContact:
         _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
         stiffness = -self.slave_weights[state.active] * slope
         constrained = self._constrained
-        for i in range(len(dofs)):
-            keep = np.array([d not in constrained for d in dofs[i]])
-            index = dofs[i][keep].astype(PETSc.IntType)
-            block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
-            A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
-        A.assemble()
+        # timed apart (inside "assembly"): includes PETSc's mallocs for new nonzeros
+        with self.timings("contact_jacobian"):
+            for i in range(len(dofs)):
+                keep = np.array([d not in constrained for d in dofs[i]])
+                index = dofs[i][keep].astype(PETSc.IntType)
+                block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
+                A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
+            A.assemble()
 
     # -- diagnostics ----------------------------------------------------------------------
     def summary(self) -> dict[str, float]:
@@ -300,6 +338,15 @@ class NodeToSurfaceContact:
         depth = self.comm.allreduce(float(np.max(-state.gaps, initial=0.0)), op=MPI.MAX)
         return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
                 "contact_normal_force": float(total[2]), "max_penetration": depth}
+
+    def nodal_pressures(self) -> tuple[np.ndarray, np.ndarray]:
+        """(reference positions (n, 3), contact pressure p(g)) of this rank's slave nodes
+        that touch (g < 0)."""
+        state = self.state or self.search()
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        touching = state.gaps < 0
+        nodes = self.slave_blocks[state.active[touching]]
+        return self.reference[nodes], pressure[touching]
 
     def refuse_initial_penetration(self, key: str, tolerance: float = 0.0) -> None:
         """ParameterError naming ``key`` when slave nodes start inside the master body
