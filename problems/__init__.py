@@ -26,6 +26,14 @@ def scenes() -> dict:
 
 def get(name: str):
     """The scene called ``name`` (KeyError listing the known names otherwise)."""
+    # by convention scene "a-b" lives in module a_b: import just that one (fast start-up)
+    try:
+        module = importlib.import_module(f"{__name__}.{name.replace('-', '_')}")
+        scene = getattr(module, "SCENE", None)
+        if scene is not None and scene.name == name:
+            return scene
+    except ModuleNotFoundError:
+        pass
     known = scenes()
     if name not in known:
         raise KeyError(f"unknown scene '{name}'; known: {', '.join(sorted(known))}")
