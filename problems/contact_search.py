@@ -100,6 +100,7 @@ class NodeToSurfaceContact:
         self.reference = space.tabulate_dof_coordinates()
         self._slave_setup(tagged, slave)
         self._master_setup(tagged, master)
+        self._drop_slaves_on_master()
         self._constrained = self._constrained_dofs(bcs)
         self.state: ContactState | None = None
 
@@ -136,23 +137,14 @@ class NodeToSurfaceContact:
         facets = facets[facets < mesh.topology.index_map(tdim - 1).size_local]
         dofmap = self.u.function_space.dofmap
         layout = dofmap.dof_layout
-        topology = basix.topology(basix.CellType.tetrahedron)
-        edges = [tuple(e) for e in topology[1]]
+        cell_type = mesh.basix_cell()
         quadratic = self.u.function_space.ufl_element().embedded_superdegree == 2
         triangles = []
         for facet in facets:
             cell = f_to_c.links(facet)[0]
             local = int(np.flatnonzero(c_to_f.links(cell) == facet)[0])
             cell_dofs = dofmap.cell_dofs(cell)
-            a, b, c = topology[2][local]
-            vertex = {k: cell_dofs[layout.entity_dofs(0, k)[0]] for k in (a, b, c)}
-            if quadratic:
-                mid = {frozenset(e): cell_dofs[layout.entity_dofs(1, i)[0]]
-                       for i, e in enumerate(edges) if set(e) <= {a, b, c}}
-                ab, bc, ca = mid[frozenset((a, b))], mid[frozenset((b, c))], mid[frozenset((c, a))]
-                pieces = [(vertex[a], ab, ca), (ab, vertex[b], bc), (ca, bc, vertex[c]), (ab, bc, ca)]
-            else:
-                pieces = [(vertex[a], vertex[b], vertex[c])]
+            pieces = facet_triangles(cell_type, local, cell_dofs, layout, quadratic)
             centroid = self.reference[cell_dofs].mean(axis=0)
             for tri in pieces:
                 x = self.reference[list(tri)]
@@ -184,6 +176,55 @@ class NodeToSurfaceContact:
         """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
         matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
+
+    # -- shared nodes and blocked systems (hexahedral eye, [u, p, P] systems) -------------
+    def _drop_slaves_on_master(self) -> None:
+        """Slave nodes that are also master nodes (where a detached layer is still
+        attached to the body under it: its rim) are not contact points: their gap to
+        their own triangles is zero by construction."""
+        shared = np.isin(self.slave_global, self.master_nodes)
+        if shared.any():
+            self.slave_blocks = self.slave_blocks[~shared]
+            self.slave_weights = self.slave_weights[~shared]
+            self.slave_global = self.slave_global[~shared]
+            self._previous = None
+
+    def to_system(self, dofs: np.ndarray, target: PETSc.Vec | PETSc.Mat) -> np.ndarray:
+        """Indices in ``target`` (the residual vector or the Jacobian) of the global
+        displacement dofs ``dofs`` (global block · bs + component).
+
+        A single-block system is numbered like u: identity. In DOLFINx's blocked
+        "mpi" layout (``NonlinearProblem`` with several unknowns, u the first) each
+        rank owns the consecutive rows [u owned, p owned, P owned, …], so a dof
+        owned by rank r sits at (start of r's rows) + (its offset in r's u range).
+        """
+        layout = self._system_layout(target)
+        if layout is None:
+            return np.asarray(dofs, dtype=PETSc.IntType)
+        u_starts, system_starts = layout
+        dofs = np.asarray(dofs, dtype=np.int64)
+        owner = np.searchsorted(u_starts, dofs, side="right") - 1
+        return (system_starts[owner] + dofs - u_starts[owner]).astype(PETSc.IntType)
+
+    def _system_layout(self, target) -> tuple[np.ndarray, np.ndarray] | None:
+        """(first u dof, first system row) of every rank, or None for a u-only system
+        (collective the first time for each new size; cached)."""
+        u_size = self.imap.size_global * self.bs
+        size = target.getSize()
+        size = size[0] if isinstance(size, tuple) else size
+        if size == u_size:
+            return None
+        cached = getattr(self, "_layout", None)
+        if cached is not None and cached[0] == size:
+            return cached[1]
+        first_row = target.getOwnershipRange()[0]
+        u_first = self.imap.local_range[0] * self.bs
+        pairs = np.array(self.comm.allgather((u_first, first_row)), dtype=np.int64)
+        blocks = target.getAttr("_blocks") if isinstance(target, PETSc.Vec) else None
+        if blocks is not None and blocks[0][1] - blocks[0][0] != self.imap.size_local * self.bs:
+            raise ValueError("node-to-surface contact needs u as the first block of the system")
+        self._layout = (size, (pairs[:, 0], pairs[:, 1]))
+        return self._layout[1]
 
     # -- geometry -------------------------------------------------------------------------
     def _positions(self, blocks: np.ndarray) -> np.ndarray:
@@ -269,7 +310,7 @@ class NodeToSurfaceContact:
         scale = -self.slave_weights[state.active] * pressure
         values = scale[:, None] * self._pair_vectors(state)
         keep = ~np.isin(dofs, list(self._constrained)) if self._constrained else np.ones_like(dofs, bool)
-        b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
+        b.setValues(self.to_system(dofs[keep], b), values[keep], addv=PETSc.InsertMode.ADD)
         b.assemblyBegin()
         b.assemblyEnd()
 
@@ -283,7 +324,7 @@ class NodeToSurfaceContact:
         constrained = self._constrained
         for i in range(len(dofs)):
             keep = np.array([d not in constrained for d in dofs[i]])
-            index = dofs[i][keep].astype(PETSc.IntType)
+            index = self.to_system(dofs[i][keep], A)
             block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
             A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
         A.assemble()
@@ -382,3 +423,45 @@ def closest_points(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarra
         best = np.where(inside[..., None], best, edge_best)
         bary = np.where(inside[..., None], bary, edge_bary)
     return best, bary
+
+
+def facet_triangles(cell_type: basix.CellType, local_facet: int, cell_dofs: np.ndarray,
+                    layout, quadratic: bool) -> list[tuple[int, int, int]]:
+    """The flat triangles (local dof numbers, unoriented) that describe one facet of a
+    tetrahedron or a hexahedron on the master surface.
+
+    Tetrahedron: P1 one triangle; P2 four through the edge nodes. Hexahedron (seed
+    002 §2.3.1 splits quadrilateral faces into triangles): Q1 two triangles across
+    the diagonal from the face's first vertex; Q2 the 3×3 face nodes make four
+    sub-quadrilaterals, each split the same way (eight triangles).
+    """
+    topology = basix.topology(cell_type)
+    face = list(topology[2][local_facet])
+    vertex = {k: int(cell_dofs[layout.entity_dofs(0, k)[0]]) for k in face}
+    mid = {}
+    if quadratic:
+        mid = {frozenset(e): int(cell_dofs[layout.entity_dofs(1, i)[0]])
+               for i, e in enumerate(topology[1]) if set(e) <= set(face)}
+    if cell_type == basix.CellType.tetrahedron:
+        a, b, c = face
+        if not quadratic:
+            return [(vertex[a], vertex[b], vertex[c])]
+        ab, bc, ca = mid[frozenset((a, b))], mid[frozenset((b, c))], mid[frozenset((c, a))]
+        return [(vertex[a], ab, ca), (ab, vertex[b], bc), (ca, bc, vertex[c]), (ab, bc, ca)]
+    if cell_type != basix.CellType.hexahedron:
+        raise ValueError(f"node-to-surface contact supports tetrahedra and hexahedra, not {cell_type.name}")
+    # basix numbers a quadrilateral's vertices a b / c d (tensor order): a-b-d-c is its cycle
+    a, b, c, d = face
+    if not quadratic:
+        return _split_quad(vertex[a], vertex[b], vertex[d], vertex[c])
+    ab, ac = mid[frozenset((a, b))], mid[frozenset((a, c))]
+    bd, cd = mid[frozenset((b, d))], mid[frozenset((c, d))]
+    centre = int(cell_dofs[layout.entity_dofs(2, local_facet)[0]])
+    quads = [(vertex[a], ab, centre, ac), (ab, vertex[b], bd, centre),
+             (centre, bd, vertex[d], cd), (ac, centre, cd, vertex[c])]
+    return [tri for quad in quads for tri in _split_quad(*quad)]
+
+
+def _split_quad(q0: int, q1: int, q2: int, q3: int) -> list[tuple[int, int, int]]:
+    """Two triangles of the quadrilateral q0-q1-q2-q3 (cyclic) across q0-q2."""
+    return [(q0, q1, q2), (q0, q2, q3)]

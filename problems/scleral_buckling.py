@@ -18,10 +18,15 @@ in a cellwise-constant field; incompressibility by a pressure multiplier (Q1P0 a
 the paper, or Q2P1). The eye is held at the end of the optic-nerve stub; the
 symmetry plane x = 0 passes through the tear.
 
+Retina–choroid contact (steps 2 and 3): penalty node to surface
+(:class:`~eyemech.problems.contact_search.NodeToSurfaceContact`), slave = the detached
+retina's outer face (its nodes), master = the choroid's inner face (its quadrilaterals
+split into triangles), α = ``retina_penalty_factor`` · 6 c_retina / h (6c = E of an
+incompressible neo-Hooke solid, h the element size along the wall), searched at every
+Newton iteration and coupled into the blocked [u, p, P] Jacobian.
+
 Not modelled yet (see README): the lens and the zonules (they carry no load in this
-operation: the liquid pressure acts on all sides of the lens), and retina–choroid
-contact, which waits for the deformable contact of issue #4 — the gap is measured and
-a negative gap (retina through choroid) is reported, not prevented.
+operation: the liquid pressure acts on all sides of the lens).
 """
 
 from __future__ import annotations
@@ -37,10 +42,11 @@ from mpi4py import MPI
 
 from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
 from eyemech.forms.buckle import Buckle, BuckleShape
-from eyemech.forms.contact import penalty_energy
+from eyemech.forms.contact import default_penalty, penalty_energy
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye
 from eyemech.problems.cavity import check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.contact_search import NodeToSurfaceContact
 from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.probes import CellField, NodeProbe, SurfacePairing, facet_nodes
@@ -83,6 +89,10 @@ class Parameters(SceneParameters):
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre", "mm")
     retina_thickness: float = field(0.2, "retina thickness", "mm")
     penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
+    retina_penalty_factor: float = field(
+        100.0, "retina–choroid penalty α = factor · E_retina / h (E = 6 c_retina)")
+    retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
+                                 "measured and the retina may pass through the choroid)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
 
@@ -90,6 +100,7 @@ class Parameters(SceneParameters):
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
                               "c_choroid", "c_retina", "c_optic_nerve", "band_width",
                               "band_thickness", "tire_width", "suture_width", "penalty_factor",
+                              "retina_penalty_factor",
                               "tear_closure_tolerance", "retina_thickness")
         self.require_nonnegative("tire_height", "indentation", "suture_force", "detachment_height")
         if self.buckle_clearance < 0:
@@ -213,6 +224,8 @@ class BucklingModel:
         self.bcs = self._boundary_conditions()
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=ctx.options.newton, timings=ctx.timings)
+        self.element_size = element_size
+        self.retina = self._retina_contact() if params.retina_contact else None
         self._probes()
         self.sutures = SutureForces(self.suture_probe, self.suture_points, self._constrained_dofs())
         self.solver.residual_hooks.append(self.sutures.residual_hook)
@@ -242,6 +255,22 @@ class BucklingModel:
         held = dolfinx.fem.locate_dofs_topological(V, 2, self.eye.facets("optic_nerve_end"))
         bcs.append(dolfinx.fem.dirichletbc(np.zeros(3), held, V))
         return bcs
+
+    def _retina_contact(self) -> NodeToSurfaceContact:
+        """Retina (slave nodes) on choroid (master triangles), penalty scaled from the
+        softer tissue: its penetration under a contact pressure p is p/α =
+        (p/E_retina) h / factor."""
+        alpha = default_penalty(6.0 * self.params.c_retina, self.element_size,
+                                self.params.retina_penalty_factor)
+        # deeper than the choroid is thick, a pair is on the wrong side (not contact)
+        contact = NodeToSurfaceContact(self.u, self.eye, "retina_detached", "choroid_detached",
+                                       alpha, self.bcs, search_depth=self.geometry.choroid_thickness,
+                                       timings=self.ctx.timings)
+        contact.refuse_initial_penetration("detachment_height")
+        self.solver.residual_hooks.append(contact.residual_hook)
+        self.solver.jacobian_hooks.append(contact.jacobian_hook)
+        contact.allow_new_nonzeros(self.solver.problem.A)
+        return contact
 
     def _constrained_dofs(self) -> np.ndarray:
         return np.concatenate([bc.dof_indices()[0] for bc in self.bcs])
@@ -342,7 +371,7 @@ class BucklingModel:
         indentation = math.hypot(before[0], before[1]) - math.hypot(under[0], under[1])
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
-        return {
+        return self._retina_contact_measures() | {
             "axial_length_mm": axial,
             "axial_length_change_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
@@ -361,6 +390,19 @@ class BucklingModel:
             "suture_force_N": float(self.sutures.magnitude),
         }
 
+    def _retina_contact_measures(self) -> dict:
+        """The penalty contact's own view (whole eye: twice the half model's area and
+        force); max_penetration_mm is the deepest retina node under the choroid."""
+        if self.retina is None:
+            return {}
+        with self.ctx.timings("contact_search"):
+            self.retina.state = self.retina.search()
+            summary = self.retina.summary()
+        return {"max_penetration_mm": summary["max_penetration"],
+                "retina_contact_nodes": summary["active_nodes"],
+                "retina_penalty_contact_area_mm2": 2.0 * summary["contact_area"],
+                "retina_contact_force_N": 2.0 * summary["contact_normal_force"]}
+
     def detached_area(self) -> float:
         if not hasattr(self, "_detached_area"):
             form = dolfinx.fem.form(dolfinx.fem.Constant(self.eye.mesh, 1.0)
@@ -376,6 +418,8 @@ class BucklingModel:
         out["cells"] = self.eye.mesh.topology.index_map(3).size_global
         out["jacobian_nonzeros"] = self.solver.jacobian_nonzeros()
         out["contact_penalty"] = self.penalty
+        if self.retina is not None:
+            out["retina_contact_penalty"] = self.retina.penalty
         return out
 
 
