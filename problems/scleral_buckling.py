@@ -41,8 +41,8 @@ import ufl
 from mpi4py import MPI
 
 from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
-from eyemech.forms.buckle import Buckle, BuckleShape
-from eyemech.forms.contact import default_penalty, penalty_energy
+from eyemech.forms.buckle import Buckle, BuckleShape, smoothed_penalty_energy
+from eyemech.forms.contact import default_penalty
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye
 from eyemech.problems.cavity import check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
@@ -91,6 +91,9 @@ class Parameters(SceneParameters):
     penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
     retina_penalty_factor: float = field(
         100.0, "retina–choroid penalty α = factor · E_retina / h (E = 6 c_retina)")
+    contact_smoothing: float = field(
+        1e-4, "penalty kink rounded off over gaps |g| < ε (buckle and retina contact; "
+        "0 = plain kink)", "mm")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
@@ -102,7 +105,7 @@ class Parameters(SceneParameters):
                               "band_thickness", "tire_width", "suture_width", "penalty_factor",
                               "retina_penalty_factor",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("tire_height", "indentation", "suture_force", "detachment_height")
+        self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force", "detachment_height")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
@@ -145,8 +148,10 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer = buckling_output.Writer(model, ctx)
         writer.state(0.0, stage=0)
         try:
-            follow_path(model.solver, model.apply, Stepping(0.0, 3.0, initial_step=1 / 12,
-                                                            max_step=1 / 4, stops=(1.0, 2.0)),
+            follow_path(model.solver, model.apply, Stepping(0.0, 3.0,
+                                                            initial_step=min(1 / 12, _max_step(params)),
+                                                            max_step=_max_step(params),
+                                                            stops=(1.0, 2.0)),
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet)
         except SolveFailure:
@@ -157,6 +162,19 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities.update(model.measure())
         ctx.result.quantities.update(model.summary())
     return ctx.result
+
+
+def _max_step(params: Parameters) -> float:
+    """Largest step as a fraction of the path (3 stages): a quarter of the path, and
+    never a buckle travel of more than a quarter of the buckle's radial thickness.
+    A deeper jump starts Newton with sclera nodes deep inside the buckle, and its
+    first iterate throws them through it (measured: a 0.64 mm jump with the default
+    1.6 mm buckle left the sclera outside the tire, or "converged" in no iteration
+    with the buckle inside the eye)."""
+    thickness = params.tire_height + params.band_thickness
+    if params.indentation <= 0:
+        return 1 / 4
+    return min(1 / 4, 0.25 * thickness / params.indentation / 3.0)
 
 
 def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
@@ -218,7 +236,8 @@ class BucklingModel:
                              self.indentation)
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
-        contact = penalty_energy(self.buckle, self.u, self.penalty, ds(self.eye.tag("sclera_outer")))
+        contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
+                                          ds(self.eye.tag("sclera_outer")))
         residual += ufl.derivative(contact, self.u, v)
 
         self.bcs = self._boundary_conditions()
@@ -265,6 +284,7 @@ class BucklingModel:
         # deeper than the choroid is thick, a pair is on the wrong side (not contact)
         contact = NodeToSurfaceContact(self.u, self.eye, "retina_detached", "choroid_detached",
                                        alpha, self.bcs, search_depth=self.geometry.choroid_thickness,
+                                       smoothing=self.params.contact_smoothing,
                                        timings=self.ctx.timings)
         contact.refuse_initial_penetration("detachment_height")
         self.solver.residual_hooks.append(contact.residual_hook)
