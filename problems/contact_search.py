@@ -322,6 +322,7 @@ class NodeToSurfaceContact:
         _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
         stiffness = -self.slave_weights[state.active] * slope
         constrained = self._constrained
+        self._system_layout(A)  # collective on its first call: before the rank-local loop
         for i in range(len(dofs)):
             keep = np.array([d not in constrained for d in dofs[i]])
             index = self.to_system(dofs[i][keep], A)

@@ -68,6 +68,17 @@ def test_results_are_finite_and_complete(coarse):
     assert q["buckle_indentation_mm"] > 0.5 * q["buckle_travel_mm"]
 
 
+def test_retina_choroid_contact_is_enforced_and_reported(coarse):
+    # node-to-surface penalty contact retina (slave) on choroid (master) in the
+    # blocked [u, p, P] system; at the default 1 mm travel the coarse retina does
+    # not reach the choroid, so no node may be below it
+    q = coarse.quantities
+    assert q["retina_contact_penalty"] > 0
+    for name in ("after_iop", "after_buckling", "after_suturing"):
+        assert q[name]["max_penetration_mm"] == 0.0
+        assert q[name]["retina_contact_nodes"] == 0
+
+
 @pytest.mark.parametrize("overrides, key", [
     ({"buckle_clearance": "-0.5"}, "buckle_clearance"),
     ({"suture_width": "20"}, "suture_width"),
@@ -97,5 +108,6 @@ def test_two_ranks_agree(coarse, tmp_path):
     assert code == 0, err
     parallel = last_json(out)["quantities"]
     for key in ("axial_length_change_mm", "iop_mmHg", "buckle_indentation_mm",
-                "retina_choroid_gap_mean_mm", "von_mises_max_MPa"):
+                "retina_choroid_gap_mean_mm", "von_mises_max_MPa", "max_penetration_mm",
+                "retina_contact_nodes", "retina_penalty_contact_area_mm2"):
         assert parallel[key] == pytest.approx(coarse.quantities[key], rel=1e-6, abs=1e-9), key
