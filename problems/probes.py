@@ -36,7 +36,8 @@ class NodeProbe:
         best = np.array(comm.allgather(distance))           # (ranks, n)
         self.owner = np.argmin(best, axis=0)
         self.mine = self.owner == comm.rank
-        self.blocks = blocks[index].astype(np.int32)         # valid where mine
+        # valid where mine (a rank without candidates owns no point)
+        self.blocks = (blocks[index] if len(blocks) else np.zeros(n, int)).astype(np.int32)
         self.bs = V.dofmap.index_map_bs
         self.comm = comm
         node = np.where(self.mine[:, None], coordinates[self.blocks] if len(blocks) else 0.0, 0.0)
