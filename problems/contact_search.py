@@ -189,6 +189,19 @@ class NodeToSurfaceContact:
             self.slave_global = self.slave_global[~shared]
             self._previous = None
 
+    def gaps_of(self, nodes: np.ndarray) -> np.ndarray:
+        """Normal gaps (from the last search) of the slave nodes with global node
+        numbers ``nodes``, on every rank (collective); inf where unpaired, nan where
+        not a slave node (e.g. dropped as shared with the master)."""
+        gaps = getattr(self, "slave_gaps", None)
+        if gaps is None or len(gaps) != len(self.slave_global):
+            self.search()
+            gaps = self.slave_gaps
+        pieces = self.comm.allgather((self.slave_global, gaps))
+        known = dict(zip(np.concatenate([p[0] for p in pieces]).tolist(),
+                         np.concatenate([p[1] for p in pieces]).tolist()))
+        return np.array([known.get(int(n), np.nan) for n in nodes])
+
     def to_system(self, dofs: np.ndarray, target: PETSc.Vec | PETSc.Mat) -> np.ndarray:
         """Indices in ``target`` (the residual vector or the Jacobian) of the global
         displacement dofs ``dofs`` (global block · bs + component).
@@ -270,6 +283,7 @@ class NodeToSurfaceContact:
             paired = gaps > -self.search_depth
             active = np.flatnonzero(paired & (gaps < self.smoothing))
             min_gap = float(np.min(gaps[paired], initial=np.inf))
+            self.slave_gaps = np.where(paired, gaps, np.inf)  # every owned slave node's gap
             return ContactState(active, gaps[active], normal[active], tri[active],
                                 shape[active], min_gap)
 

@@ -418,9 +418,23 @@ class BucklingModel:
         with self.ctx.timings("contact_search"):
             self.retina.state = self.retina.search()
             summary = self.retina.summary()
+            rim = self.retina.gaps_of(self.pairing.slave_g[self.tear_rim])
+            closed = bool(len(rim) and np.all(rim[np.isfinite(rim)] < self.params.tear_closure_tolerance)
+                          and np.isfinite(rim).any())
+            gap_min = self.retina.min_gap()
+            # nodes the penalty presses (g < ε: with the round-off a very soft retina can
+            # rest at 0 < g < ε on a pressure ≤ αε/4 without ever crossing g = 0)
+            pressed = self.retina.slave_gaps < max(self.retina.smoothing, 0.0)
+            pressed_area = self.ctx.comm.allreduce(float(self.retina.slave_weights[pressed].sum()),
+                                                   op=MPI.SUM)
         return {"max_penetration_mm": summary["max_penetration"],
+                # the normal gap of the retina's nodes to the choroid's surface (the twin-node
+                # retina_choroid_gap_* measure along the radius to the node they started above)
+                "retina_choroid_gap_nts_min_mm": gap_min,
+                "tear_closed_nts": closed,
                 "retina_contact_nodes": summary["active_nodes"],
-                "retina_penalty_contact_area_mm2": 2.0 * summary["contact_area"],
+                "retina_pressed_nodes": self.ctx.comm.allreduce(int(pressed.sum()), op=MPI.SUM),
+                "retina_penalty_contact_area_mm2": 2.0 * pressed_area,
                 "retina_contact_force_N": 2.0 * summary["contact_normal_force"]}
 
     def detached_area(self) -> float:
