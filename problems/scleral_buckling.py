@@ -92,7 +92,7 @@ class Parameters(SceneParameters):
     retina_penalty_factor: float = field(
         100.0, "retina–choroid penalty α = factor · E_retina / h (E = 6 c_retina)")
     contact_smoothing: float = field(
-        1e-4, "penalty kink rounded off over gaps |g| < ε (buckle and retina contact; "
+        0.0, "penalty kink rounded off over gaps |g| < ε (buckle and retina contact; "
         "0 = plain kink)", "mm")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
