@@ -9,11 +9,10 @@ STAMP  := $(VENV)/.installed
 # Extras: the DOLFINx wheel unless told otherwise (EXTRAS=test for a conda DOLFINx).
 EXTRAS ?= dolfinx,test
 OUT    ?= results
-# The main job. Until the scleral-buckling scene lands (issue #5) it is the
-# foundation benchmark.
-MAIN   ?= sphere-inflation
+# The main job: the scleral-buckling operation (issue #5).
+MAIN   ?= scleral-buckling
 
-.PHONY: run test venv clean
+.PHONY: run test bench venv clean
 
 venv: $(STAMP)
 
@@ -33,6 +32,11 @@ run: $(STAMP)
 
 test: $(STAMP)
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m pytest -ra --timeout=1800 $(PYTEST_ARGS)
+
+# Performance of the main job at the paper's resolution, on 1 and 2 ranks.
+bench: $(STAMP)
+	$(VENV)/bin/eyemech bench scleral-buckling --out docs/bench
+	$(VENV)/bin/mpiexec -n 2 $(VENV)/bin/eyemech bench scleral-buckling --out docs/bench
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -225,10 +225,13 @@ def contact_traction(obstacle, u, penalty):
     return penalty * penetration(obstacle, u) * obstacle_normal(obstacle, u)
 
 
-def default_penalty(youngs_modulus: float, mesh_size: float, factor: float = 100.0) -> float:
+def default_penalty(youngs_modulus: float, mesh_size: float, factor: float = 30.0) -> float:
     """α = factor · E / h (MPa/mm). The penetration of a penalty traction p is p/α,
     so relative to the element size h it is (p/E)/factor: small for factor ≫ p/E.
-    ``factor`` = 100 is what the hertz penalty study (docs/contact.md) justifies."""
+    ``factor`` = 30 is what the hertz penalty study (docs/contact.md) justifies: the
+    penetration is below 1 % of the indentation and the force within 0.7 % of its
+    α → ∞ limit at 15 Newton iterations, where 100 and 300 cost 18 and 21.
+    """
     if not (youngs_modulus > 0 and mesh_size > 0 and factor > 0):
         raise ValueError("penalty scaling needs E > 0, h > 0, factor > 0")
     return factor * youngs_modulus / mesh_size

@@ -137,3 +137,47 @@ def layered_caps(inner_radius: float, soft_thickness: float, gap: float, stiff_t
             model.mesh.setOrder(order)
 
     return from_gmsh(build, comm)
+
+
+def stacked_blocks(width: float, lower_height: float, upper_height: float, lower_size: float,
+                   upper_size: float, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+    """Two boxes [0, w]² × [0, h1] and [0, w]² × [h1, h1 + h2] touching at z = h1, meshed
+    separately (tetrahedra, P1 geometry) with different sizes, so their faces do not
+    match. Tags: cells ``lower``, ``upper``; facets ``master`` (top of the lower
+    block), ``slave`` (bottom of the upper block), ``bottom``, ``top``, ``symmetry_x``
+    (x = 0), ``symmetry_y`` (y = 0), ``sides`` (x = w, y = w)."""
+
+    def build(model):
+        import gmsh
+
+        occ = model.occ
+        lower = occ.addBox(0, 0, 0, width, width, lower_height)
+        upper = occ.addBox(0, 0, lower_height, width, width, upper_height)
+        occ.synchronize()
+        model.addPhysicalGroup(3, [lower], tag=1, name="lower")
+        model.addPhysicalGroup(3, [upper], tag=2, name="upper")
+        groups = {name: [] for name in ("master", "slave", "bottom", "top", "symmetry_x",
+                                        "symmetry_y", "sides")}
+        tol = 1e-5 * width  # OCC pads bounding boxes by about 1e-7
+        for body, (low_name, high_name) in ((lower, ("bottom", "master")), (upper, ("slave", "top"))):
+            for dim, tag in model.getBoundary([(3, body)], oriented=False):
+                x, y, z = occ.getCenterOfMass(dim, tag)
+                xmin, ymin, zmin, xmax, ymax, zmax = occ.getBoundingBox(dim, tag)
+                if zmax - zmin < tol:
+                    groups[low_name if z < (lower_height if body == upper else lower_height / 2) + tol
+                           else high_name].append(tag)
+                elif abs(x) < tol and xmax - xmin < tol:
+                    groups["symmetry_x"].append(tag)
+                elif abs(y) < tol and ymax - ymin < tol:
+                    groups["symmetry_y"].append(tag)
+                else:
+                    groups["sides"].append(tag)
+        for tag, (name, surfaces) in enumerate(groups.items(), start=1):
+            model.addPhysicalGroup(2, surfaces, tag=tag, name=name)
+        for body, size in ((lower, lower_size), (upper, upper_size)):
+            points = model.getBoundary([(3, body)], recursive=True)
+            model.mesh.setSize(points, size)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 1)
+        model.mesh.generate(3)
+
+    return from_gmsh(build, comm)

@@ -66,9 +66,10 @@ def _grid(nx: int, ny: int, diagonal: Diagonal) -> tuple[np.ndarray, np.ndarray]
 
 
 def mapped_surface(mapping: Mapping, nx: int, ny: int, diagonal: Diagonal = "crossed",
-                   comm: MPI.Comm = MPI.COMM_WORLD) -> dolfinx.mesh.Mesh:
+                   comm: MPI.Comm = MPI.COMM_WORLD, weld: bool = False) -> dolfinx.mesh.Mesh:
     """A flat-triangle mesh of the surface ``mapping([0,1]²)``, ghosted across shared
-    facets (the shell integrates over interior edges)."""
+    facets (the shell integrates over interior edges). ``weld`` merges points that the
+    mapping sends to the same place (the seam of a closed ring)."""
     if nx < 1 or ny < 1:
         raise MeshError(f"a surface grid needs at least one division each way, got {nx} × {ny}")
     if comm.rank == 0:
@@ -76,6 +77,11 @@ def mapped_surface(mapping: Mapping, nx: int, ny: int, diagonal: Diagonal = "cro
         points = np.asarray(mapping(st[:, 0], st[:, 1]), dtype=np.float64)
         if points.shape != (len(st), 3):
             raise MeshError(f"the surface mapping must return (n, 3) points, got {points.shape}")
+        if weld:
+            scale = max(float(np.ptp(points)), 1e-300)
+            _, first, inverse = np.unique(np.round(points / scale, 9), axis=0, return_index=True,
+                                          return_inverse=True)
+            points, cells = points[first], inverse.reshape(-1)[cells]
     else:
         points, cells = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     element = basix.ufl.element("Lagrange", "triangle", 1, shape=(3,))

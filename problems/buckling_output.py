@@ -55,6 +55,9 @@ class Writer:
         buckle's outline drawn at its current position."""
         import pyvista
 
+        from eyemech.problems.output import quiet_vtk
+
+        quiet_vtk()
         model = self.model
         # a slice just inside the symmetry plane: the layers, the subretinal gap, the tear
         section = grid.slice(normal=(1.0, 0.0, 0.0), origin=(0.02, 0.0, 0.0))

@@ -40,12 +40,13 @@ from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.output import FieldWriter
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
-from eyemech.problems.shells import Shell, check_shell_parameters, picture
+from eyemech.problems.shells import Shell, check_shell_parameters, newton_options, picture
 
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    moment_fraction: float = field(1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)")
+    moment_fraction: float = field(
+        1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)")
     youngs_modulus: float = field(1.2e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa")
     poisson_ratio: float = field(0.0, "Poisson's ratio (0: exact circle, no anticlastic bending)")
     length: float = field(12.0, "strip length", "mm")
@@ -95,8 +96,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ds_end = shell.ds(tagged.tag("end"))
         energy = shell.energy(params.kinematics) - moment / b * rotation * ds_end
         residual = ufl.derivative(energy, shell.u, shell.v)
-        solver = NonlinearSolver(residual, shell.u, shell.fix("root"), options=ctx.options.newton,
-                                 timings=ctx.timings)
+        solver = NonlinearSolver(residual, shell.u, shell.fix("root"),
+                                 options=newton_options(ctx, params.kinematics), timings=ctx.timings)
         rotation_form = dolfinx.fem.form(rotation * ds_end)
         tip = (L, b / 2, 0.0)
         writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [shell.u])

@@ -3,21 +3,26 @@
 driver's hooks and refreshed at every Newton iteration.
 
 Formulation (single pass, node to surface). Slave node s with lumped area w_s,
-master triangle with nodes x1, x2, x3, outward unit normal n and closest point
-x_p = Σ N_j(ξ) x_j of the deformed slave position x_s:
+master triangle with nodes x1, x2, x3 and outward unit normal n; N_j(ξ) are the
+barycentric weights of the closest point of the triangle to the deformed slave
+position x_s:
 
-    g = (x_s − x_p)·n,      Π_c = ½ α w_s ⟨−g⟩²      (paper eq. 9–10)
-    δΠ_c = α w_s g D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12, 12 entries)
-    K_c = α w_s D Dᵀ        (frozen normal and frozen ξ, eq. 13)
+    g = (x_s − x_1)·n,      Π_c = w_s ψ(g),  ψ' = −p(g)      (paper eq. 9–10)
+    δΠ_c = −w_s p(g) D·δu_c,   D = [n; −N1 n; −N2 n; −N3 n]   (eq. 11–12)
+    K_c = −w_s p'(g) D Dᵀ      (frozen normal and frozen ξ, eq. 13)
 
-For a closest-point projection the gradient is exact (x_s − x_p ∥ n, so the
-normal's variation drops out of δg); K_c omits only the terms of order α g
-(normal and ξ rotation), small because the penalty penetration is small, so
-Newton converges nearly quadratically once the active set has settled.
+with p(g) = α⟨−g⟩ (Π_c = ½ α w_s ⟨−g⟩², the paper's) or its C¹ round-off
+(:func:`penalty_pressure`). The gap is the distance to the triangle's plane,
+whose gradient in x_s is exactly n; K_c omits the terms from the rotation of n
+and the motion of ξ, of relative size g/h — small because the penalty
+penetration is small — so Newton converges nearly quadratically once the
+active set has settled.
 
 Search: a global step (a k-d tree on the master triangles' centroids gives the
 nearest few candidates) and a local step (the exact closest point on each
-candidate triangle, vectorised); the candidate nearest in distance wins.
+candidate triangle, vectorised); the candidate nearest in distance wins, except
+that a node keeps its previous triangle while it still projects inside it (up to
+a small tolerance) — otherwise nodes over an edge swap triangles every iterate.
 
 Parallel: each rank treats the slave nodes it owns. The master surface (its
 triangles as global node numbers, its current node positions) is gathered on all
@@ -71,17 +76,20 @@ class ContactState:
 class NodeToSurfaceContact:
     """Penalty contact of the ``slave`` facets' nodes against the ``master`` facets.
 
-    ``u`` is the displacement (vector Lagrange P1 or P2, the only unknown of the
-    system), ``penalty`` α in force per area per length (MPa/mm), ``bcs`` the
-    Dirichlet conditions (their rows and columns are left alone),
-    ``search_depth`` the deepest penetration still counted as contact (deeper
-    pairs are taken to be on the wrong side), ``candidates`` the triangles tested
-    per slave node.
+    ``u`` is the displacement (vector Lagrange P1 or P2), ``penalty`` α in force
+    per area per length (MPa/mm), ``bcs`` the Dirichlet conditions (their rows and
+    columns are left alone), ``search_depth`` the deepest penetration still
+    counted as contact (deeper pairs are taken to be on the wrong side),
+    ``candidates`` the triangles tested per slave node, ``smoothing`` ε the width
+    over which the penalty pressure is rounded off (:func:`penalty_pressure`; 0 =
+    the plain ⟨−g⟩ law), ``block_spaces`` the spaces of a blocked system
+    (``kind="mpi"``, displacement first) when ``u`` is one block of it.
     """
 
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
                  penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
-                 smoothing: float = 0.0, timings: Timings | None = None):
+                 smoothing: float = 0.0, timings: Timings | None = None,
+                 block_spaces=None):
         if not penalty > 0:
             raise ValueError(f"the penalty must be > 0, got {penalty}")
         if not smoothing >= 0:
@@ -97,6 +105,7 @@ class NodeToSurfaceContact:
         if self.bs != 3 or space.ufl_element().embedded_superdegree not in (1, 2):
             raise ValueError("node-to-surface contact needs a 3D vector P1 or P2 displacement")
         self.imap = space.dofmap.index_map
+        self._layout(block_spaces)
         self.reference = space.tabulate_dof_coordinates()
         self._slave_setup(tagged, slave)
         self._master_setup(tagged, master)
@@ -168,16 +177,42 @@ class NodeToSurfaceContact:
         for bc in bcs:
             local, _ = bc.dof_indices()
             blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
-            mine.append(blocks * self.bs + local % self.bs)
+            mine.append(self._petsc_base(blocks) + local % self.bs)
         mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
         return set(np.concatenate(self.comm.allgather(mine)).tolist())
+
+    def _layout(self, block_spaces) -> None:
+        """Where each rank's displacement dofs sit in the PETSc vector.
+
+        A single field: global index = global node · bs + component. A blocked
+        system (``block_spaces`` = the spaces of ``NonlinearProblem(..., kind="mpi")``,
+        the displacement's first): each rank stores its owned dofs of every block one
+        after the other, so a node owned by rank r sits at Σ_{s<r} (owned dofs of all
+        blocks on s) + (its number on r) · bs."""
+        start = self.imap.local_range[0]
+        owned = self.bs * self.imap.size_local
+        if block_spaces is None:
+            rank_total = owned
+        else:
+            if block_spaces[0] != self.u.function_space:
+                raise ValueError("block_spaces must start with the displacement's space")
+            rank_total = sum(V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+                             for V in block_spaces)
+        self._starts = np.array(self.comm.allgather(start), dtype=np.int64)
+        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
+
+    def _petsc_base(self, global_nodes: np.ndarray) -> np.ndarray:
+        """PETSc index of component 0 of the given global node numbers."""
+        global_nodes = np.asarray(global_nodes, dtype=np.int64)
+        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
+        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
         """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
         matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
 
-    # -- shared nodes and blocked systems (hexahedral eye, [u, p, P] systems) -------------
+    # -- shared slave/master nodes and per-node gaps (the eye's detached retina) ----------
     def _drop_slaves_on_master(self) -> None:
         """Slave nodes that are also master nodes (where a detached layer is still
         attached to the body under it: its rim) are not contact points: their gap to
@@ -201,43 +236,6 @@ class NodeToSurfaceContact:
         known = dict(zip(np.concatenate([p[0] for p in pieces]).tolist(),
                          np.concatenate([p[1] for p in pieces]).tolist()))
         return np.array([known.get(int(n), np.nan) for n in nodes])
-
-    def to_system(self, dofs: np.ndarray, target: PETSc.Vec | PETSc.Mat) -> np.ndarray:
-        """Indices in ``target`` (the residual vector or the Jacobian) of the global
-        displacement dofs ``dofs`` (global block · bs + component).
-
-        A single-block system is numbered like u: identity. In DOLFINx's blocked
-        "mpi" layout (``NonlinearProblem`` with several unknowns, u the first) each
-        rank owns the consecutive rows [u owned, p owned, P owned, …], so a dof
-        owned by rank r sits at (start of r's rows) + (its offset in r's u range).
-        """
-        layout = self._system_layout(target)
-        if layout is None:
-            return np.asarray(dofs, dtype=PETSc.IntType)
-        u_starts, system_starts = layout
-        dofs = np.asarray(dofs, dtype=np.int64)
-        owner = np.searchsorted(u_starts, dofs, side="right") - 1
-        return (system_starts[owner] + dofs - u_starts[owner]).astype(PETSc.IntType)
-
-    def _system_layout(self, target) -> tuple[np.ndarray, np.ndarray] | None:
-        """(first u dof, first system row) of every rank, or None for a u-only system
-        (collective the first time for each new size; cached)."""
-        u_size = self.imap.size_global * self.bs
-        size = target.getSize()
-        size = size[0] if isinstance(size, tuple) else size
-        if size == u_size:
-            return None
-        cached = getattr(self, "_layout", None)
-        if cached is not None and cached[0] == size:
-            return cached[1]
-        first_row = target.getOwnershipRange()[0]
-        u_first = self.imap.local_range[0] * self.bs
-        pairs = np.array(self.comm.allgather((u_first, first_row)), dtype=np.int64)
-        blocks = target.getAttr("_blocks") if isinstance(target, PETSc.Vec) else None
-        if blocks is not None and blocks[0][1] - blocks[0][0] != self.imap.size_local * self.bs:
-            raise ValueError("node-to-surface contact needs u as the first block of the system")
-        self._layout = (size, (pairs[:, 0], pairs[:, 1]))
-        return self._layout[1]
 
     # -- geometry -------------------------------------------------------------------------
     def _positions(self, blocks: np.ndarray) -> np.ndarray:
@@ -309,7 +307,8 @@ class NodeToSurfaceContact:
     def _pair_dofs(self, state: ContactState) -> np.ndarray:
         """(n, 12) global dof indices: slave node then the three master nodes."""
         nodes = np.column_stack([self.slave_global[state.active], self.triangles[state.triangles]])
-        return (nodes[:, :, None] * self.bs + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
+        base = self._petsc_base(nodes.ravel()).reshape(nodes.shape)
+        return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
 
     def _pair_vectors(self, state: ContactState) -> np.ndarray:
         """(n, 12) D = [n, −N1 n, −N2 n, −N3 n]."""
@@ -324,7 +323,7 @@ class NodeToSurfaceContact:
         scale = -self.slave_weights[state.active] * pressure
         values = scale[:, None] * self._pair_vectors(state)
         keep = ~np.isin(dofs, list(self._constrained)) if self._constrained else np.ones_like(dofs, bool)
-        b.setValues(self.to_system(dofs[keep], b), values[keep], addv=PETSc.InsertMode.ADD)
+        b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
         b.assemblyBegin()
         b.assemblyEnd()
 
@@ -336,13 +335,14 @@ class NodeToSurfaceContact:
         _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
         stiffness = -self.slave_weights[state.active] * slope
         constrained = self._constrained
-        self._system_layout(A)  # collective on its first call: before the rank-local loop
-        for i in range(len(dofs)):
-            keep = np.array([d not in constrained for d in dofs[i]])
-            index = self.to_system(dofs[i][keep], A)
-            block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
-            A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
-        A.assemble()
+        # timed apart (inside "assembly"): includes PETSc's mallocs for new nonzeros
+        with self.timings("contact_jacobian"):
+            for i in range(len(dofs)):
+                keep = np.array([d not in constrained for d in dofs[i]])
+                index = dofs[i][keep].astype(PETSc.IntType)
+                block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
+                A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
+            A.assemble()
 
     # -- diagnostics ----------------------------------------------------------------------
     def summary(self) -> dict[str, float]:
@@ -356,6 +356,15 @@ class NodeToSurfaceContact:
         depth = self.comm.allreduce(float(np.max(-state.gaps, initial=0.0)), op=MPI.MAX)
         return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
                 "contact_normal_force": float(total[2]), "max_penetration": depth}
+
+    def nodal_pressures(self) -> tuple[np.ndarray, np.ndarray]:
+        """(reference positions (n, 3), contact pressure p(g)) of this rank's slave nodes
+        that touch (g < 0)."""
+        state = self.state or self.search()
+        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        touching = state.gaps < 0
+        nodes = self.slave_blocks[state.active[touching]]
+        return self.reference[nodes], pressure[touching]
 
     def refuse_initial_penetration(self, key: str, tolerance: float = 0.0) -> None:
         """ParameterError naming ``key`` when slave nodes start inside the master body

@@ -13,6 +13,7 @@ Design notes
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import sys
@@ -127,20 +128,33 @@ class NonlinearSolver:
 
         def residual(snes, x, vec):
             start = time.perf_counter()
-            f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
-            for hook in self.residual_hooks:
-                hook(x, vec)
+            with self._remember_errors():
+                f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
+                for hook in self.residual_hooks:
+                    hook(x, vec)
             self.timings.add("assembly", time.perf_counter() - start)
 
         def jacobian(snes, x, mat, pmat):
             start = time.perf_counter()
-            j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
-            for hook in self.jacobian_hooks:
-                hook(x, mat)
+            with self._remember_errors():
+                j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
+                for hook in self.jacobian_hooks:
+                    hook(x, mat)
             self.timings.add("assembly", time.perf_counter() - start)
 
         self.snes.setFunction(residual, b)
         self.snes.setJacobian(jacobian, A, P)
+
+    @contextlib.contextmanager
+    def _remember_errors(self):
+        """SNES turns an exception in a callback into a bare PETSc error; keep the
+        original so that :meth:`solve` re-raises it (a bug is not a divergence)."""
+        try:
+            yield
+        except Exception as err:
+            if not isinstance(err, PETSc.Error):
+                self._callback_error = err
+            raise
 
     def _set_options(self, prefix: str) -> None:
         opts = PETSc.Options()
@@ -172,10 +186,13 @@ class NonlinearSolver:
         self.residual_history = []
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
+        self._callback_error = None
         try:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
         except PETSc.Error:  # e.g. a zero pivot from an inverted element
+            if self._callback_error is not None:
+                raise self._callback_error from None
             reason = -1
         elapsed = time.perf_counter() - start
         # assembly inside SNES is timed by the callbacks; "solve" is the rest
@@ -265,6 +282,9 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         bar.update((target - stepping.start) / span - bar.n)
         if cuts == 0 and iterations <= stepping.easy_iterations:
             increment = min(increment * stepping.grow, stepping.max_step * span)
+        if any(abs(target - s) <= 1e-12 * span for s in stops):
+            # a new stage (or output interval) starts: its difficulty is not the last one's
+            increment = max(increment, stepping.initial_step * span)
     bar.close()
     return records
 

@@ -60,7 +60,7 @@ class Parameters(SceneParameters):
     limbal_thickness: float = field(0.67, "thickness at the limbus", "mm")
     diameter: float = field(11.7, "planform diameter at the limbus", "mm")
     support: Literal["clamped"] = field("clamped", "limbus support (elastic scleral ring: not yet)")
-    mesh_size: float = field(0.5, "radial element size in the planform", "mm")
+    mesh_size: float = field(1.0, "radial element size in the planform", "mm")
     azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))")
     layers: int = field(2, "element layers through the thickness (at least)")
     fit_diameter: float = field(3.0, "central zone of the anterior sphere fit", "mm")

@@ -108,6 +108,15 @@ def _point_values(function: dolfinx.fem.Function) -> np.ndarray:
     return values.copy()
 
 
+def quiet_vtk() -> None:
+    """VTK reports that there is no X display before it falls back to off-screen
+    rendering; that is expected on clusters and in CI, so silence its warnings."""
+    with contextlib.suppress(Exception):
+        import vtk
+
+        vtk.vtkObject.GlobalWarningDisplayOff()
+
+
 def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None = None,
                title: str = "", camera: str | Sequence = "iso", clim=None,
                show_undeformed: bool = True, cmap: str = "viridis") -> None:
@@ -115,8 +124,7 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
     import pyvista
 
     pyvista.OFF_SCREEN = True
-    with contextlib.suppress(Exception):
-        pyvista.start_xvfb()  # harmless when a display or OSMesa exists
+    quiet_vtk()
     plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
     shown = grid.warp_by_vector(warp, factor=1.0) if warp else grid
     if show_undeformed and warp:

@@ -22,4 +22,5 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
 
 SCENE = Scene(name="plate-simply-supported", kind="benchmark", parameters=Parameters, run=run,
-              summary="simply supported square plate under uniform load, Kirchhoff-Love shell (Timoshenko)")
+              summary="simply supported square plate under uniform load, "
+                      "Kirchhoff-Love shell (Timoshenko)")

@@ -36,7 +36,7 @@ class NodeProbe:
         best = np.array(comm.allgather(distance))           # (ranks, n)
         self.owner = np.argmin(best, axis=0)
         self.mine = self.owner == comm.rank
-        # valid where mine (a rank without candidates owns no point)
+        # valid where mine (a rank without candidates owns none of the points)
         self.blocks = (blocks[index] if len(blocks) else np.zeros(n, int)).astype(np.int32)
         self.bs = V.dofmap.index_map_bs
         self.comm = comm

@@ -1,10 +1,9 @@
-"""Suture forces of scleral buckling (seed 002, §2.2).
+"""Suture forces of scleral buckling (seed 002, §2.2): where they act, which way they
+pull, and how hard (the UFL load is :func:`eyemech.forms.sutures.suture_residual`).
 
-Pulling the suture strings over the buckle is modelled as nodal forces at the suture
-points on the sclera, directed along the tangent from the point to the buckle's
-cross-section outline in the point's meridional plane, with directions taken from
-the last converged step. Within a Newton solve the forces are dead loads, so they add
-to the residual only (no Jacobian term).
+Each suture pulls its bite on the sclera towards the buckle, along the tangent from
+the bite to the buckle's cross-section outline in the bite's meridional plane; the
+direction is recomputed from the last converged positions after every step.
 """
 
 from __future__ import annotations
@@ -13,6 +12,13 @@ import dataclasses
 
 import numpy as np
 
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+
+from eyemech.forms.sutures import suture_residual
 from eyemech.problems.probes import NodeProbe
 
 
@@ -20,39 +26,33 @@ from eyemech.problems.probes import NodeProbe
 class SuturePoint:
     azimuth_deg: float   # about the optic axis, 0 = the tear's meridian (+y)
     side: int            # −1 posterior, +1 anterior of the buckle
-    weight: float        # 0.5 on the symmetry plane (half the suture is modelled)
+    centre: tuple[float, float, float]
 
 
 class SutureForces:
-    """Residual hook: −F w d at each suture node (owned, unconstrained components)."""
+    """Force Constants of the sutures, their directions, and their residual term."""
 
-    def __init__(self, probe: NodeProbe, points: list[SuturePoint], constrained: np.ndarray):
-        """``constrained``: local (unrolled) displacement dofs with Dirichlet conditions;
-        their residual rows belong to the boundary condition."""
-        self.probe, self.points = probe, points
+    def __init__(self, mesh: dolfinx.mesh.Mesh, V: dolfinx.fem.FunctionSpace,
+                 points: list[SuturePoint], candidates: np.ndarray, bite_radius: float):
+        self.points = points
+        self.probe = NodeProbe(V, np.array([p.centre for p in points]), candidates)
+        self.forces = [dolfinx.fem.Constant(mesh, np.zeros(3)) for _ in points]
         self.directions = np.zeros((len(points), 3))
         self.magnitude = 0.0
-        self._constrained = set(int(d) for d in constrained)
+        self.bite_radius = bite_radius
+
+    def residual(self, v, measure):
+        return suture_residual(self.forces, [p.centre for p in self.points], self.bite_radius, v,
+                               measure)
+
+    def set_magnitude(self, magnitude: float) -> None:
+        self.magnitude = magnitude
+        for constant, direction in zip(self.forces, self.directions):
+            constant.value[:] = magnitude * direction
 
     def update_directions(self, u, anchors: np.ndarray) -> None:
-        """Point each force from its suture node (deformed) to its anchor on the buckle
-        outline (``anchors``: one 3D point per suture point)."""
+        """Point each force from its bite (deformed) to its anchor on the buckle outline
+        (``anchors``: one 3D point per suture point)."""
         tangent = anchors - self.probe.positions(u)
         self.directions = tangent / np.linalg.norm(tangent, axis=1, keepdims=True)
-
-    def forces(self) -> np.ndarray:
-        weights = np.array([p.weight for p in self.points])[:, None]
-        return self.magnitude * weights * self.directions
-
-    def residual_hook(self, _x, vec) -> None:
-        if self.magnitude == 0.0:
-            return
-        array = vec.array
-        bs = self.probe.bs
-        for force, mine, block in zip(self.forces(), self.probe.mine, self.probe.blocks):
-            if not mine:
-                continue
-            for component in range(bs):
-                dof = int(block) * bs + component
-                if dof not in self._constrained:
-                    array[dof] -= force[component]  # residual = internal − external
+        self.set_magnitude(self.magnitude)

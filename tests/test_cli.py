@@ -99,3 +99,13 @@ def test_sweep_rejects_a_bad_value_before_running_any_case(tmp_path):
                               "--out", str(tmp_path / "s"))
     assert code == 2 and "c10" in stderr
     assert not (tmp_path / "s").exists()
+
+
+def test_parameter_reference_is_current():
+    """docs/parameters.md is generated; regenerate it with
+    `eyemech list --markdown > docs/parameters.md` when a scene changes."""
+    from pathlib import Path
+
+    code, out, _ = run_cli("list", "--markdown")
+    assert code == 0
+    assert (Path(__file__).parents[1] / "docs" / "parameters.md").read_text() == out

@@ -171,9 +171,14 @@ def retina_serial():
     return retina.run(retina.Parameters(), options=QUIET)
 
 
-def convergence_orders(residuals: list[float]) -> float:
-    """Order estimated from the last three residual norms: log(r3/r2) / log(r2/r1)."""
-    r1, r2, r3 = residuals[-3:]
+# Below about 1e-11 the residual norm of this scene is set by the accuracy of the LU
+# solve, not by Newton's convergence; those values are left out of the order estimate.
+RESIDUAL_FLOOR = 1e-11
+
+
+def convergence_order(residuals: list[float]) -> float:
+    """Order from the last three residual norms above the floor: log(r3/r2) / log(r2/r1)."""
+    r1, r2, r3 = [r for r in residuals if r > RESIDUAL_FLOOR][-3:]
     return np.log(r3 / r2) / np.log(r2 / r1)
 
 
@@ -195,13 +200,14 @@ def test_retina_gap_closes_without_deep_penetration(retina_serial):
 def test_retina_newton_converges_fast_at_the_end_of_each_step(retina_serial):
     contact_steps = [s for s in retina_serial.steps if s["active_nodes"] > 0]
     assert len(contact_steps) >= 3
-    orders = [convergence_orders(s["residuals"]) for s in contact_steps]
-    # frozen-normal tangent: quadratic-ish once the active set has settled
+    orders = [convergence_order(s["residuals"]) for s in contact_steps]
+    # frozen-normal tangent: the omitted terms are of relative size g/h ~ 1e-3, so the
+    # last iterations are superlinear, close to quadratic (measured 1.3-4.3, median 2.0)
     assert np.median(orders) > 1.5, orders
-    assert convergence_orders(contact_steps[-1]["residuals"]) > 1.5
+    assert min(orders) > 1.2, orders
     for step in contact_steps:
         r = step["residuals"]
-        assert r[-1] < 0.05 * r[-2]
+        assert r[-1] < 0.02 * r[-2]
 
 
 @pytest.mark.mpi
@@ -255,3 +261,89 @@ def test_bodies_starting_inside_each_other_are_refused():
 def test_retina_bad_penalty_is_refused():
     with pytest.raises(ParameterError, match="penalty"):
         retina.Parameters(penalty=0.0).validate()
+
+
+# -- patch test ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def patch_results():
+    from eyemech.problems import contact_patch
+
+    return {n: contact_patch.run(contact_patch.Parameters(passes=n), options=QUIET).quantities
+            for n in (1, 2)}
+
+
+def test_patch_single_pass_balances_force_but_not_pressure(patch_results):
+    # Taylor & Papadopoulos (1991): single-pass node-to-surface fails the contact patch
+    # test on non-matching meshes; the total force is still transmitted
+    single = patch_results[1]
+    assert single["contact_contact_normal_force"] == pytest.approx(0.01 * 1.0, rel=0.01)
+    assert single["pressure_mean"] == pytest.approx(0.01, rel=0.02)
+    assert single["stress_spread_lower"] > 0.1  # documented failure (docs/contact.md)
+
+
+def test_patch_two_pass_is_nearly_uniform(patch_results):
+    # penalty two-pass is not exact either, but several times closer to uniform
+    for block in ("lower", "upper"):
+        two, one = patch_results[2][f"stress_spread_{block}"], patch_results[1][f"stress_spread_{block}"]
+        assert two < 0.08 and two < 0.3 * one
+
+
+# -- penalty study ---------------------------------------------------------------------------
+def test_penalty_study_quick(tmp_path):
+    import csv
+
+    from eyemech.problems.studies.contact_penalty import STUDY
+
+    files = STUDY.run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
+    assert {f.suffix for f in files} == {".csv", ".png"} and all(f.exists() for f in files)
+    lines = [line for line in files[0].read_text().splitlines() if not line.startswith("#")]
+    rows = list(csv.DictReader(lines))
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    # penetration falls like 1/α: ten times the penalty, about a tenth of the penetration
+    ratio = float(rows[1]["max_penetration"]) / float(rows[0]["max_penetration"])
+    assert 0.05 < ratio < 0.2
+
+
+# -- PETSc layout of a blocked (u, p) system ----------------------------------------------------
+LAYOUT_CHECK = """
+import dolfinx_solver
+import numpy as np
+import dolfinx, dolfinx.fem.petsc
+from mpi4py import MPI
+from eyemech.meshes.contact_bodies import layered_caps
+from eyemech.problems.contact_search import NodeToSurfaceContact
+
+caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
+V = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 2, (3,)))
+Q = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 1))
+u, p = dolfinx.fem.Function(V), dolfinx.fem.Function(Q)
+imap = V.dofmap.index_map
+n = imap.size_local + imap.num_ghosts
+nodes = imap.local_to_global(np.arange(n, dtype=np.int32))
+u.x.array[:] = (nodes[:, None] * 3 + np.arange(3) + 1).ravel()
+p.x.array[:] = -1.0
+x = dolfinx.fem.petsc.create_vector([V, Q], kind="mpi")
+dolfinx.fem.petsc.assign([u, p], x)
+search = NodeToSurfaceContact(u, caps, "slave", "master", 1.0, block_spaces=[V, Q])
+owned = nodes[: imap.size_local]
+index = (search._petsc_base(owned)[:, None] + np.arange(3)).ravel()
+ok = np.array_equal(x.getValues(index.astype(np.int32)), (owned[:, None] * 3 + np.arange(3) + 1).ravel())
+ok = MPI.COMM_WORLD.allreduce(bool(ok), op=MPI.LAND)
+if MPI.COMM_WORLD.rank == 0:
+    print("LAYOUT", ok)
+"""
+
+
+@pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
+def test_blocked_system_indices(ranks, tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "layout.py"
+    script.write_text(LAYOUT_CHECK)
+    command = [sys.executable, str(script)]
+    if ranks > 1:
+        command = [str(Path(sys.executable).parent / "mpiexec"), "-n", str(ranks), *command]
+    out = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert "LAYOUT True" in out.stdout, out.stdout + out.stderr

@@ -4,8 +4,8 @@ Two hexahedral blocks with non-matching grids: the lower one's top face is the m
 (its quadrilaterals split into triangles, seed 002 §2.3.1), the upper one's bottom face
 the slave. Checks: exact penetration of a prescribed rigid motion (the master is flat,
 so the triangle split is exact), and a solve in which a decoupled extra block [u, p]
-must give the u-only solution to round-off — the blocked row mapping of the hooks is
-right or the two differ. Run as a script (``python test_eye_contact.py``) it prints the
+must give the u-only solution to round-off — the blocked row mapping of the hooks
+(``block_spaces``) is right or the two differ. Run as a script (``python test_eye_contact.py``) it prints the
 solve's numbers as JSON for the two-rank comparison.
 """
 
@@ -123,9 +123,12 @@ def squeeze(blocked: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
         v, q = ufl.TestFunctions(ufl.MixedFunctionSpace(V, Q))
         residual = ufl.derivative(energy, u, v) + p * q * dx
         residual, unknowns = list(ufl.extract_blocks(residual)), [u, p]
+        spaces = [V, Q]
     else:
         residual, unknowns = ufl.derivative(energy, u, ufl.TestFunction(V)), u
-    contact = NodeToSurfaceContact(u, blocks, "slave", "master", 100.0, bcs, search_depth=0.5)
+        spaces = None
+    contact = NodeToSurfaceContact(u, blocks, "slave", "master", 100.0, bcs, search_depth=0.5,
+                                   block_spaces=spaces)
     solver = NonlinearSolver(residual, unknowns, bcs, options=NewtonOptions(rtol=1e-11, atol=1e-12),
                              residual_hooks=[contact.residual_hook],
                              jacobian_hooks=[contact.jacobian_hook])

@@ -42,8 +42,9 @@ def test_smaller_optical_zone_flattens_more(eight_at_3mm):
 
 
 def test_four_incisions_flatten_more_than_three():
+    # 3 cuts need 24 divisions around; one layer above and one below the cut bottom
     common = dict(optical_zone=3.5, incision_depth=0.9, iop_mmHg=15.0, azimuthal_divisions=24,
-                  mesh_size=2.0, t_end=1800.0)
+                  mesh_size=3.0, layers=1, t_end=1800.0)
     three, four = solve(incisions=3, **common), solve(incisions=4, **common)
     assert four["power_change_D"][-1] < three["power_change_D"][-1] < 0
 
@@ -56,3 +57,19 @@ def test_bad_input_is_one_clear_error(key, value, words):
     with pytest.raises(ParameterError, match=words) as info:
         build(keratotomy.Parameters, {key: value})
     assert info.value.key == key
+
+
+@pytest.mark.mpi
+def test_two_ranks_give_the_same_numbers(tmp_path, eight_at_3mm):
+    """The coarse 8-incision case on 2 ranks, stopped after the first time step, against
+    the first two time levels of the serial run (same time grid)."""
+    from conftest import last_json, run_cli
+
+    sets = [f"{k}={v}" for k, v in {**COARSE, "t_end": 1800.0}.items()]
+    args = [a for s in sets for a in ("--set", s)]
+    code, out, err = run_cli("run", "keratotomy", *args, "--out", str(tmp_path), "--json",
+                             "--no-pictures", "--no-fields", ranks=2)
+    assert code == 0, err
+    parallel = last_json(out)["quantities"]
+    for key in ("power_change_D", "intact_power_D", "apex_displacement_mm", "wound_gape_mm"):
+        assert parallel[key] == pytest.approx(eight_at_3mm[key][:2], rel=1e-8)

@@ -52,3 +52,23 @@ def test_toml_config(tmp_path):
 def test_every_parameter_is_documented():
     for name, _kind, _default, _unit, text in describe(si.Parameters):
         assert text, f"{name} has no help text"
+
+
+def test_a_bug_in_a_solver_hook_is_raised_not_taken_for_divergence():
+    import dolfinx
+    import ufl
+    from mpi4py import MPI
+
+    from eyemech.problems.driver import NonlinearSolver
+
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    residual = (ufl.inner(ufl.grad(u), ufl.grad(v)) + (u - 1) * v) * ufl.dx
+
+    def broken_hook(_x, _b):
+        raise ValueError("hook bug")
+
+    solver = NonlinearSolver(residual, u, [], residual_hooks=[broken_hook])
+    with pytest.raises(ValueError, match="hook bug"):
+        solver.solve()

@@ -10,10 +10,12 @@ References
 
 - Scordelis–Lo roof: 0.3024 at the free-edge midpoint, MacNeal & Harder, Finite
   Elem. Anal. Des. 1 (1985) 3–20 (deep-shell converged values are ~0.301).
+- Pinched hemisphere with an 18° hole: radial displacement ≈ 0.093 under the loads
+  (MacNeal & Harder 1985 give 0.094; converged thin-shell values 0.0924-0.093).
 
 Tolerances: 0.3 % for the plates at the default mesh (issue 7; the measured errors
 are -0.25 % and -0.06 %), 1 % of L for the rolled tip (measured 0.35 %), 2 % for
-the Scordelis–Lo roof (issue 7; measured -0.86 %).
+the Scordelis–Lo roof and the hemisphere (issue 7; measured -0.86 % and -0.09 %).
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ import pytest
 from mpi4py import MPI
 
 from eyemech.meshes import MeshError
-from eyemech.problems import cantilever_rolling, plate_clamped, plate_simply_supported, scordelis_lo
+from eyemech.problems import (cantilever_rolling, hemisphere, plate_clamped, plate_simply_supported,
+                              scordelis_lo)
 from eyemech.problems.context import RunOptions
 from eyemech.problems.parameters import ParameterError
 
@@ -86,6 +89,13 @@ def test_cantilever_rolls_into_a_full_circle():
 def test_scordelis_lo_roof_within_2_percent():
     q = _run(scordelis_lo)
     assert abs(q["edge_deflection_error"]) < 0.02
+
+
+def test_pinched_hemisphere_within_2_percent():
+    q = _run(hemisphere)
+    assert abs(q["radial_displacement_error"]) < 0.02
+    # the loading is symmetric: outward at ±x and inward at ±y move alike
+    assert q["radial_displacement_y"] == pytest.approx(q["radial_displacement_x"], rel=1e-6)
 
 
 @pytest.mark.parametrize("module, key, value", [
@@ -148,3 +158,38 @@ def test_penalty_study_quick(tmp_path):
     rows = [line for line in (tmp_path / "shell_penalty.csv").read_text().splitlines()[2:] if line]
     conditions = [float(r.split(",")[2]) for r in rows]
     assert conditions[-1] > 5 * conditions[1]  # a large penalty spoils the conditioning
+    degree_rows = [line.split(",") for line in
+                   (tmp_path / "shell_degree.csv").read_text().splitlines()[2:] if line]
+    p3 = [row for row in degree_rows if row[0] == "3"]
+    assert abs(float(p3[0][3])) < 3e-3  # the P3 option: 4 × 4 crossed already within 0.3 %
+
+
+def test_thickness_as_a_field_matches_the_constant():
+    """A thickness Function (the lens is thicker in the optic) enters the bulk and the
+    edge terms (averaged across edges); a uniform field must reproduce the constant."""
+    import dolfinx.fem
+    import ufl
+
+    from eyemech.forms.shell import ShellMaterial
+    from eyemech.meshes.surface import mapped_surface, tag_boundary
+    from eyemech.problems.driver import NewtonOptions, NonlinearSolver
+    from eyemech.problems.shells import Shell
+
+    params = plate_clamped.Parameters(divisions=8)
+    L = params.length
+    mesh = mapped_surface(lambda s, t: np.column_stack([L * s, L * t, 0 * s]), 8, 8, "crossed",
+                          MPI.COMM_WORLD)
+    tagged = tag_boundary(mesh, {"edge": lambda x: np.isclose(x[0], 0) | np.isclose(x[0], L)
+                                 | np.isclose(x[1], 0) | np.isclose(x[1], L)})
+    shell = Shell(tagged, params, lambda x: np.tile([0.0, 0.0, 1.0], (len(x), 1)), clamped=("edge",))
+    thickness = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 0)))
+    thickness.x.array[:] = params.thickness
+    shell.material = ShellMaterial(shell.material.youngs_modulus, shell.material.poisson_ratio,
+                                   thickness)
+    residual = (ufl.derivative(shell.energy("linear"), shell.u, shell.v)
+                - params.q * shell.v[2] * shell.dx)
+    solver = NonlinearSolver(residual, shell.u, shell.fix("edge"),
+                             options=NewtonOptions(petsc={"snes_type": "ksponly"}))
+    assert solver.solve()[0]
+    constant = _run(plate_clamped, divisions=8)["center_deflection"]
+    assert shell.value_at((L / 2, L / 2, 0))[2] == pytest.approx(constant, rel=1e-9)

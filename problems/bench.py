@@ -1,0 +1,68 @@
+"""Performance benchmarks: a scene at a stated size, timed phase by phase.
+
+A scene module may define ``BENCHMARK`` (parameter overrides, e.g. the paper's
+resolution). ``eyemech bench NAME`` runs it once on the current communicator and
+appends one row to ``OUT/NAME.csv``; ``OUT/NAME.md`` is the table of all rows,
+with the machine and the method stated, regenerated every time.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import importlib
+import io
+import platform
+from pathlib import Path
+
+from mpi4py import MPI
+
+from eyemech.problems.context import RunOptions
+from eyemech.problems.parameters import build
+from eyemech.problems.results import versions, write_text_atomic
+
+COLUMNS = ("date", "machine", "ranks", "dofs", "cells", "mesh", "form_compilation", "assembly",
+           "solve", "contact_search", "output", "total", "peak_memory_mb", "newton_iterations",
+           "status")
+
+
+def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: RunOptions | None = None):
+    module = importlib.import_module(scene.run.__module__)
+    overrides = dict(getattr(module, "BENCHMARK", {}))
+    params = build(scene.parameters, overrides)
+    options = options or RunOptions(fields=False, pictures=False)
+    result = scene.run(params, comm=comm, out=Path(out) / f"{scene.name}-{comm.size}ranks",
+                       options=options)
+    if comm.rank != 0:
+        return None
+    timings = result.timings
+    row = {"date": datetime.date.today().isoformat(),
+           "machine": f"{platform.node()} ({platform.machine()}, {__import__('os').cpu_count()} cpus)",
+           "ranks": comm.size, "dofs": result.quantities.get("dofs"),
+           "cells": result.quantities.get("cells"),
+           **{k: round(timings.get(k, 0.0), 2) for k in COLUMNS[5:12]},
+           "peak_memory_mb": round(result.peak_memory_mb, 1),
+           "newton_iterations": sum(s.get("newton_iterations", 0) for s in result.steps),
+           "status": result.status}
+    table = Path(out) / f"{scene.name}.csv"
+    rows = list(csv.DictReader(table.open())) if table.exists() else []
+    rows.append({k: row[k] for k in COLUMNS})
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=COLUMNS)
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text_atomic(table, buffer.getvalue())
+    write_text_atomic(Path(out) / f"{scene.name}.md", _markdown(scene.name, overrides, rows))
+    return row
+
+
+def _markdown(name: str, overrides: dict, rows: list[dict]) -> str:
+    v = versions()
+    lines = [f"# Benchmark `{name}`", "",
+             f"Settings: {', '.join(f'`{k}={val}`' for k, val in overrides.items()) or 'defaults'}; "
+             f"SNES Newton with MUMPS LU; DOLFINx {v.get('dolfinx', '?')}, PETSc {v.get('petsc', '?')}. "
+             "Seconds per phase (form compilation is a first-run cost: FFCx caches it); "
+             "peak memory is the largest resident set of any rank.", "",
+             "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += ["| " + " | ".join(str(r[c]) for c in COLUMNS) + " |" for r in rows]
+    return "\n".join(lines) + "\n"

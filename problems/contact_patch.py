@@ -1,0 +1,143 @@
+"""``contact-patch``: the contact patch test (Taylor & Papadopoulos, 1991) for the
+node-to-surface penalty contact of :mod:`eyemech.problems.contact_search`.
+
+Two elastic blocks, one on the other, meshed separately with different element
+sizes so the contact faces do not match. The lower block sits on a frictionless
+support (u_z = 0 at its bottom); symmetry planes x = 0 and y = 0; a uniform
+pressure p on the top. The exact solution is uniform: σ_zz = −p in both blocks,
+so the contact pressure must be p at every slave node. A method passes the patch
+test when it reproduces this to round-off (up to the penalty's uniform
+penetration p/α).
+
+Quantities: ``pressure_mean``, ``pressure_min``, ``pressure_max`` (over the
+touching slave nodes, MPa), ``pressure_spread`` = (max − min)/p,
+``pressure_rms_error`` = rms(p_i − p)/p, ``touching_fraction`` of the slave nodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from eyemech.forms import compressible_neo_hooke, follower_pressure
+from eyemech.forms.contact import default_penalty
+from eyemech.meshes.contact_bodies import stacked_blocks
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.contact_search import NodeToSurfaceContact
+from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.parameters import SceneParameters, field
+from eyemech.problems.scene import Scene
+from eyemech.problems.spaces import global_dofs, symmetry_bcs
+
+import dolfinx
+import dolfinx.fem
+
+QUADRATURE = {"quadrature_degree": 2}
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameters(SceneParameters):
+    width: float = field(1.0, "width of both blocks (square)", "mm")
+    youngs_modulus: float = field(1.0, "Young's modulus of both blocks", "MPa")
+    poisson_ratio: float = field(0.3, "Poisson's ratio", "")
+    pressure: float = field(0.01, "pressure on the top face", "MPa")
+    penalty: float = field(30.0, "penalty factor: α = penalty · E / master_size", "")
+    master_size: float = field(0.25, "element size of the lower (master) block", "mm")
+    slave_size: float = field(0.17, "element size of the upper (slave) block", "mm")
+    degree: int = field(1, "displacement degree (1 or 2)")
+    passes: int = field(1, "1: slave nodes on master triangles; 2: also the reverse (two-pass)")
+
+    def validate(self) -> None:
+        self.require_positive("width", "youngs_modulus", "pressure", "penalty", "master_size",
+                              "slave_size")
+        if not -1.0 < self.poisson_ratio < 0.5:
+            from eyemech.problems.parameters import ParameterError
+
+            raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio}")
+        if self.passes not in (1, 2):
+            from eyemech.problems.parameters import ParameterError
+
+            raise ParameterError("passes", f"must be 1 or 2, got {self.passes}")
+
+
+def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
+        options: RunOptions | None = None):
+    with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        w = params.width
+        with ctx.timings("mesh"):
+            blocks = stacked_blocks(w, 0.5 * w, 0.5 * w, params.master_size, params.slave_size,
+                                    comm=ctx.comm)
+        V = dolfinx.fem.functionspace(blocks.mesh, ("Lagrange", params.degree, (3,)))
+        u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
+        energy = compressible_neo_hooke(u, params.youngs_modulus, params.poisson_ratio) * blocks.dx(QUADRATURE)
+        load = dolfinx.fem.Constant(blocks.mesh, 0.0)
+        residual = ufl.derivative(energy, u, v) + follower_pressure(
+            load, u, v, blocks.ds(QUADRATURE)(blocks.tag("top")))
+        bcs = symmetry_bcs(V, blocks, {"symmetry_x": 0, "symmetry_y": 1, "bottom": 2})
+        alpha = default_penalty(params.youngs_modulus, params.master_size, params.penalty)
+        contact = NodeToSurfaceContact(u, blocks, "slave", "master", alpha, bcs,
+                                       search_depth=0.25 * w, timings=ctx.timings)
+        contact.refuse_initial_penetration("width", tolerance=1e-9 * w)
+        searches = [contact]
+        if params.passes == 2:  # the reverse pass: the lower block's nodes on the upper's faces
+            searches.append(NodeToSurfaceContact(u, blocks, "master", "slave", alpha, bcs,
+                                                 search_depth=0.25 * w, timings=ctx.timings))
+        solver = NonlinearSolver(residual, u, bcs, options=ctx.options.newton, timings=ctx.timings,
+                                 residual_hooks=[s.residual_hook for s in searches],
+                                 jacobian_hooks=[s.jacobian_hook for s in searches])
+        contact.allow_new_nonzeros(solver.problem.A)
+
+        def apply(value: float, _increment: float) -> None:
+            load.value = value * params.pressure
+
+        records = follow_path(solver, apply, Stepping(initial_step=0.5), label=SCENE.name,
+                              quiet=ctx.options.quiet)
+        contact.state = contact.search()
+        _, pressures = contact.nodal_pressures()
+        everything = np.concatenate(ctx.comm.allgather(pressures))
+        slaves = ctx.comm.allreduce(len(contact.slave_blocks))
+        p = params.pressure
+        q = ctx.result.quantities
+        q.update({"pressure_mean": float(everything.mean()), "pressure_min": float(everything.min()),
+                  "pressure_max": float(everything.max()),
+                  "pressure_spread": float((everything.max() - everything.min()) / p),
+                  "pressure_rms_error": float(np.sqrt(np.mean((everything - p) ** 2)) / p),
+                  "touching_fraction": len(everything) / slaves,
+                  "penalty_stiffness": alpha, "newton_iterations": sum(r.iterations for r in records),
+                  "dofs": global_dofs(u)})
+        q.update({f"contact_{k}": val for k, val in contact.summary().items()})
+        q.update(_stress_spread(u, blocks, params))
+    return ctx.result
+
+
+def _stress_spread(u, blocks, params: Parameters) -> dict[str, float]:
+    """(max − min)/p of the cell-wise first Piola–Kirchhoff P_zz in each block: the patch
+    test proper (the exact P_zz is −p everywhere)."""
+    from eyemech.forms.elastic import lame
+
+    mu, lmbda = lame(params.youngs_modulus, params.poisson_ratio)
+    F = ufl.variable(ufl.Identity(3) + ufl.grad(u))
+    J = ufl.det(F)
+    W = 0.5 * mu * (ufl.tr(F.T * F) - 3 - 2 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
+    P = ufl.diff(W, F)
+    Q = dolfinx.fem.functionspace(blocks.mesh, ("DG", 0))
+    stress = dolfinx.fem.Function(Q)
+    stress.interpolate(dolfinx.fem.Expression(P[2, 2], Q.element.interpolation_points))
+    out = {}
+    comm = blocks.mesh.comm
+    owned = blocks.mesh.topology.index_map(3).size_local
+    for name in ("lower", "upper"):
+        cells = blocks.cells(name)
+        values = stress.x.array[cells[cells < owned]]
+        high = comm.allreduce(float(values.max(initial=-np.inf)), op=MPI.MAX)
+        low = comm.allreduce(float(values.min(initial=np.inf)), op=MPI.MIN)
+        out[f"stress_spread_{name}"] = (high - low) / params.pressure
+    return out
+
+
+SCENE = Scene(name="contact-patch", kind="benchmark", parameters=Parameters, run=run,
+              summary="patch test: two blocks with non-matching meshes under uniform pressure")
