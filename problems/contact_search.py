@@ -109,6 +109,7 @@ class NodeToSurfaceContact:
         self.reference = space.tabulate_dof_coordinates()
         self._slave_setup(tagged, slave)
         self._master_setup(tagged, master)
+        self._drop_slaves_on_master()
         self._constrained = self._constrained_dofs(bcs)
         self.state: ContactState | None = None
 
@@ -145,23 +146,14 @@ class NodeToSurfaceContact:
         facets = facets[facets < mesh.topology.index_map(tdim - 1).size_local]
         dofmap = self.u.function_space.dofmap
         layout = dofmap.dof_layout
-        topology = basix.topology(basix.CellType.tetrahedron)
-        edges = [tuple(e) for e in topology[1]]
+        cell_type = mesh.basix_cell()
         quadratic = self.u.function_space.ufl_element().embedded_superdegree == 2
         triangles = []
         for facet in facets:
             cell = f_to_c.links(facet)[0]
             local = int(np.flatnonzero(c_to_f.links(cell) == facet)[0])
             cell_dofs = dofmap.cell_dofs(cell)
-            a, b, c = topology[2][local]
-            vertex = {k: cell_dofs[layout.entity_dofs(0, k)[0]] for k in (a, b, c)}
-            if quadratic:
-                mid = {frozenset(e): cell_dofs[layout.entity_dofs(1, i)[0]]
-                       for i, e in enumerate(edges) if set(e) <= {a, b, c}}
-                ab, bc, ca = mid[frozenset((a, b))], mid[frozenset((b, c))], mid[frozenset((c, a))]
-                pieces = [(vertex[a], ab, ca), (ab, vertex[b], bc), (ca, bc, vertex[c]), (ab, bc, ca)]
-            else:
-                pieces = [(vertex[a], vertex[b], vertex[c])]
+            pieces = facet_triangles(cell_type, local, cell_dofs, layout, quadratic)
             centroid = self.reference[cell_dofs].mean(axis=0)
             for tri in pieces:
                 x = self.reference[list(tri)]
@@ -220,6 +212,31 @@ class NodeToSurfaceContact:
         matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
 
+    # -- shared slave/master nodes and per-node gaps (the eye's detached retina) ----------
+    def _drop_slaves_on_master(self) -> None:
+        """Slave nodes that are also master nodes (where a detached layer is still
+        attached to the body under it: its rim) are not contact points: their gap to
+        their own triangles is zero by construction."""
+        shared = np.isin(self.slave_global, self.master_nodes)
+        if shared.any():
+            self.slave_blocks = self.slave_blocks[~shared]
+            self.slave_weights = self.slave_weights[~shared]
+            self.slave_global = self.slave_global[~shared]
+            self._previous = None
+
+    def gaps_of(self, nodes: np.ndarray) -> np.ndarray:
+        """Normal gaps (from the last search) of the slave nodes with global node
+        numbers ``nodes``, on every rank (collective); inf where unpaired, nan where
+        not a slave node (e.g. dropped as shared with the master)."""
+        gaps = getattr(self, "slave_gaps", None)
+        if gaps is None or len(gaps) != len(self.slave_global):
+            self.search()
+            gaps = self.slave_gaps
+        pieces = self.comm.allgather((self.slave_global, gaps))
+        known = dict(zip(np.concatenate([p[0] for p in pieces]).tolist(),
+                         np.concatenate([p[1] for p in pieces]).tolist()))
+        return np.array([known.get(int(n), np.nan) for n in nodes])
+
     # -- geometry -------------------------------------------------------------------------
     def _positions(self, blocks: np.ndarray) -> np.ndarray:
         values = self.u.x.array.reshape(-1, self.bs)
@@ -264,6 +281,7 @@ class NodeToSurfaceContact:
             paired = gaps > -self.search_depth
             active = np.flatnonzero(paired & (gaps < self.smoothing))
             min_gap = float(np.min(gaps[paired], initial=np.inf))
+            self.slave_gaps = np.where(paired, gaps, np.inf)  # every owned slave node's gap
             return ContactState(active, gaps[active], normal[active], tri[active],
                                 shape[active], min_gap)
 
@@ -429,3 +447,45 @@ def closest_points(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarra
         best = np.where(inside[..., None], best, edge_best)
         bary = np.where(inside[..., None], bary, edge_bary)
     return best, bary
+
+
+def facet_triangles(cell_type: basix.CellType, local_facet: int, cell_dofs: np.ndarray,
+                    layout, quadratic: bool) -> list[tuple[int, int, int]]:
+    """The flat triangles (local dof numbers, unoriented) that describe one facet of a
+    tetrahedron or a hexahedron on the master surface.
+
+    Tetrahedron: P1 one triangle; P2 four through the edge nodes. Hexahedron (seed
+    002 §2.3.1 splits quadrilateral faces into triangles): Q1 two triangles across
+    the diagonal from the face's first vertex; Q2 the 3×3 face nodes make four
+    sub-quadrilaterals, each split the same way (eight triangles).
+    """
+    topology = basix.topology(cell_type)
+    face = list(topology[2][local_facet])
+    vertex = {k: int(cell_dofs[layout.entity_dofs(0, k)[0]]) for k in face}
+    mid = {}
+    if quadratic:
+        mid = {frozenset(e): int(cell_dofs[layout.entity_dofs(1, i)[0]])
+               for i, e in enumerate(topology[1]) if set(e) <= set(face)}
+    if cell_type == basix.CellType.tetrahedron:
+        a, b, c = face
+        if not quadratic:
+            return [(vertex[a], vertex[b], vertex[c])]
+        ab, bc, ca = mid[frozenset((a, b))], mid[frozenset((b, c))], mid[frozenset((c, a))]
+        return [(vertex[a], ab, ca), (ab, vertex[b], bc), (ca, bc, vertex[c]), (ab, bc, ca)]
+    if cell_type != basix.CellType.hexahedron:
+        raise ValueError(f"node-to-surface contact supports tetrahedra and hexahedra, not {cell_type.name}")
+    # basix numbers a quadrilateral's vertices a b / c d (tensor order): a-b-d-c is its cycle
+    a, b, c, d = face
+    if not quadratic:
+        return _split_quad(vertex[a], vertex[b], vertex[d], vertex[c])
+    ab, ac = mid[frozenset((a, b))], mid[frozenset((a, c))]
+    bd, cd = mid[frozenset((b, d))], mid[frozenset((c, d))]
+    centre = int(cell_dofs[layout.entity_dofs(2, local_facet)[0]])
+    quads = [(vertex[a], ab, centre, ac), (ab, vertex[b], bd, centre),
+             (centre, bd, vertex[d], cd), (ac, centre, cd, vertex[c])]
+    return [tri for quad in quads for tri in _split_quad(*quad)]
+
+
+def _split_quad(q0: int, q1: int, q2: int, q3: int) -> list[tuple[int, int, int]]:
+    """Two triangles of the quadrilateral q0-q1-q2-q3 (cyclic) across q0-q2."""
+    return [(q0, q1, q2), (q0, q2, q3)]

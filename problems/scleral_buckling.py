@@ -20,10 +20,15 @@ in a cellwise-constant field; incompressibility by a pressure multiplier (Q1P0 a
 the paper, or Q2P1). The eye is held at the end of the optic-nerve stub; the
 symmetry plane x = 0 passes through the tear.
 
+Retina–choroid contact (steps 2 and 3): penalty node to surface
+(:class:`~eyemech.problems.contact_search.NodeToSurfaceContact`), slave = the detached
+retina's outer face (its nodes), master = the choroid's inner face (its quadrilaterals
+split into triangles), α = ``retina_penalty_factor`` · 6 c_retina / h (6c = E of an
+incompressible neo-Hooke solid, h the element size along the wall), searched at every
+Newton iteration and coupled into the blocked [u, p, P] Jacobian.
+
 Not modelled yet (see README): the lens and the zonules (they carry no load in this
-operation: the liquid pressure acts on all sides of the lens), and retina–choroid
-contact, which waits for the deformable contact of issue #4 — the gap is measured and
-a negative gap (retina through choroid) is reported, not prevented.
+operation: the liquid pressure acts on all sides of the lens).
 """
 
 from __future__ import annotations
@@ -38,11 +43,12 @@ import ufl
 from mpi4py import MPI
 
 from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
-from eyemech.forms.buckle import Buckle, BuckleShape
-from eyemech.forms.contact import penalty_energy
+from eyemech.forms.buckle import Buckle, BuckleShape, smoothed_penalty_energy
+from eyemech.forms.contact import default_penalty
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye
 from eyemech.problems.cavity import check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.contact_search import NodeToSurfaceContact
 from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.probes import CellField, NodeProbe, SurfacePairing, facet_nodes
@@ -88,6 +94,13 @@ class Parameters(SceneParameters):
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre", "mm")
     retina_thickness: float = field(0.2, "retina thickness", "mm")
     penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
+    retina_penalty_factor: float = field(
+        100.0, "retina–choroid penalty α = factor · E_retina / h (E = 6 c_retina)")
+    contact_smoothing: float = field(
+        0.0, "penalty kink rounded off over gaps |g| < ε (buckle and retina contact; "
+        "0 = plain kink)", "mm")
+    retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
+                                 "measured and the retina may pass through the choroid)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
 
@@ -95,9 +108,10 @@ class Parameters(SceneParameters):
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
                               "c_choroid", "c_retina", "c_optic_nerve", "band_width",
                               "band_thickness", "tire_width", "suture_width", "penalty_factor",
+                              "retina_penalty_factor",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("tire_height", "indentation", "suture_force", "detachment_height")
+        self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force", "detachment_height")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
@@ -140,8 +154,10 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer = buckling_output.Writer(model, ctx)
         writer.state(0.0, stage=0)
         try:
-            follow_path(model.solver, model.apply, Stepping(0.0, 3.0, initial_step=1 / 12,
-                                                            max_step=1 / 4, stops=(1.0, 2.0)),
+            follow_path(model.solver, model.apply, Stepping(0.0, 3.0,
+                                                            initial_step=min(1 / 12, _max_step(params)),
+                                                            max_step=_max_step(params),
+                                                            stops=(1.0, 2.0)),
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet)
         except SolveFailure:
@@ -152,6 +168,19 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities.update(model.measure())
         ctx.result.quantities.update(model.summary())
     return ctx.result
+
+
+def _max_step(params: Parameters) -> float:
+    """Largest step as a fraction of the path (3 stages): a quarter of the path, and
+    never a buckle travel of more than a quarter of the buckle's radial thickness.
+    A deeper jump starts Newton with sclera nodes deep inside the buckle, and its
+    first iterate throws them through it (measured: a 0.64 mm jump with the default
+    1.6 mm buckle left the sclera outside the tire, or "converged" in no iteration
+    with the buckle inside the eye)."""
+    thickness = params.tire_height + params.band_thickness
+    if params.indentation <= 0:
+        return 1 / 4
+    return min(1 / 4, 0.25 * thickness / params.indentation / 3.0)
 
 
 def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
@@ -213,7 +242,8 @@ class BucklingModel:
                              self.indentation)
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
-        contact = penalty_energy(self.buckle, self.u, self.penalty, ds(self.eye.tag("sclera_outer")))
+        contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
+                                          ds(self.eye.tag("sclera_outer")))
         residual += ufl.derivative(contact, self.u, v)
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
@@ -226,6 +256,8 @@ class BucklingModel:
         newton = dataclasses.replace(ctx.options.newton, line_search="bt")
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings)
+        self.element_size = element_size
+        self.retina = self._retina_contact() if params.retina_contact else None
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
@@ -253,6 +285,24 @@ class BucklingModel:
         held = dolfinx.fem.locate_dofs_topological(V, 2, self.eye.facets("optic_nerve_end"))
         bcs.append(dolfinx.fem.dirichletbc(np.zeros(3), held, V))
         return bcs
+
+    def _retina_contact(self) -> NodeToSurfaceContact:
+        """Retina (slave nodes) on choroid (master triangles), penalty scaled from the
+        softer tissue: its penetration under a contact pressure p is p/α =
+        (p/E_retina) h / factor."""
+        alpha = default_penalty(6.0 * self.params.c_retina, self.element_size,
+                                self.params.retina_penalty_factor)
+        # deeper than the choroid is thick, a pair is on the wrong side (not contact)
+        contact = NodeToSurfaceContact(self.u, self.eye, "retina_detached", "choroid_detached",
+                                       alpha, self.bcs, search_depth=self.geometry.choroid_thickness,
+                                       smoothing=self.params.contact_smoothing,
+                                       timings=self.ctx.timings,
+                                       block_spaces=[f.function_space for f in self.fields])
+        contact.refuse_initial_penetration("detachment_height")
+        self.solver.residual_hooks.append(contact.residual_hook)
+        self.solver.jacobian_hooks.append(contact.jacobian_hook)
+        contact.allow_new_nonzeros(self.solver.problem.A)
+        return contact
 
     def _probes(self) -> None:
         V, geo = self.u.function_space, self.geometry
@@ -353,7 +403,7 @@ class BucklingModel:
         indentation = math.hypot(before[0], before[1]) - math.hypot(under[0], under[1])
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
-        return {
+        return self._retina_contact_measures() | {
             "axial_length_mm": axial,
             "axial_length_change_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
@@ -372,6 +422,33 @@ class BucklingModel:
             "suture_force_N": float(self.sutures.magnitude),
         }
 
+    def _retina_contact_measures(self) -> dict:
+        """The penalty contact's own view (whole eye: twice the half model's area and
+        force); max_penetration_mm is the deepest retina node under the choroid."""
+        if self.retina is None:
+            return {}
+        with self.ctx.timings("contact_search"):
+            self.retina.state = self.retina.search()
+            summary = self.retina.summary()
+            rim = self.retina.gaps_of(self.pairing.slave_g[self.tear_rim])
+            closed = bool(len(rim) and np.all(rim[np.isfinite(rim)] < self.params.tear_closure_tolerance)
+                          and np.isfinite(rim).any())
+            gap_min = self.retina.min_gap()
+            # nodes the penalty presses (g < ε: with the round-off a very soft retina can
+            # rest at 0 < g < ε on a pressure ≤ αε/4 without ever crossing g = 0)
+            pressed = self.retina.slave_gaps < max(self.retina.smoothing, 0.0)
+            pressed_area = self.ctx.comm.allreduce(float(self.retina.slave_weights[pressed].sum()),
+                                                   op=MPI.SUM)
+        return {"max_penetration_mm": summary["max_penetration"],
+                # the normal gap of the retina's nodes to the choroid's surface (the twin-node
+                # retina_choroid_gap_* measure along the radius to the node they started above)
+                "retina_choroid_gap_nts_min_mm": gap_min,
+                "tear_closed_nts": closed,
+                "retina_contact_nodes": summary["active_nodes"],
+                "retina_pressed_nodes": self.ctx.comm.allreduce(int(pressed.sum()), op=MPI.SUM),
+                "retina_penalty_contact_area_mm2": 2.0 * pressed_area,
+                "retina_contact_force_N": 2.0 * summary["contact_normal_force"]}
+
     def detached_area(self) -> float:
         if not hasattr(self, "_detached_area"):
             form = dolfinx.fem.form(dolfinx.fem.Constant(self.eye.mesh, 1.0)
@@ -387,6 +464,8 @@ class BucklingModel:
         out["cells"] = self.eye.mesh.topology.index_map(3).size_global
         out["jacobian_nonzeros"] = self.solver.jacobian_nonzeros()
         out["contact_penalty"] = self.penalty
+        if self.retina is not None:
+            out["retina_contact_penalty"] = self.retina.penalty
         return out
 
 

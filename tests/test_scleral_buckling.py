@@ -68,6 +68,57 @@ def test_results_are_finite_and_complete(coarse):
     assert q["buckle_indentation_mm"] > 0.5 * q["buckle_travel_mm"]
 
 
+def test_retina_choroid_contact_is_enforced_and_reported(coarse):
+    # node-to-surface penalty contact retina (slave) on choroid (master) in the
+    # blocked [u, p, P] system; at the default 1 mm travel the coarse retina does
+    # not reach the choroid, so no node may be below it
+    q = coarse.quantities
+    assert q["retina_contact_penalty"] > 0
+    for name in ("after_iop", "after_buckling", "after_suturing"):
+        assert q[name]["max_penetration_mm"] == 0.0
+        assert q[name]["retina_contact_nodes"] == 0
+
+
+# a thinner detachment and a deeper buckle: the retina reaches the choroid in step 2
+CLOSING = dict(resolution="coarse", detachment_height="0.2", indentation="1.3")
+
+
+@pytest.fixture(scope="module")
+def closing():
+    params = build(sb.Parameters, CLOSING)
+    return sb.run(params, options=RunOptions(fields=False, pictures=False))
+
+
+def test_retina_lands_on_the_choroid_without_passing_through(closing):
+    # the penalty contact holds the retina on the choroid's surface: pressed nodes,
+    # a normal gap no deeper than the penalty allows (p/α with p ≤ a few kPa and
+    # α = 0.21 MPa/mm is < 1e-3 mm; measured 2e-5 mm), Newton converged
+    q = closing.quantities
+    after = q["after_suturing"]
+    assert after["retina_penalty_contact_area_mm2"] > 0.0
+    assert after["retina_pressed_nodes"] >= 1
+    assert after["max_penetration_mm"] < 1e-3
+    assert after["retina_choroid_gap_nts_min_mm"] > -1e-3
+    assert q["after_iop"]["retina_pressed_nodes"] == 0
+    assert max(s["newton_iterations"] for s in closing.steps) <= 15
+
+
+@pytest.mark.mpi
+def test_contact_two_ranks_agree(closing, tmp_path):
+    args = [f"{k}={v}" for k, v in CLOSING.items()]
+    code, out, err = run_cli("run", "scleral-buckling", *sum((["--set", a] for a in args), []),
+                             "--out", str(tmp_path), "--json", "--no-pictures", "--no-fields",
+                             ranks=2)
+    assert code == 0, err
+    parallel = last_json(out)["quantities"]["after_suturing"]
+    serial = closing.quantities["after_suturing"]
+    for key in ("retina_penalty_contact_area_mm2", "retina_contact_force_N", "max_penetration_mm",
+                "retina_choroid_gap_nts_min_mm", "axial_length_change_mm", "iop_mmHg"):
+        assert parallel[key] == pytest.approx(serial[key], rel=1e-6, abs=1e-9), key
+    for key in ("retina_pressed_nodes", "tear_closed_nts", "tear_closed"):
+        assert parallel[key] == serial[key], key
+
+
 @pytest.mark.parametrize("overrides, key", [
     ({"buckle_clearance": "-0.5"}, "buckle_clearance"),
     ({"suture_width": "20"}, "suture_width"),
@@ -97,5 +148,6 @@ def test_two_ranks_agree(coarse, tmp_path):
     assert code == 0, err
     parallel = last_json(out)["quantities"]
     for key in ("axial_length_change_mm", "iop_mmHg", "buckle_indentation_mm",
-                "retina_choroid_gap_mean_mm", "von_mises_max_MPa"):
+                "retina_choroid_gap_mean_mm", "von_mises_max_MPa", "max_penetration_mm",
+                "retina_contact_nodes", "retina_penalty_contact_area_mm2"):
         assert parallel[key] == pytest.approx(coarse.quantities[key], rel=1e-6, abs=1e-9), key
