@@ -150,7 +150,7 @@ class Parameters(SceneParameters):
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
         options: RunOptions | None = None):
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
-        model = _build(params, ctx)
+        model = BucklingModel(params, ctx)
         writer = buckling_output.Writer(model, ctx)
         writer.state(0.0, stage=0)
         try:
@@ -479,10 +479,6 @@ def _von_mises(u, stiffness):
     b_bar = J ** (-2.0 / 3.0) * F * F.T
     deviator = 2 * stiffness / J * (b_bar - ufl.tr(b_bar) / 3 * ufl.Identity(3))
     return ufl.sqrt(1.5 * ufl.inner(deviator, deviator))
-
-
-def _build(params: Parameters, ctx: RunContext) -> BucklingModel:
-    return BucklingModel(params, ctx)
 
 
 SCENE = Scene(name="scleral-buckling", kind="scene", parameters=Parameters, run=run,

@@ -18,7 +18,7 @@ from mpi4py import MPI
 from eyemech.problems import scleral_buckling
 from eyemech.problems.context import RunOptions
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import save_chart, stamp
 from eyemech.problems.sweep import run_sweep
 
 # an encircling band alone (no tire), so that its width is what touches the sclera:
@@ -73,10 +73,7 @@ def _chart(rows: list[dict], grid: dict, path: Path) -> None:
         ax.legend()
         ax.grid(alpha=0.3)
     fig.suptitle("scleral-buckling: encircling band alone, coarse eye, Q1P0")
-    fig.text(0.01, 0.01, stamp(), fontsize=7)
-    fig.tight_layout(rect=(0, 0.04, 1, 0.95))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_chart(fig, path, dpi=110, rect=(0, 0.04, 1, 0.95))
 
 
 STUDY = Study("buckling-sweep", "axial length and retina gap vs buckle indentation and band width",

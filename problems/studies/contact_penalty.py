@@ -12,7 +12,7 @@ from eyemech.problems import hertz
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import save_chart, stamp
 
 FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0)
 QUICK_FACTORS = (10.0, 100.0)
@@ -79,10 +79,7 @@ def _chart(rows: list[dict], path: Path) -> None:
     right.set_xlabel("penalty factor")
     right.legend(fontsize=8)
     right.set_title("hertz: cost")
-    fig.text(0.01, 0.01, stamp(), fontsize=6, color="grey")
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_chart(fig, path, dpi=110, rect=(0, 0.03, 1, 1))
 
 
 STUDY = Study(name="contact-penalty", summary="hertz: penetration and Newton iterations vs penalty factor",

@@ -27,7 +27,7 @@ from eyemech.problems import cook_membrane, liquid_sphere, sphere_inflation
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import save_chart, stamp
 
 FAMILIES = ("P2P1", "P2P0", "Q1P0", "Q2P1", "P1")
 SPHERE_SIZES = {"P2P1": (2.0, 1.0, 0.7), "P2P0": (2.0, 1.0, 0.7), "Q1P0": (2.0, 1.0, 0.7, 0.5),
@@ -148,10 +148,7 @@ def _chart(path: Path, rows: list[dict], error_key: str, title: str, ylabel: str
         extra(axes[0])
     axes[0].legend()
     fig.suptitle(title)
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_chart(fig, path, dpi=110, rect=(0, 0.03, 1, 1))
     return path
 
 
@@ -187,11 +184,8 @@ def pressure_pictures(out: Path, comm, n: int) -> Path | None:
             axes[row, column].imshow(plt.imread(folders[family] / name))
             axes[row, column].set_axis_off()
         axes[0, column].set_title(family)
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
-    fig.tight_layout()
     target = out / "cook_pressure_Q1P0_vs_Q2P1.png"
-    fig.savefig(target, dpi=80)
-    plt.close(fig)
+    save_chart(fig, target, dpi=80, rect=(0, 0, 1, 1))
     for folder in folders.values():
         shutil.rmtree(folder)
     return target

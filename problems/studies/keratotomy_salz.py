@@ -20,7 +20,7 @@ from mpi4py import MPI
 from eyemech.problems import keratotomy
 from eyemech.problems.context import RunOptions
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import save_chart, stamp
 
 SALZ_ZONES = {3.0: 9.06, 4.0: 6.44, 5.0: 5.23, 6.0: 2.29}
 SALZ_COUNTS = {3: 4.84, 4: 6.08}
@@ -70,10 +70,7 @@ def _chart(path: Path, zones: list[dict], counts: list[dict]) -> Path:
     ax.set_title("3.5 mm optical zone, 90 % depth, 15 mmHg", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    save_chart(fig, path, dpi=80, rect=(0, 0.03, 1, 1))
     return path
 
 

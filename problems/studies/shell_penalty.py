@@ -36,7 +36,7 @@ from eyemech.problems import plate_clamped
 from eyemech.problems.context import RunOptions
 from eyemech.problems.shells import Shell
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import save_chart, stamp
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -133,11 +133,8 @@ def _curve_chart(out: Path, rows: np.ndarray, parameters: dict) -> Path:
              title=f"clamped plate, P{parameters['degree']} crossed "
                    f"{parameters['divisions']}×{parameters['divisions']}")
     axis.legend()
-    fig.text(0.01, 0.01, stamp(), fontsize=6, color="grey")
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
     path = out / "shell_plate_nonlinear.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_chart(fig, path, dpi=110, rect=(0, 0.04, 1, 1))
     return path
 
 
@@ -160,11 +157,8 @@ def _charts(out: Path, divisions: int, penalty: np.ndarray, degree_rows: list) -
     right.loglog(penalty[:, 0], penalty[:, 2], "s-", color="C3")
     right.set(xlabel="penalty factor α", ylabel="condition number (1-norm estimate)",
               title="bending stiffness conditioning (free w dofs)")
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
     penalty_png = out / "shell_penalty.png"
-    fig.savefig(penalty_png, dpi=110)
-    plt.close(fig)
+    save_chart(fig, penalty_png, dpi=110, rect=(0, 0.04, 1, 1))
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     for degree, marker in ((2, "o-"), (3, "s-")):
@@ -181,11 +175,8 @@ def _charts(out: Path, divisions: int, penalty: np.ndarray, degree_rows: list) -
         axis.legend()
     left.set_title("clamped plate, crossed meshes, α = 1")
     right.set_title("accuracy against time (labels: divisions)")
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
     degree_png = out / "shell_degree.png"
-    fig.savefig(degree_png, dpi=110)
-    plt.close(fig)
+    save_chart(fig, degree_png, dpi=110, rect=(0, 0.04, 1, 1))
     return [penalty_png, degree_png]
 
 

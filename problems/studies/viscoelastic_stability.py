@@ -31,7 +31,7 @@ from eyemech.problems import uniaxial_relaxation, viscoelastic_reference as refe
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import save_chart, stamp
 
 RATIOS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 1.25, 2.0, 2.5, 5.0, 10.0)
 QUICK_RATIOS = (0.1, 0.5, 2.5)
@@ -116,10 +116,7 @@ def _chart(path: Path, rows: list[dict], histories: dict) -> Path:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.suptitle("Viscoelastic relaxation (λ = 1.2 step, μ∞ = μv): time-step stability", fontsize=10)
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    save_chart(fig, path, dpi=80, rect=(0, 0.03, 1, 1))
     return path
 
 
