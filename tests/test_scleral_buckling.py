@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import last_json, run_cli
+from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.context import RunOptions
 from eyemech.problems.parameters import ParameterError, build
@@ -112,9 +112,11 @@ def test_contact_two_ranks_agree(closing, tmp_path):
     assert code == 0, err
     parallel = last_json(out)["quantities"]["after_suturing"]
     serial = closing.quantities["after_suturing"]
-    for key in ("retina_penalty_contact_area_mm2", "retina_contact_force_N", "max_penetration_mm",
-                "retina_choroid_gap_nts_min_mm", "axial_length_change_mm", "iop_mmHg"):
+    for key in ("axial_length_change_mm", "iop_mmHg"):
         assert parallel[key] == pytest.approx(serial[key], rel=1e-6, abs=1e-9), key
+    for key in ("retina_penalty_contact_area_mm2", "retina_contact_force_N", "max_penetration_mm",
+                "retina_choroid_gap_nts_min_mm"):
+        assert parallel[key] == pytest.approx(serial[key], rel=CONTACT_RANKS_RTOL, abs=1e-9), key
     for key in ("retina_pressed_nodes", "tear_closed_nts", "tear_closed"):
         assert parallel[key] == serial[key], key
 
@@ -148,6 +150,8 @@ def test_two_ranks_agree(coarse, tmp_path):
     assert code == 0, err
     parallel = last_json(out)["quantities"]
     for key in ("axial_length_change_mm", "iop_mmHg", "buckle_indentation_mm",
-                "retina_choroid_gap_mean_mm", "von_mises_max_MPa", "max_penetration_mm",
-                "retina_contact_nodes", "retina_penalty_contact_area_mm2"):
+                "retina_choroid_gap_mean_mm", "von_mises_max_MPa", "retina_contact_nodes"):
         assert parallel[key] == pytest.approx(coarse.quantities[key], rel=1e-6, abs=1e-9), key
+    for key in ("max_penetration_mm", "retina_penalty_contact_area_mm2"):
+        assert parallel[key] == pytest.approx(coarse.quantities[key], rel=CONTACT_RANKS_RTOL,
+                                              abs=1e-9), key
