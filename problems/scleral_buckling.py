@@ -27,8 +27,11 @@ split into triangles), α = ``retina_penalty_factor`` · 6 c_retina / h (6c = E 
 incompressible neo-Hooke solid, h the element size along the wall), searched at every
 Newton iteration and coupled into the blocked [u, p, P] Jacobian.
 
-Not modelled yet (see README): the lens and the zonules (they carry no load in this
-operation: the liquid pressure acts on all sides of the lens).
+The lens (neo-Hooke, c = ``c_lens``) floats in the liquid, wetted on all sides (its
+surface is part of the cavity wall, so the liquid volume excludes it exactly), and
+hangs on the zonules: linear-elastic bars (E = ``zonule_modulus``, cross-section
+``zonule_area``) from its equatorial belt to the ciliary body's inner surface
+(:class:`~eyemech.problems.zonules.ZonuleBars`; why bars: see that module).
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ from mpi4py import MPI
 from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
 from eyemech.forms.buckle import Buckle, BuckleShape, smoothed_penalty_energy
 from eyemech.forms.contact import default_penalty
-from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye
+from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems.cavity import check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.contact_search import NodeToSurfaceContact
@@ -56,6 +59,7 @@ from eyemech.problems.scene import Scene
 from eyemech.problems.solid import solid_residual
 from eyemech.problems.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
 from eyemech.problems.sutures import SutureForces, SuturePoint
+from eyemech.problems.zonules import ZonuleBars
 from eyemech.problems import buckling_output
 
 import dolfinx
@@ -79,6 +83,14 @@ class Parameters(SceneParameters):
     c_choroid: float = field(0.0083, "neo-Hooke c of the choroid", "MPa")
     c_retina: float = field(0.0008, "neo-Hooke c of the retina", "MPa")
     c_optic_nerve: float = field(0.05, "neo-Hooke c of the optic nerve", "MPa")
+    c_lens: float = field(10.0, "neo-Hooke c of the lens (Table 1)", "MPa")
+    lens: bool = field(True, "model the lens and its zonules (off: the liquid fills its place)")
+    lens_diameter: float = field(9.0, "equatorial diameter of the lens (Rosen et al. 2006)", "mm")
+    lens_thickness: float = field(4.0, "axial thickness of the lens (Atchison & Smith 2000)", "mm")
+    zonule_modulus: float = field(100.0, "Young's modulus of the zonules' bars (seed 002)", "MPa")
+    zonule_area: float = field(
+        0.008, "cross-section of one zonule bar (a 0.1 mm fibre bundle; not given in seed 002)",
+        "mm²")
     buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
@@ -108,7 +120,8 @@ class Parameters(SceneParameters):
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
                               "c_choroid", "c_retina", "c_optic_nerve", "band_width",
                               "band_thickness", "tire_width", "suture_width", "penalty_factor",
-                              "retina_penalty_factor",
+                              "retina_penalty_factor", "c_lens", "lens_diameter",
+                              "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
         self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force", "detachment_height")
@@ -138,7 +151,8 @@ class Parameters(SceneParameters):
     def geometry(self) -> EyeGeometry:
         return EyeGeometry(cells_per_edge=RESOLUTIONS[self.resolution],
                            detachment_height=self.detachment_height,
-                           retina_thickness=self.retina_thickness)
+                           retina_thickness=self.retina_thickness, lens=self.lens,
+                           lens_diameter=self.lens_diameter, lens_thickness=self.lens_thickness)
 
     def buckle_shape(self) -> BuckleShape:
         return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height)
@@ -254,6 +268,7 @@ class BucklingModel:
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=ctx.options.newton, timings=ctx.timings)
         self.element_size = element_size
+        self.zonules = self._zonules() if params.lens else None
         self.retina = self._retina_contact() if params.retina_contact else None
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
@@ -282,6 +297,16 @@ class BucklingModel:
         held = dolfinx.fem.locate_dofs_topological(V, 2, self.eye.facets("optic_nerve_end"))
         bcs.append(dolfinx.fem.dirichletbc(np.zeros(3), held, V))
         return bcs
+
+    def _zonules(self) -> ZonuleBars:
+        with self.ctx.timings("mesh"):
+            pairs = zonule_pairs(self.geometry)
+        bars = ZonuleBars(self.u, pairs, self.params.zonule_modulus, self.params.zonule_area,
+                          self.bcs, block_spaces=[f.function_space for f in self.fields])
+        self.solver.residual_hooks.append(bars.residual_hook)
+        self.solver.jacobian_hooks.append(bars.jacobian_hook)
+        bars.allow_new_nonzeros(self.solver.problem.A)
+        return bars
 
     def _retina_contact(self) -> NodeToSurfaceContact:
         """Retina (slave nodes) on choroid (master triangles), penalty scaled from the
@@ -405,7 +430,8 @@ class BucklingModel:
         indentation = math.hypot(before[0], before[1]) - math.hypot(under[0], under[1])
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
-        return self._retina_contact_measures() | {
+        zonules = self.zonules.summary() if self.zonules is not None else {}
+        return self._retina_contact_measures() | zonules | {
             "axial_length_mm": axial,
             "axial_length_change_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
