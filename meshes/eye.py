@@ -19,7 +19,9 @@ Construction
   liquid fills through the tear. The zone ends where the bump reaches zero, so the
   retina is attached at its rim.
 - The tear removes the retina cells within ``tear_radius`` of its centre (on the
-  symmetry plane, so the model holds half of it).
+  symmetry plane, so the model holds half of it). ``tear_radius = 0`` and
+  ``detachment_height = 0`` give an intact, attached retina: then the whole model has
+  the cube's symmetries about the optic axis (mirror y → −y, swap x ↔ y).
 - The optic-nerve stub is the outer-surface patch within ``optic_nerve_radius`` of the
   posterior pole extruded backwards; its end is where the eye is held.
 - The lens (``lens=True``) is a separate hexahedral body inside the liquid: a half
@@ -96,7 +98,7 @@ class EyeGeometry:
     detachment_half_width: float = 40.0    # azimuth half-width about the tear (deg)
     detachment_height: float = 0.5         # subretinal gap at the centre (mm)
     tear_angle: float = 88.0               # polar angle of the tear centre (deg)
-    tear_radius: float = 1.6               # mm
+    tear_radius: float = 1.6               # mm (0: no tear)
     optic_nerve_radius: float = 1.5
     optic_nerve_length: float = 3.0
     coat_layers: int = 2
@@ -329,6 +331,8 @@ def _tear_cells(geo: EyeGeometry, points, hexes, retina: np.ndarray) -> np.ndarr
     unit = centroids / np.linalg.norm(centroids, axis=1, keepdims=True)
     distance = geo.sclera_radius * np.arccos(np.clip(unit @ centre_dir, -1, 1))
     tear = retina & (distance < geo.tear_radius)
+    if geo.tear_radius == 0:  # no tear (an intact retina, e.g. to check symmetry)
+        return tear
     if not tear.any():
         raise MeshError(f"resolution too coarse to resolve the tear (radius {geo.tear_radius} mm): "
                         "no retina cell falls inside it; raise cells_per_edge or tear_radius")
@@ -470,7 +474,8 @@ def _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index,
 def zonule_pairs(geo: EyeGeometry, grid: EyeGrid | None = None,
                  per_node: int = 2) -> np.ndarray:
     """(n, 2, 3) reference coordinates of the zonules' bars: each node of the lens's
-    insertion belt (:func:`lens_belt`) joined to its ``per_node`` nearest nodes of the
+    insertion belt (:func:`lens_belt`) joined to its ``per_node`` nearest nodes (and
+    any tied with the last) of the
     ciliary body's inner surface (the inner wall between the limbus and the ora
     serrata). Pure numpy, the same on every rank; the scene finds the nodes by their
     coordinates."""
@@ -485,9 +490,11 @@ def zonule_pairs(geo: EyeGeometry, grid: EyeGrid | None = None,
     if len(ciliary) < per_node:
         raise MeshError("no ciliary-body nodes for the zonules to attach to")
     distance = np.linalg.norm(grid.points[belt][:, None, :] - grid.points[ciliary][None], axis=2)
-    nearest = np.argsort(distance, axis=1, kind="stable")[:, :per_node]
-    lens_end = np.repeat(grid.points[belt], per_node, axis=0)
-    return np.stack([lens_end, grid.points[ciliary[nearest.ravel()]]], axis=1)
+    # every node as near as the per_node-th nearest (ties all taken, so that the bars
+    # keep the mesh's symmetries instead of depending on the node numbering)
+    cutoff = np.sort(distance, axis=1)[:, per_node - 1:per_node] * (1 + 1e-9)
+    lens_index, wall_index = np.nonzero(distance <= cutoff)
+    return np.stack([grid.points[belt[lens_index]], grid.points[ciliary[wall_index]]], axis=1)
 
 
 def to_gmsh(grid: EyeGrid, model) -> None:

@@ -103,7 +103,9 @@ class Parameters(SceneParameters):
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
     suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
                                                "suture meridians, degrees from the tear", "deg")
-    detachment_height: float = field(0.5, "subretinal gap at the detachment's centre", "mm")
+    detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
+                                     "(0: the retina is attached)", "mm")
+    tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm")
     retina_thickness: float = field(0.2, "retina thickness", "mm")
     penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
     retina_penalty_factor: float = field(
@@ -124,7 +126,8 @@ class Parameters(SceneParameters):
                               "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force", "detachment_height")
+        self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force",
+                                 "detachment_height", "tear_radius")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
@@ -152,6 +155,7 @@ class Parameters(SceneParameters):
         return EyeGeometry(cells_per_edge=RESOLUTIONS[self.resolution],
                            detachment_height=self.detachment_height,
                            retina_thickness=self.retina_thickness, lens=self.lens,
+                           tear_radius=self.tear_radius,
                            lens_diameter=self.lens_diameter, lens_thickness=self.lens_thickness)
 
     def buckle_shape(self) -> BuckleShape:
@@ -269,7 +273,8 @@ class BucklingModel:
                                       options=ctx.options.newton, timings=ctx.timings)
         self.element_size = element_size
         self.zonules = self._zonules() if params.lens else None
-        self.retina = self._retina_contact() if params.retina_contact else None
+        self.detached = "retina_detached" in self.eye.names  # false: detachment_height = 0
+        self.retina = self._retina_contact() if params.retina_contact and self.detached else None
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
@@ -338,8 +343,14 @@ class BucklingModel:
         theta = math.radians(self.buckle_angle)
         under = np.array([[0.0, geo.sclera_radius * math.sin(theta), self.axial_position]])
         self.under_buckle = NodeProbe(V, under, outer)
+        if not self.detached:
+            self.pairing, self.tear_rim = None, np.zeros(0, bool)
+            return
         self.pairing = SurfacePairing(V, self.eye.facets("retina_detached"),
                                       self.eye.facets("choroid_detached"))
+        if "tear_edge" not in self.eye.names:
+            self.tear_rim = np.zeros(len(self.pairing.slave_g), bool)
+            return
         tear = facet_nodes(V, self.eye.facets("tear_edge"))
         owned = V.dofmap.index_map.size_local
         tear_global = V.dofmap.index_map.local_to_global(tear[tear < owned].astype(np.int32))
@@ -421,7 +432,8 @@ class BucklingModel:
 
     def measure(self) -> dict:
         with self.ctx.timings("contact_search"):
-            gaps = self.pairing.gaps(self.u)
+            # an attached retina (detachment_height = 0): no subretinal gap to measure
+            gaps = self.pairing.gaps(self.u) if self.pairing is not None else np.zeros(1)
         apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
         axial = apex[2] - pole[2]
         reference_axial = self.apex.nodes[0][2] - self.pole.nodes[0][2]
@@ -444,7 +456,7 @@ class BucklingModel:
             "retina_contact_area_mm2": 2.0 * detached_area * float(in_contact.mean()),
             "retina_choroid_gap_mean_mm": float(gaps.mean()),
             # closed: every lifted retina node on the tear's rim is back on the choroid
-            "tear_closed": bool(self.tear_rim.any()
+            "tear_closed": bool(self.tear_rim.any() and self.pairing is not None
                                 and np.all(gaps[self.tear_rim] < self.params.tear_closure_tolerance)),
             "von_mises_max_MPa": self.von_mises.update(),
             "suture_force_N": float(self.sutures.magnitude),
@@ -478,6 +490,8 @@ class BucklingModel:
                 "retina_contact_force_N": 2.0 * summary["contact_normal_force"]}
 
     def detached_area(self) -> float:
+        if not self.detached:
+            return 0.0
         if not hasattr(self, "_detached_area"):
             form = dolfinx.fem.form(dolfinx.fem.Constant(self.eye.mesh, 1.0)
                                     * self.eye.ds()(self.eye.tag("retina_detached")))
