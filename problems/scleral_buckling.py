@@ -96,6 +96,8 @@ class Parameters(SceneParameters):
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial)", "mm")
     tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
+    buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
+                                        "(capped at half their height)", "mm")
     indentation: float = field(1.0, "radial inward travel of the buckle in step 2", "mm")
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
@@ -107,12 +109,17 @@ class Parameters(SceneParameters):
                                      "(0: the retina is attached)", "mm")
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm")
     retina_thickness: float = field(0.2, "retina thickness", "mm")
-    penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
+    penalty_factor: float = field(
+        30.0, "buckle–sclera penalty α = factor · E_sclera / h (30: the hertz study's choice; "
+        "100 halves the penetration and doubles the Newton iterations)")
     retina_penalty_factor: float = field(
         100.0, "retina–choroid penalty α = factor · E_retina / h (E = 6 c_retina)")
     contact_smoothing: float = field(
         0.0, "penalty kink rounded off over gaps |g| < ε (buckle and retina contact; "
         "0 = plain kink)", "mm")
+    contact_integration: Literal["gauss", "nodal"] = field(
+        "gauss", "buckle–sclera penalty evaluated at Gauss points or at the nodes (trapezoidal "
+        "rule: node-to-rigid-surface contact)")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
@@ -126,7 +133,7 @@ class Parameters(SceneParameters):
                               "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force",
+        self.require_nonnegative("buckle_corner_radius", "tire_height", "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
@@ -159,7 +166,8 @@ class Parameters(SceneParameters):
                            lens_diameter=self.lens_diameter, lens_thickness=self.lens_thickness)
 
     def buckle_shape(self) -> BuckleShape:
-        return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height)
+        return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,
+                           self.buckle_corner_radius)
 
     def stiffness(self) -> dict[str, float]:
         return {t: getattr(self, f"c_{t}") for t in TISSUES}
@@ -199,6 +207,17 @@ def _max_step(params: Parameters) -> float:
     if params.indentation <= 0:
         return 1 / 4
     return min(1 / 4, 0.25 * thickness / params.indentation / 3.0)
+
+
+def _contact_quadrature(integration: str, family) -> dict:
+    """Quadrature of the buckle's penalty integral. ``nodal``: Gauss–Lobatto of degree 1
+    (the trapezoidal rule, points at the face's vertices; Q1 faces only), so the
+    penalty acts on the sclera's nodes as in a node-to-rigid-surface scheme."""
+    if integration == "gauss":
+        return {"quadrature_degree": family.quadrature_degree}
+    if family.displacement_degree != 1:
+        raise ParameterError("contact_integration", "nodal contact needs a Q1 displacement")
+    return {"quadrature_rule": "GLL", "quadrature_degree": 1}
 
 
 def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
@@ -260,8 +279,9 @@ class BucklingModel:
                              self.indentation)
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
+        contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
         contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
-                                          ds(self.eye.tag("sclera_outer")))
+                                          contact_ds(self.eye.tag("sclera_outer")))
         residual += ufl.derivative(contact, self.u, v)
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
