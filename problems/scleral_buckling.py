@@ -156,7 +156,8 @@ class Parameters(SceneParameters):
         try:
             geometry.validate()
         except Exception as err:
-            raise ParameterError("resolution", str(err)) from None
+            key = "lens_diameter" if "lens" in str(err) else "resolution"
+            raise ParameterError(key, str(err)) from None
 
     def geometry(self) -> EyeGeometry:
         return EyeGeometry(cells_per_edge=RESOLUTIONS[self.resolution],

@@ -128,6 +128,9 @@ def test_contact_two_ranks_agree(closing, tmp_path):
     ({"c_sclera": "0"}, "c_sclera"),
     ({"buckle_position": "40"}, "buckle_position"),
     ({"detachment_height": "-1"}, "detachment_height"),
+    ({"lens_diameter": "19"}, "lens_diameter"),       # the lens would not fit in the eye
+    ({"zonule_area": "0"}, "zonule_area"),
+    ({"tear_radius": "-1"}, "tear_radius"),
 ])
 def test_bad_input_is_refused_before_solving(overrides, key):
     with pytest.raises(ParameterError) as info:
