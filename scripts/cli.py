@@ -7,7 +7,9 @@
     eyemech bench NAME [--out docs/bench]
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
-failed (the last converged state and results.json with status "failed" are kept).
+failed (the last converged state and results.json with status "failed" are kept),
+130 / 143 stopped by SIGINT / SIGTERM after writing a checkpoint (128 + the signal
+number; continue with ``eyemech run NAME --resume DIR``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_SOLVE_FAILED = 3
+EXIT_INTERRUPTED_BASE = 128  # + the signal number, as a shell reports a signal
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -42,12 +45,18 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--quiet", action="store_true", help="no progress bar")
         p.add_argument("--no-fields", action="store_true", help="do not write VTX fields")
         p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
+        p.add_argument("--checkpoint-every", default="10m", metavar="N|Tm",
+                       help="write a checkpoint every N steps or T minutes (10m; 0 = only on "
+                            "SIGINT/SIGTERM); kept in OUT/checkpoints/")
 
     p_run = sub.add_parser("run", help="run one scene")
     common(p_run)
     p_run.add_argument("--out", help="output folder (default results/NAME)")
     p_run.add_argument("--json", action="store_true",
                        help="print results.json as the last line on stdout")
+    p_run.add_argument("--resume", metavar="DIR",
+                       help="continue from the last checkpoint in DIR (a run's output folder; "
+                            "its parameters are used; the output goes to DIR unless --out)")
 
     p_sweep = sub.add_parser("sweep", help="parameter study over a grid")
     common(p_sweep)
@@ -75,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     from mpi4py import MPI
 
     from eyemech import problems
+    from eyemech.problems.checkpoint import CheckpointError, Interrupted
     from eyemech.problems.driver import SolveFailure
     from eyemech.problems.parameters import ParameterError
     from eyemech.meshes import MeshError
@@ -104,9 +114,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyError as err:
         say(f"eyemech: error: {err.args[0]}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except (ParameterError, MeshError) as err:
+    except (ParameterError, MeshError, CheckpointError) as err:
         say(f"eyemech: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Interrupted as err:
+        say(f"eyemech: {err}", file=sys.stderr)
+        return EXIT_INTERRUPTED_BASE + err.signum
     except SolveFailure as err:
         say(f"eyemech: solve failed: {err}", file=sys.stderr)
         return EXIT_SOLVE_FAILED
@@ -179,17 +192,29 @@ def _options(args):
     from eyemech.problems.driver import NewtonOptions
     from eyemech.problems.parameters import parse_assignments
 
+    from eyemech.problems.checkpoint import CheckpointOptions
+    from eyemech.problems.parameters import ParameterError
+
     newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()})
+    try:
+        steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)
+    except ValueError as err:
+        raise ParameterError("--checkpoint-every", str(err)) from None
+    checkpoint = CheckpointOptions(every_steps=steps, every_minutes=minutes,
+                                   resume=Path(args.resume) if getattr(args, "resume", None) else None)
     return RunOptions(quiet=args.quiet, fields=not args.no_fields, pictures=not args.no_pictures,
-                      newton=newton)
+                      newton=newton, checkpoint=checkpoint)
 
 
 def _run(scene, overrides, args, options, comm, say) -> int:
     from eyemech.problems.driver import SolveFailure
     from eyemech.problems.parameters import build
 
+    if args.resume:
+        overrides = _resumed_parameters(scene, Path(args.resume), overrides, comm)
     params = build(scene.parameters, overrides)  # raises before anything is created
-    out = Path(args.out) if args.out else Path("results") / scene.name
+    out = Path(args.out) if args.out else Path(args.resume) if args.resume \
+        else Path("results") / scene.name
     try:
         result = scene.run(params, comm=comm, out=out, options=options)
     except SolveFailure:
@@ -201,6 +226,23 @@ def _run(scene, overrides, args, options, comm, say) -> int:
     else:
         _summary(result, out, say)
     return 0
+
+
+def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
+    """The checkpoint's parameters; --set/--config may repeat them but not change them
+    (the checkpoint then refuses). No checkpoint in ``folder``: a fresh start."""
+    from eyemech.problems.checkpoint import CheckpointError, latest, read_meta
+
+    found = latest(folder) if comm.rank == 0 else None
+    meta = read_meta(found) if found is not None else None
+    meta = comm.bcast(meta, root=0)
+    if meta is None:
+        logging.getLogger("eyemech").warning("no checkpoint in %s: starting from the beginning",
+                                             folder)
+        return overrides
+    if meta["scene"] != scene.name:
+        raise CheckpointError(f"the checkpoint in {folder} is of scene '{meta['scene']}'")
+    return {**meta["parameters"], **overrides}
 
 
 def _summary(result, out: Path, say) -> None:
