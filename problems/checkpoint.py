@@ -142,6 +142,7 @@ class Checkpoints:
         self._kill = _parse_kill(os.environ.get(KILL_ENV, ""))
         self.resume_meta: dict[str, Any] | None = None
         self.resumed_from: Path | None = None
+        self.restore_seconds = 0.0
         if self.options.resume is not None:
             self._load_meta(Path(self.options.resume))
 
@@ -326,6 +327,7 @@ class Checkpoints:
         self.resumed_from = Path(meta["_folder"])
 
     def _restore(self, meta: dict[str, Any]) -> None:
+        start = time.perf_counter()
         folder = Path(meta["_folder"])
         saved = set(meta["functions"]) | set(meta["constants"]) | set(meta["values"])
         if saved != set(self.entries):
@@ -352,6 +354,7 @@ class Checkpoints:
         self.result.pictures[:] = result["pictures"]
         self.steps_done = meta["steps_done"]
         self.completed_paths = [list(p) for p in meta["completed_paths"]]
+        self.restore_seconds = time.perf_counter() - start
 
     # -- signals ------------------------------------------------------------------------
     def _install_signal_handlers(self) -> None:
@@ -383,6 +386,7 @@ class Checkpoints:
             out["write_seconds_total"] = round(sum(self.write_seconds), 4)
         if self.resumed_from is not None:
             out["resumed_from"] = str(self.resumed_from)
+            out["restore_seconds"] = round(self.restore_seconds, 4)
         return out
 
 

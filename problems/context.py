@@ -78,6 +78,8 @@ class RunContext:
             self.result.message = (f"resumed from {self.checkpoints.resumed_from}, but the run "
                                    "never reached the checkpoint's path (does the scene pass "
                                    "ctx.checkpoints to follow_path?)")
+        if self.checkpoints.write_seconds:
+            self.timings.add("checkpoint", sum(self.checkpoints.write_seconds))
         self.result.timings = self.timings.as_dict()
         self.result.checkpoints = self.checkpoints.summary()
         # all ranks are here
