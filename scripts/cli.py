@@ -2,7 +2,8 @@
 
     eyemech list [-v]
     eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
-    eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R]
+                     [--checkpoint-every N|Tm] [--resume DIR]
+    eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R] [--resume]
     eyemech study NAME|all|list [--quick] [--out DIR]
     eyemech bench NAME [--out docs/bench]
 
@@ -200,8 +201,9 @@ def _options(args):
         steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)
     except ValueError as err:
         raise ParameterError("--checkpoint-every", str(err)) from None
-    checkpoint = CheckpointOptions(every_steps=steps, every_minutes=minutes,
-                                   resume=Path(args.resume) if getattr(args, "resume", None) else None)
+    # `run --resume DIR` names the folder; `sweep --resume` (a flag) resumes case by case
+    resume = Path(args.resume) if args.command == "run" and args.resume else None
+    checkpoint = CheckpointOptions(every_steps=steps, every_minutes=minutes, resume=resume)
     return RunOptions(quiet=args.quiet, fields=not args.no_fields, pictures=not args.no_pictures,
                       newton=newton, checkpoint=checkpoint)
 
@@ -215,9 +217,11 @@ def _run(scene, overrides, args, options, comm, say) -> int:
     params = build(scene.parameters, overrides)  # raises before anything is created
     out = Path(args.out) if args.out else Path(args.resume) if args.resume \
         else Path("results") / scene.name
+    from eyemech.problems.checkpoint import Interrupted
+
     try:
         result = scene.run(params, comm=comm, out=out, options=options)
-    except SolveFailure:
+    except (SolveFailure, Interrupted):
         if args.json:
             say(json.dumps(json.loads((out / "results.json").read_text())) if comm.rank == 0 else "")
         raise
@@ -233,9 +237,16 @@ def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
     (the checkpoint then refuses). No checkpoint in ``folder``: a fresh start."""
     from eyemech.problems.checkpoint import CheckpointError, latest, read_meta
 
-    found = latest(folder) if comm.rank == 0 else None
-    meta = read_meta(found) if found is not None else None
-    meta = comm.bcast(meta, root=0)
+    meta, error = None, None
+    if comm.rank == 0:  # rank 0 reads; an unreadable checkpoint must not leave the others waiting
+        try:
+            found = latest(folder)
+            meta = read_meta(found) if found is not None else None
+        except (OSError, ValueError) as err:
+            error = f"cannot read the checkpoint in {folder}: {err}"
+    meta, error = comm.bcast((meta, error), root=0)
+    if error:
+        raise CheckpointError(error)
     if meta is None:
         logging.getLogger("eyemech").warning("no checkpoint in %s: starting from the beginning",
                                              folder)
