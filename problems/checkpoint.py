@@ -140,6 +140,7 @@ class Checkpoints:
         self._stop_signal = 0
         self._handlers: dict[int, Any] = {}
         self._kill = _parse_kill(os.environ.get(KILL_ENV, ""))
+        self._watching: tuple[Any, Callable] | None = None  # (solver, hook) of the test hook
         self.resume_meta: dict[str, Any] | None = None
         self.resumed_from: Path | None = None
         self.restore_seconds = 0.0
@@ -218,15 +219,15 @@ class Checkpoints:
                 elif rank is None or rank == self.comm.rank:
                     os.kill(os.getpid(), signal.SIGTERM)
         solver.residual_hooks.append(hook)
-        self._remove_hook = (solver, hook)
+        self._watching = (solver, hook)
 
     def step_done(self, path_state: dict[str, Any]) -> None:
         """After a converged step: write a checkpoint when due, stop when asked to."""
         self.steps_done += 1
-        if hasattr(self, "_remove_hook"):
-            solver, hook = self._remove_hook
+        if self._watching is not None:
+            solver, hook = self._watching
             solver.residual_hooks.remove(hook)
-            del self._remove_hook
+            self._watching = None
         stop = self.comm.allreduce(self._stop_signal, op=MPI.MAX)
         due = self.comm.bcast(self._due() if self.comm.rank == 0 else None, root=0)
         if self.enabled and (due or stop):
@@ -406,14 +407,16 @@ def _set_cell_values(f, cells: np.ndarray, values: np.ndarray, name: str) -> Non
     V = f.function_space
     mesh = V.mesh
     local = np.asarray(mesh.topology.original_cell_index, dtype=np.int64)  # owned + ghosts
+    if len(cells) == 0:
+        raise CheckpointError(f"'{name}': the checkpoint has no cells")
     order = np.argsort(cells)
-    at = np.searchsorted(cells[order], local)
-    at = np.minimum(at, len(cells) - 1)
-    if len(cells) == 0 or not np.array_equal(cells[order][at], local):
+    cells, values = cells[order], values[order]
+    at = np.minimum(np.searchsorted(cells, local), len(cells) - 1)
+    if not np.array_equal(cells[at], local):
         raise CheckpointError(f"'{name}': the checkpoint lacks cells of this mesh")
     bs = V.dofmap.bs
     dofs = V.dofmap.list[:len(local)]
-    rows = values[order][at].reshape(len(local), dofs.shape[1], bs)
+    rows = values[at].reshape(len(local), dofs.shape[1], bs)
     f.x.array.reshape(-1, bs)[dofs] = rows
     f.x.scatter_forward()
 

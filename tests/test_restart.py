@@ -24,7 +24,6 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from conftest import BIN, CONTACT_RANKS_RTOL, run_cli
