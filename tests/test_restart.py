@@ -198,3 +198,39 @@ def test_sweep_resume_skips_finished_cases_and_reruns_failed_ones(tmp_path):
     assert json.loads(failed.read_text())["status"] == "ok"
     radii = [float(r["inner_radius_deformed"]) for r in rows]
     assert radii[0] < radii[1] < radii[2]
+
+
+@pytest.mark.parametrize("text, every", [("5", (5, 0.0)), ("0", (0, 0.0)), ("10m", (0, 10.0)),
+                                         ("0.5min", (0, 0.5))])
+def test_checkpoint_every_reads_steps_or_minutes(text, every):
+    from eyemech.problems.checkpoint import CheckpointOptions
+
+    assert CheckpointOptions.parse_every(text) == every
+
+
+def test_latest_skips_uncommitted_and_incomplete_checkpoints(tmp_path):
+    folder = tmp_path / "checkpoints"
+    for name, meta in (("ckpt_000002", True), ("ckpt_000010", True), ("ckpt_000011", False),
+                       (".tmp_ckpt_000012", True)):
+        (folder / name).mkdir(parents=True)
+        if meta:
+            (folder / name / "meta.json").write_text("{}")
+    assert latest(tmp_path) == folder / "ckpt_000010"
+    assert latest(folder) == folder / "ckpt_000010"
+    assert latest(tmp_path / "nothing") is None
+
+
+def test_time_based_checkpoints_are_due_after_the_interval(monkeypatch):
+    from mpi4py import MPI
+
+    from eyemech.problems import checkpoint
+    from eyemech.problems.results import Result
+
+    clock = [100.0]
+    monkeypatch.setattr(checkpoint.time, "monotonic", lambda: clock[0])
+    points = checkpoint.Checkpoints("x", {}, Result("x", {}), MPI.COMM_SELF, None,
+                                    checkpoint.CheckpointOptions(every_minutes=2.0))
+    clock[0] += 119.0
+    assert not points._due()
+    clock[0] += 1.0
+    assert points._due()
