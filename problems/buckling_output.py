@@ -18,9 +18,18 @@ class Writer:
         self.model, self.ctx = model, ctx
         folder = ctx.out if ctx.options.fields else None
         model.u.name = "displacement"
-        self.vtx = FieldWriter(folder, ctx.comm, [model.u])
+        # a resumed run starts a new VTX file (the old one keeps the steps before the
+        # checkpoint: VTX cannot append); the .pvd series continues (docs/restart.md)
+        resumed = ctx.checkpoints.resumed_from
+        stem = "fields" if resumed is None else f"fields_from_{resumed.name}"
+        self.earlier = sorted(p.name for p in folder.glob("fields*.bp")) \
+            if resumed is not None and folder is not None else []
+        self.vtx = FieldWriter(folder, ctx.comm, [model.u], stem=stem)
         self.series = PyvistaSeries(folder, ctx.comm)
         self.pictures = ctx.options.pictures and ctx.out is not None
+        ctx.checkpoints.value("pyvista_series", lambda: self.series.entries,
+                              lambda saved: self.series.entries.__setitem__(
+                                  slice(None), [tuple(e) for e in saved]))
 
     def state(self, load: float, stage: int, picture: bool = False) -> None:
         if not (self.vtx.files or self.pictures):
@@ -80,7 +89,7 @@ class Writer:
 
     def close(self) -> None:
         self.vtx.close()
-        self.ctx.result.fields = self.vtx.files + self.series.files
+        self.ctx.result.fields = self.earlier + self.vtx.files + self.series.files
 
 
 def _buckle_outline(model):

@@ -366,6 +366,39 @@ class NodeToSurfaceContact:
         nodes = self.slave_blocks[state.active[touching]]
         return self.reference[nodes], pressure[touching]
 
+    # -- checkpoints (docs/restart.md) ------------------------------------------------------
+    def sticky_state(self) -> np.ndarray:
+        """The sticky memory -- each slave node's previous master triangle -- as reference
+        coordinates (slave node, triangle centroid), gathered on every rank: rows (n, 6)
+        that do not depend on the partition, so a checkpoint restarts on other ranks."""
+        previous = getattr(self, "_previous", None)
+        local = np.zeros((0, 6))
+        if previous is not None and len(previous) == len(self.slave_blocks):
+            centroids = self._reference_master()[self.triangle_nodes[previous]].mean(axis=1)
+            local = np.hstack([self.reference[self.slave_blocks], centroids])
+        return np.vstack(self.comm.allgather(local))
+
+    def restore_sticky_state(self, saved: np.ndarray) -> None:
+        saved = np.asarray(saved, dtype=float).reshape(-1, 6)
+        self._previous = None
+        if len(saved) == 0 or len(self.slave_blocks) == 0:
+            return
+        distance, row = cKDTree(saved[:, :3]).query(self.reference[self.slave_blocks])
+        if distance.max() > 1e-9 * (1.0 + np.abs(saved[:, :3]).max()):
+            raise ValueError("contact checkpoint: slave nodes differ from this mesh's")
+        centroids = self._reference_master()[self.triangle_nodes].mean(axis=1)
+        # nearest centroid: the same triangle unless the quadrilaterals were split along
+        # the other diagonal (then the neighbour on the same plane)
+        self._previous = cKDTree(centroids).query(saved[row, 3:])[1]
+
+    def _reference_master(self) -> np.ndarray:
+        local_global = self.imap.local_to_global(self.master_local.astype(np.int32))
+        pieces = self.comm.allgather((local_global, self.reference[self.master_local]))
+        positions = np.empty((len(self.master_nodes), 3))
+        positions[np.searchsorted(self.master_nodes, np.concatenate([p[0] for p in pieces]))] = \
+            np.vstack([p[1] for p in pieces])
+        return positions
+
     def refuse_initial_penetration(self, key: str, tolerance: float = 0.0) -> None:
         """ParameterError naming ``key`` when slave nodes start inside the master body
         (deeper than ``tolerance`` but within the search depth)."""

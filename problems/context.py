@@ -11,6 +11,7 @@ from typing import Any
 
 from mpi4py import MPI
 
+from eyemech.problems.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.driver import NewtonOptions, SolveFailure
 from eyemech.problems.parameters import SceneParameters
 from eyemech.problems.results import Result, Timings, peak_memory_mb, write_json_atomic
@@ -26,6 +27,7 @@ class RunOptions:
     fields: bool = True           # write VTX fields
     pictures: bool = True         # write PNG pictures (pyvista, rank 0)
     newton: NewtonOptions = dataclasses.field(default_factory=NewtonOptions)
+    checkpoint: CheckpointOptions = dataclasses.field(default_factory=CheckpointOptions)
 
 
 class RunContext:
@@ -33,7 +35,11 @@ class RunContext:
 
     On leaving, ``results.json`` is written atomically by rank 0 with status ``ok``,
     or ``failed`` and the message when a :class:`SolveFailure` escapes (the failure
-    is then re-raised for the caller or the command line to report).
+    is then re-raised for the caller or the command line to report), or ``interrupted``
+    when SIGINT/SIGTERM stopped the run after a checkpoint (:class:`Interrupted`).
+
+    ``ctx.checkpoints`` is where a stepped scene registers its state for checkpoints
+    (see :mod:`eyemech.problems.checkpoint`); pass it to ``follow_path``.
     """
 
     def __init__(self, scene: str, params: SceneParameters, comm: MPI.Comm | None,
@@ -44,6 +50,8 @@ class RunContext:
         self.options = options or RunOptions()
         self.timings = Timings()
         self.result = Result(scene=scene, parameters=params.as_dict(), mpi_size=self.comm.size)
+        self.checkpoints = Checkpoints(scene, self.result.parameters, self.result, self.comm,
+                                       self.out, self.options.checkpoint)
         if self.out is not None and self.comm.rank == 0:
             self.out.mkdir(parents=True, exist_ok=True)
         self.comm.Barrier()
@@ -52,7 +60,11 @@ class RunContext:
         return self
 
     def __exit__(self, kind, error, tb) -> bool:
-        if isinstance(error, SolveFailure):
+        self.checkpoints.restore_signal_handlers()
+        if isinstance(error, Interrupted):
+            self.result.status = "interrupted"
+            self.result.message = str(error)
+        elif isinstance(error, SolveFailure):
             self.result.status = "failed"
             kept = f" Converged steps are in {self.out}: {', '.join(self.result.fields)}." \
                 if self.out is not None and self.result.fields else ""
@@ -60,11 +72,25 @@ class RunContext:
         elif error is not None:
             self.result.status = "error"
             self.result.message = "".join(traceback.format_exception_only(kind, error)).strip()
+        if error is None and self.checkpoints.resume_meta is not None:
+            # the scene never reached the checkpoint's path: its numbers are not a resume
+            self.result.status = "error"
+            self.result.message = (f"resumed from {self.checkpoints.resumed_from}, but the run "
+                                   "never reached the checkpoint's path (does the scene pass "
+                                   "ctx.checkpoints to follow_path?)")
+        if self.checkpoints.write_seconds:
+            self.timings.add("checkpoint", sum(self.checkpoints.write_seconds))
         self.result.timings = self.timings.as_dict()
-        collective = error is None or isinstance(error, SolveFailure)  # all ranks are here
+        self.result.checkpoints = self.checkpoints.summary()
+        # all ranks are here
+        collective = error is None or isinstance(error, (SolveFailure, Interrupted))
         memory = peak_memory_mb()
         self.result.peak_memory_mb = self.comm.allreduce(memory, op=MPI.MAX) if collective else memory
         self.write()
+        if self.result.status == "error" and error is None:
+            from eyemech.problems.checkpoint import CheckpointError
+
+            raise CheckpointError(self.result.message)
         return False
 
     @property

@@ -18,7 +18,7 @@ import dataclasses
 import logging
 import sys
 import time
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
@@ -31,6 +31,9 @@ import dolfinx.fem.petsc
 from petsc4py import PETSc
 
 from eyemech.problems.results import Timings
+
+if TYPE_CHECKING:
+    from eyemech.problems.checkpoint import Checkpoints
 
 log = logging.getLogger("eyemech")
 
@@ -236,11 +239,19 @@ class StepRecord:
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 stepping: Stepping, *, on_converged: Callable[[StepRecord], None] | None = None,
-                label: str = "", quiet: bool = False) -> list[StepRecord]:
+                label: str = "", quiet: bool = False,
+                checkpoints: "Checkpoints | None" = None) -> list[StepRecord]:
     """Solve along the path: ``apply(value, increment)`` sets loads (or time) for the
     target value, Newton solves, and ``on_converged`` records and updates history
     variables. A failed solve restores the last converged state and halves the
-    increment; easy solves grow it."""
+    increment; easy solves grow it.
+
+    With ``checkpoints`` (``ctx.checkpoints``) a checkpoint is written after a step when
+    due, SIGINT/SIGTERM stop the run after the current step (raising ``Interrupted``),
+    and a resumed run skips the paths finished before its checkpoint and continues the
+    path it is in. ``apply`` must then depend on its arguments only (it is called again
+    with the checkpoint's value); any other state must be registered with the
+    checkpoints."""
     span = stepping.end - stepping.start
     if span <= 0:
         raise ValueError("stepping.end must be greater than stepping.start")
@@ -249,11 +260,23 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     value = stepping.start
     increment = stepping.initial_step * span
     records: list[StepRecord] = []
-    bar = _progress(solver, label, quiet)
     step = 0
+    resumed = checkpoints.enter_path(label) if checkpoints is not None else None
+    if resumed is not None:
+        if "skip" in resumed:  # finished before the checkpoint: its state comes later
+            records = [StepRecord(**r) for r in resumed["skip"]]
+            apply(stepping.end, records[-1].increment if records else 0.0)
+            checkpoints.leave_path([dataclasses.asdict(r) for r in records])
+            return records
+        value, increment, step = resumed["value"], resumed["increment"], resumed["step"]
+        records = [StepRecord(**r) for r in resumed["records"]]
+        apply(value, records[-1].increment if records else 0.0)
+    bar = _progress(solver, label, quiet)
     while value < stepping.end - 1e-12 * span:
         step += 1
         state = solver.save_state()
+        if checkpoints is not None:
+            checkpoints.watch_step(solver)
         cuts = 0
         while True:
             next_stop = next(s for s in stops if s > value + 1e-12 * span)
@@ -285,7 +308,17 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         if any(abs(target - s) <= 1e-12 * span for s in stops):
             # a new stage (or output interval) starts: its difficulty is not the last one's
             increment = max(increment, stepping.initial_step * span)
+        if checkpoints is not None:
+            try:
+                checkpoints.step_done({"label": label, "step": step, "value": value,
+                                       "increment": increment,
+                                       "records": [dataclasses.asdict(r) for r in records]})
+            except BaseException:
+                bar.close()
+                raise
     bar.close()
+    if checkpoints is not None:
+        checkpoints.leave_path([dataclasses.asdict(r) for r in records])
     return records
 
 

@@ -141,6 +141,15 @@ class Cornea:
         return NonlinearSolver(self.residual_blocks, [self.u, self.p], self.bcs,
                                options=ctx.options.newton, timings=ctx.timings)
 
+    def register_checkpoint(self, checkpoints, label: str, series: dict[str, list]) -> None:
+        """The state of this cornea's run for checkpoints (docs/restart.md)."""
+        for name, f in (("u", self.u), ("p", self.p), ("Cv_n", self.history.Cv_n),
+                        ("Cbar_n", self.history.Cbar_n)):
+            checkpoints.function(f"{label}/{name}", f)
+        checkpoints.constant(f"{label}/pressure", self.pressure)
+        checkpoints.constant(f"{label}/dt", self.history.dt)
+        checkpoints.series(f"{label}/series", series)
+
     # -- quantities ---------------------------------------------------------------------
     def power_D(self) -> float:
         """337.5 / R of the least-squares sphere through the deformed central anterior nodes."""
@@ -167,6 +176,7 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> 
     solver = body.solver(ctx)
     series: dict[str, list] = {"times": [], "power_D": [], "apex_displacement_mm": [],
                                "wound_gape_mm": []}
+    body.register_checkpoint(ctx.checkpoints, label, series)
 
     def record(t: float) -> None:
         series["times"].append(t)
@@ -176,7 +186,8 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> 
 
     body.history.dt.value = 0.0
     follow_path(solver, lambda f, _i: setattr(body.pressure, "value", f * params.iop_mmHg * MMHG),
-                Stepping(initial_step=1.0), label=f"{label} IOP", quiet=ctx.options.quiet)
+                Stepping(initial_step=1.0), label=f"{label} IOP", quiet=ctx.options.quiet,
+                checkpoints=ctx.checkpoints)
     record(0.0)
 
     def apply(t: float, increment: float) -> None:
@@ -190,7 +201,8 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> 
 
     follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, initial_step=1.0,
                                         max_step=1.0, min_step=1e-6, stops=params.time_grid()),
-                on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet)
+                on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet,
+                checkpoints=ctx.checkpoints)
     return series
 
 

@@ -88,6 +88,7 @@ class Result:
     fields: list[str] = dataclasses.field(default_factory=list)
     pictures: list[str] = dataclasses.field(default_factory=list)
     peak_memory_mb: float = 0.0
+    checkpoints: dict[str, Any] = dataclasses.field(default_factory=dict)  # written, resumed_from
 
     def as_json(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)

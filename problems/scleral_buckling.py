@@ -180,13 +180,14 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         model = BucklingModel(params, ctx)
         writer = buckling_output.Writer(model, ctx)
         writer.state(0.0, stage=0)
+        model.register_checkpoint(ctx.checkpoints)
         try:
             follow_path(model.solver, model.apply, Stepping(0.0, 3.0,
                                                             initial_step=min(1 / 12, _max_step(params)),
                                                             max_step=_max_step(params),
                                                             stops=(1.0, 2.0)),
                         on_converged=lambda record: _converged(model, ctx, writer, record),
-                        label=SCENE.name, quiet=ctx.options.quiet)
+                        label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
         except SolveFailure:
             ctx.result.quantities.update(model.measure())
             raise
@@ -442,6 +443,33 @@ class BucklingModel:
             z = self.axial_position + point.side * 0.5 * shape.footprint
             anchors.append([rho * math.sin(psi), rho * math.cos(psi), z])
         return np.array(anchors)
+
+    def register_checkpoint(self, checkpoints) -> None:
+        """Everything a restart needs besides the load (docs/restart.md): the unknowns,
+        the liquid's P_ini/V_ini and switch, the buckle, the sutures' directions, the
+        line search chosen in step 2, the contact's sticky memory, the stage results."""
+        for name, f in zip(("u", "p", "P"), self.fields):
+            checkpoints.function(name, f)
+        for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
+                     "base_radius", "indentation"):
+            checkpoints.constant(name, getattr(self, name))
+        checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
+                                              "magnitude": self.sutures.magnitude},
+                          self._restore_sutures)
+        checkpoints.value("reference_positions", lambda: self.reference_positions,
+                          lambda saved: setattr(self, "reference_positions", saved))
+        checkpoints.value("stage_results", lambda: self.stage_results,
+                          lambda saved: setattr(self, "stage_results",
+                                                {int(k): v for k, v in saved.items()}))
+        line_search = self.solver.snes.getLineSearch()
+        checkpoints.value("line_search", line_search.getType, line_search.setType)
+        if self.retina is not None:
+            checkpoints.value("retina_sticky", self.retina.sticky_state,
+                              self.retina.restore_sticky_state)
+
+    def _restore_sutures(self, saved: dict) -> None:
+        self.sutures.directions = np.asarray(saved["directions"], dtype=float)
+        self.sutures.set_magnitude(saved["magnitude"])
 
     # -- measurements ---------------------------------------------------------------
     def volume(self) -> float:

@@ -4,6 +4,7 @@ side on split communicators, one CSV row per case (failures recorded, not fatal)
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import itertools
 import json
@@ -13,6 +14,7 @@ from typing import Any
 
 from mpi4py import MPI
 
+from eyemech.problems.checkpoint import Interrupted, latest
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.parameters import ParameterError, build
@@ -66,9 +68,12 @@ def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path
             continue
         params = build(scene.parameters, overrides)
         try:
-            result = scene.run(params, comm=sub, out=case_dir, options=options)
+            result = scene.run(params, comm=sub, out=case_dir,
+                               options=_case_options(options, case_dir, resume))
             row.update(status=result.status, **_scalars(result.quantities))
             row["wall_time_s"] = result.timings.get("total")
+        except Interrupted:
+            raise  # SIGINT/SIGTERM stop the whole sweep; --resume continues it
         except SolveFailure as err:
             row.update(status="failed", error=str(err))
         except Exception as err:  # one case's error must not stop the others
@@ -82,6 +87,15 @@ def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path
     table = sorted((r for part in gathered for r in part), key=lambda r: r["case"])
     write_text_atomic(Path(out) / "sweep.csv", _csv(table))
     return table
+
+
+def _case_options(options: RunOptions | None, case_dir: Path, resume: bool) -> RunOptions | None:
+    """With --resume, an interrupted case continues from its last checkpoint."""
+    if not resume or latest(case_dir) is None:
+        return options
+    options = options or RunOptions()
+    return dataclasses.replace(options, checkpoint=dataclasses.replace(options.checkpoint,
+                                                                       resume=case_dir))
 
 
 def _finished(case_dir: Path) -> dict[str, Any] | None:

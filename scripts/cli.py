@@ -2,12 +2,15 @@
 
     eyemech list [-v]
     eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
-    eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R]
+                     [--checkpoint-every N|Tm] [--resume DIR]
+    eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R] [--resume]
     eyemech study NAME|all|list [--quick] [--out DIR]
     eyemech bench NAME [--out docs/bench]
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
-failed (the last converged state and results.json with status "failed" are kept).
+failed (the last converged state and results.json with status "failed" are kept),
+130 / 143 stopped by SIGINT / SIGTERM after writing a checkpoint (128 + the signal
+number; continue with ``eyemech run NAME --resume DIR``).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_SOLVE_FAILED = 3
+EXIT_INTERRUPTED_BASE = 128  # + the signal number, as a shell reports a signal
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -42,12 +46,18 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--quiet", action="store_true", help="no progress bar")
         p.add_argument("--no-fields", action="store_true", help="do not write VTX fields")
         p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
+        p.add_argument("--checkpoint-every", default="10m", metavar="N|Tm",
+                       help="write a checkpoint every N steps or T minutes (10m; 0 = only on "
+                            "SIGINT/SIGTERM); kept in OUT/checkpoints/")
 
     p_run = sub.add_parser("run", help="run one scene")
     common(p_run)
     p_run.add_argument("--out", help="output folder (default results/NAME)")
     p_run.add_argument("--json", action="store_true",
                        help="print results.json as the last line on stdout")
+    p_run.add_argument("--resume", metavar="DIR",
+                       help="continue from the last checkpoint in DIR (a run's output folder; "
+                            "its parameters are used; the output goes to DIR unless --out)")
 
     p_sweep = sub.add_parser("sweep", help="parameter study over a grid")
     common(p_sweep)
@@ -75,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     from mpi4py import MPI
 
     from eyemech import problems
+    from eyemech.problems.checkpoint import CheckpointError, Interrupted
     from eyemech.problems.driver import SolveFailure
     from eyemech.problems.parameters import ParameterError
     from eyemech.meshes import MeshError
@@ -104,9 +115,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyError as err:
         say(f"eyemech: error: {err.args[0]}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except (ParameterError, MeshError) as err:
+    except (ParameterError, MeshError, CheckpointError) as err:
         say(f"eyemech: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Interrupted as err:
+        say(f"eyemech: {err}", file=sys.stderr)
+        return EXIT_INTERRUPTED_BASE + err.signum
     except SolveFailure as err:
         say(f"eyemech: solve failed: {err}", file=sys.stderr)
         return EXIT_SOLVE_FAILED
@@ -179,20 +193,35 @@ def _options(args):
     from eyemech.problems.driver import NewtonOptions
     from eyemech.problems.parameters import parse_assignments
 
+    from eyemech.problems.checkpoint import CheckpointOptions
+    from eyemech.problems.parameters import ParameterError
+
     newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()})
+    try:
+        steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)
+    except ValueError as err:
+        raise ParameterError("--checkpoint-every", str(err)) from None
+    # `run --resume DIR` names the folder; `sweep --resume` (a flag) resumes case by case
+    resume = Path(args.resume) if args.command == "run" and args.resume else None
+    checkpoint = CheckpointOptions(every_steps=steps, every_minutes=minutes, resume=resume)
     return RunOptions(quiet=args.quiet, fields=not args.no_fields, pictures=not args.no_pictures,
-                      newton=newton)
+                      newton=newton, checkpoint=checkpoint)
 
 
 def _run(scene, overrides, args, options, comm, say) -> int:
     from eyemech.problems.driver import SolveFailure
     from eyemech.problems.parameters import build
 
+    if args.resume:
+        overrides = _resumed_parameters(scene, Path(args.resume), overrides, comm)
     params = build(scene.parameters, overrides)  # raises before anything is created
-    out = Path(args.out) if args.out else Path("results") / scene.name
+    out = Path(args.out) if args.out else Path(args.resume) if args.resume \
+        else Path("results") / scene.name
+    from eyemech.problems.checkpoint import Interrupted
+
     try:
         result = scene.run(params, comm=comm, out=out, options=options)
-    except SolveFailure:
+    except (SolveFailure, Interrupted):
         if args.json:
             say(json.dumps(json.loads((out / "results.json").read_text())) if comm.rank == 0 else "")
         raise
@@ -201,6 +230,30 @@ def _run(scene, overrides, args, options, comm, say) -> int:
     else:
         _summary(result, out, say)
     return 0
+
+
+def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
+    """The checkpoint's parameters; --set/--config may repeat them but not change them
+    (the checkpoint then refuses). No checkpoint in ``folder``: a fresh start."""
+    from eyemech.problems.checkpoint import CheckpointError, latest, read_meta
+
+    meta, error = None, None
+    if comm.rank == 0:  # rank 0 reads; an unreadable checkpoint must not leave the others waiting
+        try:
+            found = latest(folder)
+            meta = read_meta(found) if found is not None else None
+        except (OSError, ValueError) as err:
+            error = f"cannot read the checkpoint in {folder}: {err}"
+    meta, error = comm.bcast((meta, error), root=0)
+    if error:
+        raise CheckpointError(error)
+    if meta is None:
+        logging.getLogger("eyemech").warning("no checkpoint in %s: starting from the beginning",
+                                             folder)
+        return overrides
+    if meta["scene"] != scene.name:
+        raise CheckpointError(f"the checkpoint in {folder} is of scene '{meta['scene']}'")
+    return {**meta["parameters"], **overrides}
 
 
 def _summary(result, out: Path, say) -> None:
