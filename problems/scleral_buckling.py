@@ -64,6 +64,7 @@ from eyemech.problems import buckling_output
 
 import dolfinx
 import dolfinx.fem
+from petsc4py import PETSc
 
 MMHG = 1.33322e-4  # MPa
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
@@ -297,6 +298,13 @@ class BucklingModel:
         self.zonules = self._zonules() if params.lens else None
         self.detached = "retina_detached" in self.eye.names  # false: detachment_height = 0
         self.retina = self._retina_contact() if params.retina_contact and self.detached else None
+        # the formulation's pattern (solid, liquid row and column, zonule bars), before
+        # any contact pair: PETSc grows the matrix as retina pairs appear, so the later
+        # allocation depends on the load path (and differs in a run resumed from a checkpoint)
+        # (entries used, not allocated: the bars' entries are inserted into an assembled
+        # matrix, whose allocation then grows by chunks that differ with the rank count)
+        info = self.solver.problem.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)
+        self.pattern_nonzeros = int(info["nz_used"])
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
@@ -553,7 +561,7 @@ class BucklingModel:
         out = {f"after_{names[k]}": v for k, v in sorted(self.stage_results.items())}
         out["dofs"] = global_dofs(*self.fields)
         out["cells"] = self.eye.mesh.topology.index_map(3).size_global
-        out["jacobian_nonzeros"] = self.solver.jacobian_nonzeros()
+        out["jacobian_nonzeros"] = self.pattern_nonzeros
         out["contact_penalty"] = self.penalty
         if self.retina is not None:
             out["retina_contact_penalty"] = self.retina.penalty

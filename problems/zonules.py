@@ -110,9 +110,18 @@ class ZonuleBars:
         return np.unique(np.concatenate(self.comm.allgather(mine)))
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
-        """A bar couples two nodes of different bodies: not in the FE pattern."""
+        """A bar couples two nodes of different bodies: not in the FE pattern. The bars'
+        blocks are inserted (as zeros) here, once, so that the matrix's allocation does not
+        depend on when they first appear (a run resumed from a checkpoint then allocates
+        exactly as the uninterrupted one). Collective."""
         matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
+        for dofs in self._dofs():
+            keep = ~np.isin(dofs, self._constrained)
+            index = dofs[keep].astype(PETSc.IntType)
+            matrix.setValues(index, index, np.zeros((len(index), len(index))),
+                             addv=PETSc.InsertMode.ADD)
+        matrix.assemble()
 
     # -- kinematics -----------------------------------------------------------------------
     def positions(self) -> np.ndarray:
