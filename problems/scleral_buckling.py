@@ -64,7 +64,6 @@ from eyemech.problems import buckling_output
 
 import dolfinx
 import dolfinx.fem
-from petsc4py import PETSc
 
 MMHG = 1.33322e-4  # MPa
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
@@ -295,16 +294,17 @@ class BucklingModel:
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=ctx.options.newton, timings=ctx.timings)
         self.element_size = element_size
+        self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries
         self.zonules = self._zonules() if params.lens else None
         self.detached = "retina_detached" in self.eye.names  # false: detachment_height = 0
         self.retina = self._retina_contact() if params.retina_contact and self.detached else None
         # the formulation's pattern (solid, liquid row and column, zonule bars), before
         # any contact pair: PETSc grows the matrix as retina pairs appear, so the later
         # allocation depends on the load path (and differs in a run resumed from a checkpoint)
-        # (entries used, not allocated: the bars' entries are inserted into an assembled
-        # matrix, whose allocation then grows by chunks that differ with the rank count)
-        info = self.solver.problem.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)
-        self.pattern_nonzeros = int(info["nz_used"])
+        # (DOLFINx's exact preallocation plus the bars' couplings, counted: PETSc's own
+        # allocation grows by chunks when the bars are inserted, differently on 1 and 2 ranks)
+        self.pattern_nonzeros = self._fe_nonzeros + (
+            self.zonules.coupling_entries() if self.zonules is not None else 0)
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")

@@ -123,6 +123,14 @@ class ZonuleBars:
                              addv=PETSc.InsertMode.ADD)
         matrix.assemble()
 
+    def coupling_entries(self) -> int:
+        """Matrix entries the bars add to the finite-element pattern (the lens–ciliary
+        blocks, both ways; the same on every rank)."""
+        base = self._petsc_base(self.nodes.ravel()).reshape(-1, 2)
+        free = [(~np.isin(base[:, k, None] + np.arange(self.bs), self._constrained)).sum(axis=1)
+                for k in (0, 1)]
+        return int(2 * np.sum(free[0] * free[1]))
+
     # -- kinematics -----------------------------------------------------------------------
     def positions(self) -> np.ndarray:
         """(n, 2, 3) deformed positions of the bars' ends (collective)."""
