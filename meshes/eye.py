@@ -19,9 +19,23 @@ Construction
   liquid fills through the tear. The zone ends where the bump reaches zero, so the
   retina is attached at its rim.
 - The tear removes the retina cells within ``tear_radius`` of its centre (on the
-  symmetry plane, so the model holds half of it).
+  symmetry plane, so the model holds half of it). ``tear_radius = 0`` and
+  ``detachment_height = 0`` give an intact, attached retina: then the whole model has
+  the cube's symmetries about the optic axis (mirror y → −y, swap x ↔ y).
 - The optic-nerve stub is the outer-surface patch within ``optic_nerve_radius`` of the
   posterior pole extruded backwards; its end is where the eye is held.
+- The lens (``lens=True``) is a separate hexahedral body inside the liquid: a half
+  ellipsoid (equatorial ``lens_diameter``, axial ``lens_thickness``) meshed as a
+  "cubed ball" (a structured cube grid, each point pushed radially onto the concentric
+  sphere its cube shell belongs to, x ↦ x‖x‖∞/‖x‖₂, then scaled), its anterior pole
+  ``lens_depth`` behind the corneal apex. It shares no node with the eye wall: it hangs
+  on the zonules, which are not cells but node pairs (:func:`zonule_pairs`, bars
+  between the lens's equatorial belt and the ciliary body's inner surface, added to the
+  residual by :class:`eyemech.problems.zonules.ZonuleBars`). Its whole surface is wetted
+  (``lens_surface`` is part of ``cavity_wall``): with the solid's outward normal on every
+  wetted face, V = −⅓∮ x·n da over the eye's inner wall *and* the lens surface is the
+  liquid's volume, the lens's own volume excluded, exactly (both are closed, with the
+  symmetry plane through the origin), and the liquid pressure acts on all sides of it.
 
 Why not gmsh's CAD kernel: revolving a meridian profile about the optic axis gives
 degenerate wedges on the axis, and O-grid blocking of eight layered tissues in OCC is
@@ -37,6 +51,13 @@ Default dimensions (mm) and sources
   0.67 at the limbus; choroid ≈ 0.25, retina ≈ 0.2 (Alamouti & Funk, Br J Ophthalmol 87, 2003).
 - The ora serrata ≈ 7 mm posterior of the limbus (θ ≈ 65°); the ciliary body between.
 - Optic nerve ≈ 3 mm in diameter.
+- Lens: equatorial diameter 9.0 mm and central thickness 4.0 mm of the adult
+  unaccommodated lens (Rosen et al., Vision Res 46:1002, 2006: 8.8–9.6 mm in vitro;
+  Atchison & Smith 2000, Table 2.1: 3.6–4.0 mm); its anterior pole 3.6 mm behind the
+  corneal apex (anterior chamber depth 3.1 mm + cornea 0.5 mm; Gullstrand–Le Grand eye,
+  Atchison & Smith 2000). The real lens is an asymmetric biconvex body (anterior radius
+  ≈ 10 mm, posterior ≈ 6 mm); an ellipsoid of the same diameter and thickness is enough
+  for a body 300 times stiffer than the sclera that only transmits the zonules' pull.
 """
 
 from __future__ import annotations
@@ -49,11 +70,12 @@ from mpi4py import MPI
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh, from_gmsh
 
-TISSUES = ("cornea", "sclera", "ciliary_body", "choroid", "retina", "optic_nerve")
+TISSUES = ("cornea", "sclera", "ciliary_body", "choroid", "retina", "optic_nerve", "lens")
 FACETS = ("symmetry", "cornea_outer", "sclera_outer", "optic_nerve_side", "optic_nerve_end",
-          "retina_inner", "retina_detached", "choroid_detached", "tear_edge")
-# every face the liquid wets: the vitreous side, the subretinal space, the tear's edges
-CAVITY_WALL = ("retina_inner", "retina_detached", "choroid_detached", "tear_edge")
+          "retina_inner", "retina_detached", "choroid_detached", "tear_edge", "lens_surface")
+# every face the liquid wets: the vitreous side, the subretinal space, the tear's edges,
+# and all of the lens (it floats in the liquid, held by the zonules)
+CAVITY_WALL = ("retina_inner", "retina_detached", "choroid_detached", "tear_edge", "lens_surface")
 RESOLUTIONS = {"coarse": 8, "default": 12, "paper": 26}  # cells along a cube edge
 
 
@@ -76,11 +98,16 @@ class EyeGeometry:
     detachment_half_width: float = 40.0    # azimuth half-width about the tear (deg)
     detachment_height: float = 0.5         # subretinal gap at the centre (mm)
     tear_angle: float = 88.0               # polar angle of the tear centre (deg)
-    tear_radius: float = 1.6               # mm
+    tear_radius: float = 1.6               # mm (0: no tear)
     optic_nerve_radius: float = 1.5
     optic_nerve_length: float = 3.0
     coat_layers: int = 2
     cells_per_edge: int = 12               # cubed-sphere cells along a cube edge (even)
+    lens: bool = True                      # the lens body (and, in a scene, its zonules)
+    lens_diameter: float = 9.0             # equatorial (mm)
+    lens_thickness: float = 4.0            # axial (mm)
+    lens_depth: float = 3.6                # corneal apex to the lens's anterior pole (mm)
+    lens_cells: int = 4                    # cells along an edge of the lens's cube (even)
 
     def validate(self) -> None:
         if self.cells_per_edge % 2 or self.cells_per_edge < 4:
@@ -94,10 +121,39 @@ class EyeGeometry:
             raise MeshError(
                 f"resolution too coarse to resolve the retina: elements of {element:.2f} mm on a "
                 f"{self.retina_thickness} mm layer (aspect ratio > 12); raise cells_per_edge")
+        if self.lens:
+            self._validate_lens()
         zone = math.radians(self.detachment_to - self.detachment_from) * self.sclera_radius
         if zone / element < 3:
             raise MeshError(f"resolution too coarse: the detached zone spans {zone / element:.1f} "
                             "elements (need at least 3)")
+
+    def _validate_lens(self) -> None:
+        if self.lens_cells % 2 or self.lens_cells < 2:
+            raise MeshError("lens_cells must be an even number >= 2")
+        if not (self.lens_diameter > 0 and self.lens_thickness > 0 and self.lens_depth > 0):
+            raise MeshError("lens_diameter, lens_thickness and lens_depth must be > 0")
+        apex = self.cornea_center + self.cornea_radius
+        inner_apex = apex - self.cornea_thickness_center
+        if self.lens_depth <= self.cornea_thickness_center:
+            raise MeshError(f"lens_depth {self.lens_depth} mm puts the lens inside the cornea "
+                            f"(central thickness {self.cornea_thickness_center} mm)")
+        # the wall's inner surface is at least this far from the origin behind the limbus
+        inner = self.sclera_radius - max(self.sclera_thickness_limbus, self.sclera_thickness_posterior,
+                                         self.sclera_thickness_equator) \
+            - max(self.ciliary_body_thickness, self.choroid_thickness) - self.retina_thickness
+        centre = self.lens_centre
+        a, b = self.lens_diameter / 2, self.lens_thickness / 2
+        t = np.linspace(0, math.pi, 91)
+        rim = np.hypot(a * np.sin(t), centre + b * np.cos(t))
+        if rim.max() >= inner or centre + b >= inner_apex:
+            raise MeshError("the lens does not fit inside the eye (lens_diameter, lens_thickness "
+                            "or lens_depth too large)")
+
+    @property
+    def lens_centre(self) -> float:
+        """z of the lens's centre."""
+        return self.cornea_center + self.cornea_radius - self.lens_depth - self.lens_thickness / 2
 
     # -- derived geometry ---------------------------------------------------------
     @property
@@ -243,6 +299,8 @@ def build_grid(geo: EyeGeometry) -> EyeGrid:
     keep = ~_tear_cells(geo, points, hexes, layer_of == geo.coat_layers + 1)
     hexes, tissue = hexes[keep], tissue[keep]
     points, hexes, tissue = _add_optic_nerve(geo, points, hexes, tissue, level_index[0], quads)
+    if geo.lens:
+        points, hexes, tissue = _add_lens(geo, points, hexes, tissue)
     hexes = _orient(points, hexes)
     faces = _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index, lifted)
     # the tear leaves nodes no cell uses; DOLFINx expects every node to be in a cell
@@ -273,6 +331,8 @@ def _tear_cells(geo: EyeGeometry, points, hexes, retina: np.ndarray) -> np.ndarr
     unit = centroids / np.linalg.norm(centroids, axis=1, keepdims=True)
     distance = geo.sclera_radius * np.arccos(np.clip(unit @ centre_dir, -1, 1))
     tear = retina & (distance < geo.tear_radius)
+    if geo.tear_radius == 0:  # no tear (an intact retina, e.g. to check symmetry)
+        return tear
     if not tear.any():
         raise MeshError(f"resolution too coarse to resolve the tear (radius {geo.tear_radius} mm): "
                         "no retina cell falls inside it; raise cells_per_edge or tear_radius")
@@ -310,6 +370,46 @@ def _add_optic_nerve(geo, points, hexes, tissue, outer_level, quads):
     nerve = TISSUES.index("optic_nerve")
     return (np.vstack(new_points), np.vstack([hexes, stub]),
             np.concatenate([tissue, np.full(len(stub), nerve)]))
+
+
+def _cubed_ball(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points and hexes (gmsh corner order, orientation not yet fixed) of the half unit
+    ball x ≥ 0: an n×n×n cube grid (x from 0), each point moved radially onto the
+    sphere of radius ‖x‖∞. The map is homogeneous of degree one, so every cube shell
+    becomes a sphere and the cells stay valid (worst at the cube's edges)."""
+    full = np.linspace(-1.0, 1.0, n + 1)
+    half = full[n // 2:]
+    X, Y, Z = np.meshgrid(half, full, full, indexing="ij")
+    cube = np.stack([X, Y, Z], -1).reshape(-1, 3)
+    norm2 = np.linalg.norm(cube, axis=1)
+    scale = np.divide(np.abs(cube).max(axis=1), norm2, out=np.zeros(len(cube)), where=norm2 > 0)
+    points = cube * scale[:, None]
+    index = np.arange(len(cube)).reshape(X.shape)
+    bottom = [index[:-1, :-1, :-1], index[1:, :-1, :-1], index[1:, 1:, :-1], index[:-1, 1:, :-1]]
+    top = [index[:-1, :-1, 1:], index[1:, :-1, 1:], index[1:, 1:, 1:], index[:-1, 1:, 1:]]
+    hexes = np.stack(bottom + top, -1)
+    return points, hexes.reshape(-1, 8)
+
+
+def _add_lens(geo: EyeGeometry, points, hexes, tissue):
+    """Append the lens body (a scaled half cubed ball, see the module docstring)."""
+    unit, cells = _cubed_ball(geo.lens_cells)
+    scale = np.array([geo.lens_diameter / 2, geo.lens_diameter / 2, geo.lens_thickness / 2])
+    lens_points = unit * scale + np.array([0.0, 0.0, geo.lens_centre])
+    lens_points[:, 0] = np.where(np.abs(lens_points[:, 0]) < 1e-12, 0.0, lens_points[:, 0])
+    return (np.vstack([points, lens_points]), np.vstack([hexes, cells + len(points)]),
+            np.concatenate([tissue, np.full(len(cells), TISSUES.index("lens"))]))
+
+
+def lens_belt(geo: EyeGeometry, points: np.ndarray) -> np.ndarray:
+    """Mask of points on the lens surface within the zonules' insertion belt: the
+    equator and the capsule up to ``geo.lens_thickness/4`` in front of and behind it
+    (anterior, equatorial and posterior zonular fibres; the fan keeps the lens from
+    sliding or tilting along the optic axis, which bars in one plane would allow)."""
+    a, b = geo.lens_diameter / 2, geo.lens_thickness / 2
+    rel = points - np.array([0.0, 0.0, geo.lens_centre])
+    on_surface = np.abs((rel[:, 0] / a) ** 2 + (rel[:, 1] / a) ** 2 + (rel[:, 2] / b) ** 2 - 1) < 1e-9
+    return on_surface & (np.abs(rel[:, 2]) <= 0.5 * b + 1e-9)
 
 
 def _orient(points, hexes):
@@ -350,6 +450,8 @@ def _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index,
     names = np.full(len(faces), "", dtype=object)
     names[np.all(np.abs(x[:, :, 0]) < 1e-9, axis=1)] = "symmetry"
     todo = names == ""
+    names[todo & (tissue[owner] == TISSUES.index("lens"))] = "lens_surface"
+    todo = names == ""
     end = nerve & np.all(np.abs(x[:, :, 2] - x[:, :, 2].min()) < 1e-9, axis=1)
     names[todo & end] = "optic_nerve_end"
     names[todo & nerve & ~end] = "optic_nerve_side"
@@ -367,6 +469,32 @@ def _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index,
     todo = names == ""
     names[todo] = "tear_edge"
     return {name: faces[names == name] for name in FACETS}
+
+
+def zonule_pairs(geo: EyeGeometry, grid: EyeGrid | None = None,
+                 per_node: int = 2) -> np.ndarray:
+    """(n, 2, 3) reference coordinates of the zonules' bars: each node of the lens's
+    insertion belt (:func:`lens_belt`) joined to its ``per_node`` nearest nodes (and
+    any tied with the last) of the
+    ciliary body's inner surface (the inner wall between the limbus and the ora
+    serrata). Pure numpy, the same on every rank; the scene finds the nodes by their
+    coordinates."""
+    if not geo.lens:
+        return np.zeros((0, 2, 3))
+    grid = grid or build_grid(geo)
+    belt = np.flatnonzero(lens_belt(geo, grid.points))
+    inner = np.unique(grid.faces["retina_inner"])
+    x = grid.points[inner]
+    theta = np.degrees(np.arccos(np.clip(x[:, 2] / np.linalg.norm(x, axis=1), -1, 1)))
+    ciliary = inner[(theta > geo.limbus_angle + 2.0) & (theta < geo.ora_serrata_angle)]
+    if len(ciliary) < per_node:
+        raise MeshError("no ciliary-body nodes for the zonules to attach to")
+    distance = np.linalg.norm(grid.points[belt][:, None, :] - grid.points[ciliary][None], axis=2)
+    # every node as near as the per_node-th nearest (ties all taken, so that the bars
+    # keep the mesh's symmetries instead of depending on the node numbering)
+    cutoff = np.sort(distance, axis=1)[:, per_node - 1:per_node] * (1 + 1e-9)
+    lens_index, wall_index = np.nonzero(distance <= cutoff)
+    return np.stack([grid.points[belt[lens_index]], grid.points[ciliary[wall_index]]], axis=1)
 
 
 def to_gmsh(grid: EyeGrid, model) -> None:

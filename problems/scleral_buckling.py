@@ -27,8 +27,11 @@ split into triangles), α = ``retina_penalty_factor`` · 6 c_retina / h (6c = E 
 incompressible neo-Hooke solid, h the element size along the wall), searched at every
 Newton iteration and coupled into the blocked [u, p, P] Jacobian.
 
-Not modelled yet (see README): the lens and the zonules (they carry no load in this
-operation: the liquid pressure acts on all sides of the lens).
+The lens (neo-Hooke, c = ``c_lens``) floats in the liquid, wetted on all sides (its
+surface is part of the cavity wall, so the liquid volume excludes it exactly), and
+hangs on the zonules: linear-elastic bars (E = ``zonule_modulus``, cross-section
+``zonule_area``) from its equatorial belt to the ciliary body's inner surface
+(:class:`~eyemech.problems.zonules.ZonuleBars`; why bars: see that module).
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ from mpi4py import MPI
 from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
 from eyemech.forms.buckle import Buckle, BuckleShape, smoothed_penalty_energy
 from eyemech.forms.contact import default_penalty
-from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye
+from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems.cavity import check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.contact_search import NodeToSurfaceContact
@@ -56,6 +59,7 @@ from eyemech.problems.scene import Scene
 from eyemech.problems.solid import solid_residual
 from eyemech.problems.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
 from eyemech.problems.sutures import SutureForces, SuturePoint
+from eyemech.problems.zonules import ZonuleBars
 from eyemech.problems import buckling_output
 
 import dolfinx
@@ -79,11 +83,21 @@ class Parameters(SceneParameters):
     c_choroid: float = field(0.0083, "neo-Hooke c of the choroid", "MPa")
     c_retina: float = field(0.0008, "neo-Hooke c of the retina", "MPa")
     c_optic_nerve: float = field(0.05, "neo-Hooke c of the optic nerve", "MPa")
+    c_lens: float = field(10.0, "neo-Hooke c of the lens (Table 1)", "MPa")
+    lens: bool = field(True, "model the lens and its zonules (off: the liquid fills its place)")
+    lens_diameter: float = field(9.0, "equatorial diameter of the lens (Rosen et al. 2006)", "mm")
+    lens_thickness: float = field(4.0, "axial thickness of the lens (Atchison & Smith 2000)", "mm")
+    zonule_modulus: float = field(100.0, "Young's modulus of the zonules' bars (seed 002)", "MPa")
+    zonule_area: float = field(
+        0.008, "cross-section of one zonule bar (a 0.1 mm fibre bundle; not given in seed 002)",
+        "mm²")
     buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial)", "mm")
     tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
+    buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
+                                        "(capped at half their height)", "mm")
     indentation: float = field(1.0, "radial inward travel of the buckle in step 2", "mm")
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
@@ -91,14 +105,21 @@ class Parameters(SceneParameters):
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
     suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
                                                "suture meridians, degrees from the tear", "deg")
-    detachment_height: float = field(0.5, "subretinal gap at the detachment's centre", "mm")
+    detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
+                                     "(0: the retina is attached)", "mm")
+    tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm")
     retina_thickness: float = field(0.2, "retina thickness", "mm")
-    penalty_factor: float = field(100.0, "contact penalty α = factor · E_sclera / h")
+    penalty_factor: float = field(
+        30.0, "buckle–sclera penalty α = factor · E_sclera / h (30: the hertz study's choice; "
+        "100 halves the penetration and doubles the Newton iterations)")
     retina_penalty_factor: float = field(
         100.0, "retina–choroid penalty α = factor · E_retina / h (E = 6 c_retina)")
     contact_smoothing: float = field(
         0.0, "penalty kink rounded off over gaps |g| < ε (buckle and retina contact; "
         "0 = plain kink)", "mm")
+    contact_integration: Literal["gauss", "nodal"] = field(
+        "gauss", "buckle–sclera penalty evaluated at Gauss points or at the nodes (trapezoidal "
+        "rule: node-to-rigid-surface contact)")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
@@ -108,10 +129,12 @@ class Parameters(SceneParameters):
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
                               "c_choroid", "c_retina", "c_optic_nerve", "band_width",
                               "band_thickness", "tire_width", "suture_width", "penalty_factor",
-                              "retina_penalty_factor",
+                              "retina_penalty_factor", "c_lens", "lens_diameter",
+                              "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("tire_height", "contact_smoothing", "indentation", "suture_force", "detachment_height")
+        self.require_nonnegative("buckle_corner_radius", "tire_height", "contact_smoothing", "indentation", "suture_force",
+                                 "detachment_height", "tear_radius")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
@@ -133,15 +156,19 @@ class Parameters(SceneParameters):
         try:
             geometry.validate()
         except Exception as err:
-            raise ParameterError("resolution", str(err)) from None
+            key = "lens_diameter" if "lens" in str(err) else "resolution"
+            raise ParameterError(key, str(err)) from None
 
     def geometry(self) -> EyeGeometry:
         return EyeGeometry(cells_per_edge=RESOLUTIONS[self.resolution],
                            detachment_height=self.detachment_height,
-                           retina_thickness=self.retina_thickness)
+                           retina_thickness=self.retina_thickness, lens=self.lens,
+                           tear_radius=self.tear_radius,
+                           lens_diameter=self.lens_diameter, lens_thickness=self.lens_thickness)
 
     def buckle_shape(self) -> BuckleShape:
-        return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height)
+        return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,
+                           self.buckle_corner_radius)
 
     def stiffness(self) -> dict[str, float]:
         return {t: getattr(self, f"c_{t}") for t in TISSUES}
@@ -182,6 +209,17 @@ def _max_step(params: Parameters) -> float:
     if params.indentation <= 0:
         return 1 / 4
     return min(1 / 4, 0.25 * thickness / params.indentation / 3.0)
+
+
+def _contact_quadrature(integration: str, family) -> dict:
+    """Quadrature of the buckle's penalty integral. ``nodal``: Gauss–Lobatto of degree 1
+    (the trapezoidal rule, points at the face's vertices; Q1 faces only), so the
+    penalty acts on the sclera's nodes as in a node-to-rigid-surface scheme."""
+    if integration == "gauss":
+        return {"quadrature_degree": family.quadrature_degree}
+    if family.displacement_degree != 1:
+        raise ParameterError("contact_integration", "nodal contact needs a Q1 displacement")
+    return {"quadrature_rule": "GLL", "quadrature_degree": 1}
 
 
 def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
@@ -243,8 +281,9 @@ class BucklingModel:
                              self.indentation)
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
+        contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
         contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
-                                          ds(self.eye.tag("sclera_outer")))
+                                          contact_ds(self.eye.tag("sclera_outer")))
         residual += ufl.derivative(contact, self.u, v)
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
@@ -255,7 +294,17 @@ class BucklingModel:
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=ctx.options.newton, timings=ctx.timings)
         self.element_size = element_size
-        self.retina = self._retina_contact() if params.retina_contact else None
+        self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries
+        self.zonules = self._zonules() if params.lens else None
+        self.detached = "retina_detached" in self.eye.names  # false: detachment_height = 0
+        self.retina = self._retina_contact() if params.retina_contact and self.detached else None
+        # the formulation's pattern (solid, liquid row and column, zonule bars), before
+        # any contact pair: PETSc grows the matrix as retina pairs appear, so the later
+        # allocation depends on the load path (and differs in a run resumed from a checkpoint)
+        # (DOLFINx's exact preallocation plus the bars' couplings, counted: PETSc's own
+        # allocation grows by chunks when the bars are inserted, differently on 1 and 2 ranks)
+        self.pattern_nonzeros = self._fe_nonzeros + (
+            self.zonules.coupling_entries() if self.zonules is not None else 0)
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
@@ -283,6 +332,16 @@ class BucklingModel:
         held = dolfinx.fem.locate_dofs_topological(V, 2, self.eye.facets("optic_nerve_end"))
         bcs.append(dolfinx.fem.dirichletbc(np.zeros(3), held, V))
         return bcs
+
+    def _zonules(self) -> ZonuleBars:
+        with self.ctx.timings("mesh"):
+            pairs = zonule_pairs(self.geometry)
+        bars = ZonuleBars(self.u, pairs, self.params.zonule_modulus, self.params.zonule_area,
+                          self.bcs, block_spaces=[f.function_space for f in self.fields])
+        self.solver.residual_hooks.append(bars.residual_hook)
+        self.solver.jacobian_hooks.append(bars.jacobian_hook)
+        bars.allow_new_nonzeros(self.solver.problem.A)
+        return bars
 
     def _retina_contact(self) -> NodeToSurfaceContact:
         """Retina (slave nodes) on choroid (master triangles), penalty scaled from the
@@ -314,8 +373,14 @@ class BucklingModel:
         theta = math.radians(self.buckle_angle)
         under = np.array([[0.0, geo.sclera_radius * math.sin(theta), self.axial_position]])
         self.under_buckle = NodeProbe(V, under, outer)
+        if not self.detached:
+            self.pairing, self.tear_rim = None, np.zeros(0, bool)
+            return
         self.pairing = SurfacePairing(V, self.eye.facets("retina_detached"),
                                       self.eye.facets("choroid_detached"))
+        if "tear_edge" not in self.eye.names:
+            self.tear_rim = np.zeros(len(self.pairing.slave_g), bool)
+            return
         tear = facet_nodes(V, self.eye.facets("tear_edge"))
         owned = V.dofmap.index_map.size_local
         tear_global = V.dofmap.index_map.local_to_global(tear[tear < owned].astype(np.int32))
@@ -424,7 +489,8 @@ class BucklingModel:
 
     def measure(self) -> dict:
         with self.ctx.timings("contact_search"):
-            gaps = self.pairing.gaps(self.u)
+            # an attached retina (detachment_height = 0): no subretinal gap to measure
+            gaps = self.pairing.gaps(self.u) if self.pairing is not None else np.zeros(1)
         apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
         axial = apex[2] - pole[2]
         reference_axial = self.apex.nodes[0][2] - self.pole.nodes[0][2]
@@ -433,7 +499,8 @@ class BucklingModel:
         indentation = math.hypot(before[0], before[1]) - math.hypot(under[0], under[1])
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
-        return self._retina_contact_measures() | {
+        zonules = self.zonules.summary() if self.zonules is not None else {}
+        return self._retina_contact_measures() | zonules | {
             "axial_length_mm": axial,
             "axial_length_change_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
@@ -446,7 +513,7 @@ class BucklingModel:
             "retina_contact_area_mm2": 2.0 * detached_area * float(in_contact.mean()),
             "retina_choroid_gap_mean_mm": float(gaps.mean()),
             # closed: every lifted retina node on the tear's rim is back on the choroid
-            "tear_closed": bool(self.tear_rim.any()
+            "tear_closed": bool(self.tear_rim.any() and self.pairing is not None
                                 and np.all(gaps[self.tear_rim] < self.params.tear_closure_tolerance)),
             "von_mises_max_MPa": self.von_mises.update(),
             "suture_force_N": float(self.sutures.magnitude),
@@ -480,6 +547,8 @@ class BucklingModel:
                 "retina_contact_force_N": 2.0 * summary["contact_normal_force"]}
 
     def detached_area(self) -> float:
+        if not self.detached:
+            return 0.0
         if not hasattr(self, "_detached_area"):
             form = dolfinx.fem.form(dolfinx.fem.Constant(self.eye.mesh, 1.0)
                                     * self.eye.ds()(self.eye.tag("retina_detached")))
@@ -492,7 +561,7 @@ class BucklingModel:
         out = {f"after_{names[k]}": v for k, v in sorted(self.stage_results.items())}
         out["dofs"] = global_dofs(*self.fields)
         out["cells"] = self.eye.mesh.topology.index_map(3).size_global
-        out["jacobian_nonzeros"] = self.solver.jacobian_nonzeros()
+        out["jacobian_nonzeros"] = self.pattern_nonzeros
         out["contact_penalty"] = self.penalty
         if self.retina is not None:
             out["retina_contact_penalty"] = self.retina.penalty

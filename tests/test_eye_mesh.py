@@ -96,3 +96,68 @@ def test_hexahedra_are_valid():
 def test_unusable_settings_are_refused(change, words):
     with pytest.raises(MeshError, match=words):
         build_grid(EyeGeometry(**change))
+
+
+# -- the lens and the zonules -----------------------------------------------------------
+def test_lens_is_a_wetted_body_excluded_from_the_liquid(eye):
+    # the lens surface is part of the cavity wall with the solid's outward normal, so the
+    # enclosed volume is the liquid's: the eye without the lens minus the lens body, to
+    # round-off (both surfaces closed with the symmetry plane x = 0 through the origin)
+    assert eye.count("lens") > 0 and eye.count("lens_surface") > 0
+    x = ufl.SpatialCoordinate(eye.mesh)
+    n = ufl.FacetNormal(eye.mesh)
+    one = dolfinx.fem.Constant(eye.mesh, 1.0)
+
+    def liquid(tagged):
+        return _integral(tagged, -ufl.dot(ufl.SpatialCoordinate(tagged.mesh),
+                                          ufl.FacetNormal(tagged.mesh)) / 3,
+                         tagged.ds()(tagged.tag("cavity_wall")))
+
+    no_lens = half_eye(EyeGeometry(cells_per_edge=8, lens=False))
+    lens_volume = _integral(eye, one, eye.dx()(eye.tag("lens")))
+    assert liquid(eye) == pytest.approx(liquid(no_lens) - lens_volume, rel=1e-12)
+    # the 32-hexahedron ellipsoid has bilinear faces inside the true surface: within 10 %
+    # of ⅔πa²b (half ellipsoid), never above it
+    a, b = GEOMETRY.lens_diameter / 2, GEOMETRY.lens_thickness / 2
+    assert 0.9 * (2 / 3) * math.pi * a * a * b < lens_volume < (2 / 3) * math.pi * a * a * b
+    # the lens surface is closed with the symmetry plane: x·n/3 equals y n_y, z n_z
+    surface = eye.ds()(eye.tag("lens_surface"))
+    volume = _integral(eye, ufl.dot(x, n) / 3 * one, surface)
+    assert volume == pytest.approx(lens_volume, rel=1e-10)
+    assert _integral(eye, x[2] * n[2] * one, surface) == pytest.approx(lens_volume, rel=1e-10)
+
+
+def test_lens_sits_behind_the_anterior_chamber():
+    grid = build_grid(GEOMETRY)
+    lens = grid.points[np.unique(grid.hexes[grid.tissue == 6])]
+    apex = GEOMETRY.cornea_center + GEOMETRY.cornea_radius
+    # Gullstrand–Le Grand: the lens's anterior pole 3.6 mm behind the corneal apex
+    assert apex - lens[:, 2].max() == pytest.approx(GEOMETRY.lens_depth, abs=1e-9)
+    assert lens[:, 2].max() - lens[:, 2].min() == pytest.approx(GEOMETRY.lens_thickness, abs=1e-9)
+    assert 2 * np.hypot(lens[:, 0], lens[:, 1]).max() == pytest.approx(GEOMETRY.lens_diameter,
+                                                                       abs=1e-9)
+
+
+def test_zonules_join_the_lens_belt_to_the_ciliary_body():
+    from eyemech.meshes.eye import lens_belt, zonule_pairs
+
+    grid = build_grid(GEOMETRY)
+    pairs = zonule_pairs(GEOMETRY, grid)
+    assert len(pairs) >= 40
+    assert np.all(lens_belt(GEOMETRY, pairs[:, 0]))
+    ciliary = pairs[:, 1]
+    theta = np.degrees(np.arccos(ciliary[:, 2] / np.linalg.norm(ciliary, axis=1)))
+    assert np.all((theta > GEOMETRY.limbus_angle) & (theta < GEOMETRY.ora_serrata_angle))
+    length = np.linalg.norm(pairs[:, 1] - pairs[:, 0], axis=1)
+    assert 1.0 < length.min() and length.max() < 4.0
+    # a fan, not a plane: bars leave the lens in front of and behind its equator, so they
+    # hold it along the optic axis (bars in one plane would have no axial stiffness)
+    lens_z = pairs[:, 0, 2] - GEOMETRY.lens_centre
+    assert lens_z.min() < -0.5 and lens_z.max() > 0.5
+
+
+@pytest.mark.parametrize("change", [dict(lens_diameter=19.0), dict(lens_depth=0.3),
+                                    dict(lens_cells=3)])
+def test_unusable_lens_is_refused(change):
+    with pytest.raises(MeshError, match="lens"):
+        build_grid(EyeGeometry(**change))

@@ -1,0 +1,192 @@
+"""Zinn's zonules as elastic bars between node pairs (seed 002, §3.1: 241 linear bars,
+E = 100 MPa), added to a (blocked) Newton system by residual and Jacobian hooks.
+
+Why bars and not cells: the zonules are a fan of thin fibres, not a continuum, and the
+paper models them as bars. A conforming ring of hexahedra between the lens's equator
+and the ciliary body would have to share nodes with the structured eye wall, whose
+cubed-sphere nodes lie on no circle of constant z; bars join any two existing nodes
+(the lens is its own body, see :mod:`eyemech.meshes.eye`) and cost a 6×6 block per bar.
+
+Each bar is a two-node truss with a linear material (axial force N = E A (l − L)/L)
+and exact kinematics (l the deformed length), so a rigid rotation of the eye costs no
+energy:
+
+    f_b = −f_a = N d/l,    d = x_b − x_a,
+    K = (E A/L) n⊗n + (N/l) (I − n⊗n),    n = d/l,
+
+on the dofs (a, b) with the signs of [[K, −K], [−K, K]]. A bar lying in the symmetry
+plane x = 0 is half in the model and gets half its area.
+
+The pairs are found by reference coordinates (the same numpy computation on every
+rank); each bar is added by the rank that owns its first node, the positions of all
+bar nodes are gathered every evaluation (a few hundred nodes).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx
+from petsc4py import PETSc
+
+from eyemech.meshes.tagged import MeshError
+
+
+class ZonuleBars:
+    """Bars between reference points ``pairs`` (n, 2, 3) of ``u``'s nodes; ``area`` is
+    each bar's cross-section (mm²), ``youngs_modulus`` E (MPa); ``block_spaces``
+    the spaces of a blocked system with ``u``'s first (as for
+    :class:`eyemech.problems.contact_search.NodeToSurfaceContact`)."""
+
+    def __init__(self, u: dolfinx.fem.Function, pairs: np.ndarray, youngs_modulus: float,
+                 area: float, bcs=(), block_spaces=None, tolerance: float = 1e-8):
+        if not (youngs_modulus > 0 and area > 0):
+            raise ValueError("zonules need E > 0 and a cross-section > 0")
+        self.u = u
+        space = u.function_space
+        self.comm = space.mesh.comm
+        self.bs = space.dofmap.index_map_bs
+        self.imap = space.dofmap.index_map
+        self.reference_pairs = np.asarray(pairs, dtype=float).reshape(-1, 2, 3)
+        self.nodes = self._find_nodes(space, tolerance)        # (n, 2) global node numbers
+        d = self.reference_pairs[:, 1] - self.reference_pairs[:, 0]
+        self.lengths = np.linalg.norm(d, axis=1)
+        in_plane = np.all(np.abs(self.reference_pairs[:, :, 0]) < 1e-9, axis=1)
+        self.in_plane = in_plane
+        self.axial_stiffness = youngs_modulus * area * np.where(in_plane, 0.5, 1.0)  # E A
+        self._layout(block_spaces)
+        self._constrained = self._constrained_dofs(bcs)
+        owned = self.imap.size_local
+        start = self.imap.local_range[0]
+        self.mine = (self.nodes[:, 0] >= start) & (self.nodes[:, 0] < start + owned)
+        self.unique_nodes = np.unique(self.nodes)
+
+    # -- set-up ---------------------------------------------------------------------------
+    def _find_nodes(self, space, tolerance) -> np.ndarray:
+        """Global node numbers of the pairs' points (owned nodes searched, then shared)."""
+        coords = space.tabulate_dof_coordinates()[: self.imap.size_local]
+        points = self.reference_pairs.reshape(-1, 3)
+        found = np.full(len(points), -1, dtype=np.int64)
+        if len(coords):
+            from scipy.spatial import cKDTree
+
+            distance, index = cKDTree(coords).query(points)
+            hit = distance < tolerance
+            found[hit] = self.imap.local_to_global(index[hit].astype(np.int32))
+        from mpi4py import MPI
+
+        result = np.empty_like(found)
+        self.comm.Allreduce(found, result, op=MPI.MAX)
+        found = result
+        if np.any(found < 0):
+            raise MeshError(f"{int(np.sum(found < 0))} zonule end points are not mesh nodes")
+        return found.reshape(-1, 2)
+
+    def _layout(self, block_spaces) -> None:
+        """PETSc index of a node's first component (see NodeToSurfaceContact._layout)."""
+        start = self.imap.local_range[0]
+        owned = self.bs * self.imap.size_local
+        rank_total = owned if block_spaces is None else sum(
+            V.dofmap.index_map.size_local * V.dofmap.index_map_bs for V in block_spaces)
+        self._starts = np.array(self.comm.allgather(start), dtype=np.int64)
+        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
+
+    def _petsc_base(self, global_nodes: np.ndarray) -> np.ndarray:
+        global_nodes = np.asarray(global_nodes, dtype=np.int64)
+        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
+        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
+
+    def _constrained_dofs(self, bcs) -> np.ndarray:
+        mine = []
+        for bc in bcs:
+            local, _ = bc.dof_indices()
+            blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
+            mine.append(self._petsc_base(blocks) + local % self.bs)
+        mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate(self.comm.allgather(mine)))
+
+    def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
+        """A bar couples two nodes of different bodies: not in the FE pattern. The bars'
+        blocks are inserted (as zeros) here, once, so that the matrix's allocation does not
+        depend on when they first appear (a run resumed from a checkpoint then allocates
+        exactly as the uninterrupted one). Collective."""
+        matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
+        for dofs in self._dofs():
+            keep = ~np.isin(dofs, self._constrained)
+            index = dofs[keep].astype(PETSc.IntType)
+            matrix.setValues(index, index, np.zeros((len(index), len(index))),
+                             addv=PETSc.InsertMode.ADD)
+        matrix.assemble()
+
+    def coupling_entries(self) -> int:
+        """Matrix entries the bars add to the finite-element pattern (the lens–ciliary
+        blocks, both ways; the same on every rank)."""
+        base = self._petsc_base(self.nodes.ravel()).reshape(-1, 2)
+        free = [(~np.isin(base[:, k, None] + np.arange(self.bs), self._constrained)).sum(axis=1)
+                for k in (0, 1)]
+        return int(2 * np.sum(free[0] * free[1]))
+
+    # -- kinematics -----------------------------------------------------------------------
+    def positions(self) -> np.ndarray:
+        """(n, 2, 3) deformed positions of the bars' ends (collective)."""
+        start, owned = self.imap.local_range[0], self.imap.size_local
+        local = self.unique_nodes[(self.unique_nodes >= start) & (self.unique_nodes < start + owned)]
+        values = self.u.x.array.reshape(-1, self.bs)[local - start]
+        pieces = self.comm.allgather((local, values))
+        nodes = np.concatenate([p[0] for p in pieces])
+        displacement = np.vstack([p[1] for p in pieces])
+        order = np.argsort(nodes)
+        u = displacement[order[np.searchsorted(nodes[order], self.nodes.ravel())]]
+        return self.reference_pairs + u.reshape(-1, 2, 3)
+
+    def forces(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N, n, l): axial force (N), unit direction a→b and deformed length per bar."""
+        x = self.positions()
+        d = x[:, 1] - x[:, 0]
+        length = np.linalg.norm(d, axis=1)
+        force = self.axial_stiffness * (length - self.lengths) / self.lengths
+        return force, d / length[:, None], length
+
+    def _dofs(self) -> np.ndarray:
+        base = self._petsc_base(self.nodes[self.mine].ravel()).reshape(-1, 2)
+        return (base[:, :, None] + np.arange(self.bs)).reshape(-1, 2 * self.bs)
+
+    # -- assembly hooks -------------------------------------------------------------------
+    def residual_hook(self, _x: PETSc.Vec, b: PETSc.Vec) -> None:
+        """F += internal bar forces: −N n on a, +N n on b."""
+        force, n, _ = self.forces()
+        f = (force[:, None] * n)[self.mine]
+        values = np.hstack([-f, f])
+        dofs = self._dofs()
+        keep = ~np.isin(dofs, self._constrained)
+        b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
+        b.assemblyBegin()
+        b.assemblyEnd()
+
+    def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
+        force, n, length = self.forces()
+        dofs = self._dofs()
+        rows = np.flatnonzero(self.mine)
+        for i, bar in enumerate(rows):
+            nn = np.outer(n[bar], n[bar])
+            k = self.axial_stiffness[bar] / self.lengths[bar] * nn \
+                + force[bar] / length[bar] * (np.eye(3) - nn)
+            block = np.block([[k, -k], [-k, k]])
+            keep = ~np.isin(dofs[i], self._constrained)
+            index = dofs[i][keep].astype(PETSc.IntType)
+            A.setValues(index, index, block[np.ix_(keep, keep)], addv=PETSc.InsertMode.ADD)
+        A.assemble()
+
+    def summary(self) -> dict[str, float]:
+        """Whole eye (twice the half model's bars, in-plane bars counted once)."""
+        force, _, length = self.forces()
+        weight = np.where(self.in_plane, 1.0, 2.0)
+        strain = (length - self.lengths) / self.lengths
+        return {"zonule_force_total_N": float(np.sum(weight * force)),
+                "zonule_strain_max": float(np.abs(strain).max()) if len(strain) else 0.0}
+
