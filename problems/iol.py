@@ -44,7 +44,8 @@ class LensParameters(SceneParameters):
     nozzle_radius: float = field(1.05, "nozzle bore radius (≈ 2.2 mm outer: a ≈ 2 mm incision)", "mm")
     fold_radius: float = field(1.0, "radius the optic is rolled to about the injector axis", "mm")
     contact_stiffness: float = field(1.0, "nodal penalty stiffness k of rigid contact", "N/mm")
-    damping: float = field(60.0, "mass-proportional damping c standing in for the fluid", "1/s")
+    damping: float = field(2.0e4, "mass-proportional damping c standing in for the viscoelastic "
+                                  "fluid: c = μ/(δ ρ h), μ ≈ 10 Pa·s over a δ ≈ 2 mm layer", "1/s")
 
     def validate(self) -> None:
         self.require_positive("youngs_modulus", "density", "optic_thickness", "haptic_thickness",

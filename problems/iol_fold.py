@@ -43,7 +43,7 @@ from eyemech.problems.time_integration import ImplicitDynamics
 class Parameters(LensParameters):
     fold_time: float = field(0.4, "pseudo time of the folding", "s")
     time_step: float = field(0.01, "time step", "s")
-    fold_damping: float = field(200.0, "mass-proportional damping while folding", "1/s")
+    fold_damping: float = field(2.0e4, "mass-proportional damping while folding", "1/s")
     frames: int = field(10, "PNG frames of the folding")
 
     def validate(self) -> None:

@@ -138,6 +138,8 @@ class ImplicitDynamics:
         F.destroy()
 
     def set_step(self, dt: float) -> None:
+        if not dt > 0.0:  # the path follower restoring the last converged state: nothing to set
+            return
         self.dt = float(dt)
         self.coefficients = self.scheme.coefficients(self.dt)
 
