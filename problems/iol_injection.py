@@ -53,6 +53,11 @@ class Parameters(iol_fold.Parameters):
     frames_every: int = field(4, "a PNG frame every this many steps")
 
     def validate(self) -> None:
+        layout = InjectorLayout()
+        semi = np.asarray(layout.capsule_semi_axes)
+        if min(semi[:2]) < 0.5 * self.optic_diameter:
+            raise ParameterError("optic_diameter", f"the capsule (semi-axes {tuple(semi)}) is smaller "
+                                 f"than the {self.optic_diameter} mm optic")
         iol_fold.Parameters.validate(self)
         self.require_positive("plunger_speed", "frames_every", "jacobian_lag")
         self.require_nonnegative("settle_time", "plunger_overshoot")
@@ -60,11 +65,6 @@ class Parameters(iol_fold.Parameters):
             raise ParameterError("scheme", f"must be one of {sorted(SCHEMES)}, got {self.scheme!r}")
         if self.folded_state and not Path(self.folded_state).is_file():
             raise ParameterError("folded_state", f"no such file: {self.folded_state}")
-        layout = InjectorLayout()
-        semi = np.asarray(layout.capsule_semi_axes)
-        if min(semi[:2]) < 0.5 * self.optic_diameter:
-            raise ParameterError("optic_diameter", f"the capsule (semi-axes {tuple(semi)}) is smaller "
-                                 f"than the {self.optic_diameter} mm optic")
         if self.plunger_speed * self.time_step > 0.5 * self.nozzle_radius:
             raise ParameterError("plunger_speed", f"{self.plunger_speed} mm/s moves the plunger "
                                  f"{self.plunger_speed * self.time_step:.3g} mm per step, more than half "
