@@ -100,7 +100,7 @@ def fold(params: Parameters, ctx: RunContext, shell: LensShell, frames_dir: Path
     def converged(record) -> None:
         dynamics.advance()
         history["time"].append(record.load)
-        history["penetration"].append(max(contact.max_penetration().values()))
+        history["penetration"].append(max(contact.max_penetration().values(), default=0.0))
         history["strain"].append(strain.haptic_max())
         frame = record.step % every == 0 or record.load >= params.fold_time - 1e-9
         if self_distance is not None:

@@ -134,7 +134,7 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         h["time"].append(record.load)
         h["newton"].append(record.iterations)
         depth = contact.max_penetration()
-        h["penetration"].append(max(depth.values()))
+        h["penetration"].append(max(depth.values(), default=0.0))
         frame = record.step % params.frames_every == 1 or record.load >= end - 1e-9
         with ctx.timings("measurements"):
             h["strain"].append(strain.haptic_max())

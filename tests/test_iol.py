@@ -103,10 +103,10 @@ def test_bad_input_is_refused_before_any_solve():
 
 
 def test_short_fold_keeps_the_lens_out_of_the_chamber_wall():
-    """Three damped steps of iol-fold (the compiled lens form is shared with the scenes)."""
+    """0.03 s of iol-fold (the compiled lens form is shared with the scenes)."""
     params = iol_fold.Parameters(fold_time=0.03, frames=1)
     q = iol_fold.run(params, options=QUIET).quantities
-    assert q["steps"] == 3
+    assert q["steps"] >= 3  # the first steps are cut back (the roll starts against the haptics)
     # the penalty's penetration f/k: shell forces are ~1e-4 N, k = 1 N/mm
     assert q["max_penetration_mm"] < 1e-3
     assert not q["self_intersecting"]
