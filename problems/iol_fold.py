@@ -31,10 +31,10 @@ import dolfinx.fem
 
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.iol import (InjectorLayout, LensParameters, lens_newton, LensShell, StrainProbe, render_frame,
-                                  rolled, save_state, write_animation)
+from eyemech.problems.iol import (InjectorLayout, LensParameters, LensShell, StrainProbe, lens_newton,
+                                  render_frame, rolled, save_state, write_animation)
 from eyemech.problems.iol_contact import NodalContact, self_distance_probe
-from eyemech.problems.parameters import SceneParameters, field
+from eyemech.problems.parameters import field
 from eyemech.problems.scene import Scene
 from eyemech.problems.time_integration import ImplicitDynamics
 

@@ -30,8 +30,8 @@ except ImportError:
 from eyemech.problems import iol_fold
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.iol import (InjectorLayout, LensShell, lens_newton, StrainProbe, load_state, optic_center,
-                                  optic_normal, render_frame, write_animation)
+from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, load_state,
+                                  optic_center, optic_normal, render_frame, write_animation)
 from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
