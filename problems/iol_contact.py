@@ -1,0 +1,251 @@
+r"""Node-to-rigid-surface penalty contact for the lens, evaluated in numpy, and the lens'
+self distance measured with ipctk.
+
+Why numpy and not UFL (forms/contact.py): the lens' rigid bodies move every time step
+(plunger, closing cartridge) and are cut into regions (the cartridge acts only inside
+the injector, the capsule only outside it); a nodal penalty on the P2 nodes is a few
+vectorised lines per obstacle, costs microseconds, and keeps the (minutes to compile)
+shell form free of contact terms, so one compiled kernel serves every scene.
+
+Each obstacle gives, at deformed node positions x (n, 3), a signed gap g (> 0 free,
+< 0 penetrating; a distance in mm, first-order accurate near the surface) and its unit
+normal n = ∇g, and a mask of where it acts. The penalty energy and its derivatives are
+
+    Π_c = Σ_nodes ½ k ⟨−g⟩²,   f = ∂Π_c/∂u = −k ⟨−g⟩ n,   ∂²Π_c/∂u² ≈ k n⊗n (g < 0)
+
+with ⟨·⟩ smoothed over ±ε (``smoothing``, 2 µm by default) so that the force is C¹
+
+(the curvature term k g ∂n/∂x is left out of the Jacobian: a quasi-Newton tangent).
+k is a nodal stiffness (N/mm); the penetration under a nodal force f is f/k.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from petsc4py import PETSc
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx.fem
+
+
+def _radial(x: np.ndarray, axis_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ρ about the x-directed axis through ``axis_point`` and the unit radial direction."""
+    d = x[:, 1:] - axis_point[1:]
+    rho = np.sqrt(np.sum(d ** 2, axis=1) + 1e-24)
+    e = np.zeros_like(x)
+    e[:, 1:] = d / rho[:, None]
+    return rho, e
+
+
+@dataclasses.dataclass
+class TaperedBore:
+    """The cartridge bore: axis along +x through ``axis_point``; radius ``radius`` up to
+    ``taper_start``, then linear down to ``nozzle_radius`` at ``taper_end``, straight to the
+    nozzle tip ``tip``. Acts for x < tip (the body is inside). ``scale`` shrinks the whole
+    bore towards ``radius`` (the closing loading chamber of the folding stage)."""
+
+    axis_point: np.ndarray
+    radius: float
+    nozzle_radius: float
+    taper_start: float
+    taper_end: float
+    tip: float
+    opening: float = 0.0  # extra radius (mm) added everywhere: the chamber before it closes
+
+    def wall_radius(self, x: np.ndarray) -> np.ndarray:
+        s = np.clip((x - self.taper_start) / (self.taper_end - self.taper_start), 0.0, 1.0)
+        return self.radius + (self.nozzle_radius - self.radius) * s + self.opening
+
+    def gap_normal(self, x):
+        rho, e = _radial(x, self.axis_point)
+        return self.wall_radius(x[:, 0]) - rho, -e, x[:, 0] < self.tip
+
+
+@dataclasses.dataclass
+class Plunger:
+    """A flat plunger head x = ``position`` of ``radius`` about the x-directed axis through
+    ``axis_point``, pushing along +x (the body lies at larger x)."""
+
+    position: float
+    axis_point: np.ndarray
+    radius: float
+
+    def gap_normal(self, x):
+        normal = np.zeros_like(x)
+        normal[:, 0] = 1.0
+        rho, _ = _radial(x, self.axis_point)
+        return x[:, 0] - self.position, normal, rho < self.radius
+
+
+@dataclasses.dataclass
+class Capsule:
+    """A rigid ellipsoidal bag (semi-axes ``semi_axes`` along x, y, z about ``center``); the
+    body is inside. Acts where x > ``entry`` (outside the injector). Gap ≈ (1 − s)/|∇s|,
+    s = |A⁻¹(x − c)|: exact on the surface to first order."""
+
+    center: np.ndarray
+    semi_axes: np.ndarray
+    entry: float
+
+    def gap_normal(self, x):
+        y = (x - self.center) / self.semi_axes
+        s = np.sqrt(np.sum(y ** 2, axis=1) + 1e-24)
+        grad_s = y / self.semi_axes / s[:, None]
+        norm = np.linalg.norm(grad_s, axis=1) + 1e-24
+        return (1.0 - s) / norm, -grad_s / norm[:, None], x[:, 0] > self.entry
+
+
+class NodalContact:
+    """Penalty contact of the (owned) nodes of a vector Lagrange ``u`` with rigid obstacles,
+    as NonlinearSolver hooks; nodes in ``excluded`` (e.g. prescribed ones) are skipped."""
+
+    def __init__(self, u: dolfinx.fem.Function, obstacles: dict, stiffness: float,
+                 excluded: np.ndarray | None = None, smoothing: float = 2e-3):
+        V = u.function_space
+        self.owned = V.dofmap.index_map.size_local
+        self.X = V.tabulate_dof_coordinates()[: self.owned]
+        self.u, self.obstacles, self.stiffness = u, obstacles, float(stiffness)
+        self.smoothing = float(smoothing)
+        self.active = np.ones(self.owned, bool)
+        if excluded is not None:
+            self.active[excluded[excluded < self.owned]] = False
+        self.seconds = 0.0
+
+    def positions(self, values: np.ndarray | None = None) -> np.ndarray:
+        values = self.u.x.array if values is None else values
+        return self.X + values[: 3 * self.owned].reshape(-1, 3)
+
+    def _pressed(self, x: np.ndarray, band: float = 0.0):
+        """(node, depth, normal, obstacle name) of every node/obstacle pair with gap < band."""
+        for name, obstacle in self.obstacles.items():
+            gap, normal, acts = obstacle.gap_normal(x)
+            hit = np.flatnonzero(acts & self.active & (gap < band))
+            if len(hit):
+                yield hit, -gap[hit], normal[hit], name
+
+    def _smoothed(self, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """⟨d⟩ smoothed over |d| < ε by the C¹ ramp (d + ε)²/(4ε), and its derivative: a
+        kinked ⟨d⟩ makes Newton cycle when a node sits at the wall (measured: residuals
+        alternating 1e-2 / 1e-4 for 25 iterations); ε = ``smoothing`` mm."""
+        eps = self.smoothing
+        if eps <= 0.0:
+            return np.maximum(depth, 0.0), (depth > 0.0).astype(float)
+        inside = depth >= eps
+        value = np.where(inside, depth, (depth + eps) ** 2 / (4.0 * eps))
+        slope = np.where(inside, 1.0, (depth + eps) / (2.0 * eps))
+        return value, slope
+
+    def residual_hook(self, x_vec: PETSc.Vec, F: PETSc.Vec) -> None:
+        start = PETSc.Log.getTime()
+        x = self.X + x_vec.array_r[: 3 * self.owned].reshape(-1, 3)
+        with F.localForm() as local:
+            values = local.array
+            for nodes, depth, normal, _ in self._pressed(x, self.smoothing):
+                force = -self.stiffness * self._smoothed(depth)[0][:, None] * normal
+                np.add.at(values.reshape(-1, 3), nodes, force)
+        self.seconds += PETSc.Log.getTime() - start
+
+    def jacobian_hook(self, x_vec: PETSc.Vec, J: PETSc.Mat) -> None:
+        start = PETSc.Log.getTime()
+        x = self.X + x_vec.array_r[: 3 * self.owned].reshape(-1, 3)
+        added = False
+        for nodes, depth, normal, _ in self._pressed(x, self.smoothing):
+            slope = self._smoothed(depth)[1]
+            blocks = self.stiffness * slope[:, None, None] * np.einsum("ni,nj->nij", normal, normal)
+            for node, block in zip(nodes, blocks):
+                dofs = np.arange(3 * node, 3 * node + 3, dtype=np.int32)
+                J.setValuesLocal(dofs, dofs, block.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
+            added = True
+        if added:
+            J.assemble()
+        self.seconds += PETSc.Log.getTime() - start
+
+    def max_penetration(self) -> dict[str, float]:
+        """Deepest penetration (mm) of the current state, per obstacle."""
+        x = self.positions()
+        depth = {name: 0.0 for name in self.obstacles}
+        for _nodes, d, _n, name in self._pressed(x):
+            depth[name] = max(depth[name], float(d.max()))
+        return depth
+
+    def forces(self) -> dict[str, np.ndarray]:
+        """Resultant force (N) each obstacle exerts on the lens."""
+        x = self.positions()
+        total = {name: np.zeros(3) for name in self.obstacles}
+        for _nodes, d, normal, name in self._pressed(x, self.smoothing):
+            total[name] += self.stiffness * (self._smoothed(d)[0][:, None] * normal).sum(axis=0)
+        return total
+
+
+def self_distance_probe(u: dolfinx.fem.Function):
+    """A :class:`SelfDistance` when it can run (ipctk installed, one rank), else None."""
+    if u.function_space.mesh.comm.size != 1:
+        return None
+    try:
+        import ipctk  # noqa: F401
+    except ImportError:
+        return None
+    return SelfDistance(u)
+
+
+class SelfDistance:
+    """Smallest distance between distant parts of the lens mid-surface, by ipctk, on the
+    flat triangles through the P2 vertex nodes (serial; the lens is small).
+
+    Only pairs of primitives whose vertices all lie more than ``exclusion`` apart in the
+    reference (flat) lens count: on a flat mesh, neighbouring elements are a fraction of
+    an element apart, which says nothing about self-contact; parts that were apart along
+    the lens and come together (a haptic on the optic, the rolled optic's rims) are what
+    is measured. ipctk gives the candidates within ``search_radius`` and their distances.
+    """
+
+    def __init__(self, u: dolfinx.fem.Function, exclusion: float = 1.0):
+        import ipctk
+
+        V = u.function_space
+        self.u = u
+        cells = V.dofmap.list[:, :3]  # the vertex nodes of each P2 triangle
+        self.nodes, faces = np.unique(cells, return_inverse=True)
+        faces = faces.reshape(-1, 3)
+        self.X = V.tabulate_dof_coordinates()[self.nodes]
+        self.faces = np.asfortranarray(faces.astype(np.int32))
+        self.edges = np.asfortranarray(ipctk.edges(self.faces))
+        self.mesh = ipctk.CollisionMesh(np.asfortranarray(self.X), self.edges, self.faces)
+        self.exclusion = exclusion
+        self._ipctk = ipctk
+
+    def positions(self) -> np.ndarray:
+        return np.asfortranarray(self.X + self.u.x.array.reshape(-1, 3)[self.nodes])
+
+    def __call__(self, search_radius: float = 0.25, distances: bool = True) -> tuple[float, bool]:
+        """(minimum distance in mm — ``inf`` when nothing distant is within
+        ``search_radius``, NaN when ``distances`` is False —, whether the surface
+        intersects itself: ipctk's exact triangle–edge test, cheap, always done)."""
+        ipctk = self._ipctk
+        x = self.positions()
+        if not distances:
+            return float("nan"), bool(ipctk.has_intersections(self.mesh, x))
+        collisions = ipctk.NormalCollisions()
+        t0 = time.perf_counter()
+        collisions.build(self.mesh, x, search_radius)
+        self.timing = [time.perf_counter() - t0, len(collisions)]
+        best = np.inf
+        for i in range(len(collisions)):
+            collision = collisions[i]
+            ids = [v for v in collision.vertex_ids(self.edges, self.faces) if v >= 0]
+            split = 2 if isinstance(collision, ipctk.EdgeEdgeNormalCollision) else 1
+            first, second = self.X[ids[:split]], self.X[ids[split:]]
+            if np.min(np.linalg.norm(first[:, None] - second[None], axis=2)) < self.exclusion:
+                continue
+            best = min(best, float(np.sqrt(collision.compute_distance(collision.dof(x, self.edges,
+                                                                                     self.faces)))))
+        t0 = time.perf_counter()
+        crossing = bool(ipctk.has_intersections(self.mesh, x))
+        self.timing.append(time.perf_counter() - t0)
+        return best, crossing

@@ -1,0 +1,162 @@
+"""``iol-fold``: the lens folded into the cartridge (seed 000 §3: "the haptics are folded
+onto the implant body; the body was then bent while keeping the haptics inside").
+
+Two rigid actions over the pseudo time [0, fold_time]:
+- the optic is rolled isometrically about the injector axis to ``fold_radius``
+  (prescribed on its nodes, κ(t) = (t/T)/fold_radius: two rigid fingers wrapping it);
+- the loading chamber closes: a tube about the same axis whose radius shrinks from
+  beyond the haptic tips to ``bore_radius`` pushes the haptics in (nodal penalty contact).
+
+Solved as heavily damped implicit dynamics (backward Euler, damping ``fold_damping``):
+slow enough to be quasi-static, and the damping carries the haptics through the
+snap-throughs of a static path. Self-contact forces are NOT applied; the lens' own
+smallest distance is measured with ipctk and reported. The folded state is saved to
+``folded_state.npz`` for ``iol-injection``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+import dolfinx.fem
+
+from eyemech.problems.context import RunContext, RunOptions
+from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.iol import (InjectorLayout, LensParameters, LensShell, StrainProbe, lens_newton,
+                                  render_frame, rolled, save_state, write_animation)
+from eyemech.problems.iol_contact import NodalContact, self_distance_probe
+from eyemech.problems.parameters import field
+from eyemech.problems.scene import Scene
+from eyemech.problems.time_integration import ImplicitDynamics
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameters(LensParameters):
+    fold_time: float = field(0.4, "pseudo time of the folding", "s")
+    time_step: float = field(0.01, "time step", "s")
+    fold_damping: float = field(2.0e4, "mass-proportional damping while folding", "1/s")
+    frames: int = field(10, "PNG frames of the folding")
+
+    def validate(self) -> None:
+        LensParameters.validate(self)
+        self.require_positive("fold_time", "time_step", "frames")
+
+
+class Folding:
+    """The optic's prescribed roll and the closing chamber, as functions of λ = t/T."""
+
+    def __init__(self, shell: LensShell, params: Parameters):
+        self.shell, self.params = shell, params
+        V = shell.V
+        cells = shell.tagged.cells("optic")
+        self.optic_dofs = dolfinx.fem.locate_dofs_topological(V, 2, cells)
+        self.prescribed = dolfinx.fem.Function(V)
+        self.bc = dolfinx.fem.dirichletbc(self.prescribed, self.optic_dofs)
+        self.X = shell.node_coordinates()[self.optic_dofs]
+        self.chamber = InjectorLayout().cartridge(params)
+        x = shell.node_coordinates()
+        reach = np.max(np.hypot(x[:, 1] - params.axis_point()[1], x[:, 2] - params.axis_point()[2]))
+        self.opening = reach + 0.3 - params.bore_radius
+
+    def apply(self, fraction: float) -> None:
+        curvature = fraction / self.params.fold_radius
+        values = self.prescribed.x.array.reshape(-1, 3)
+        values[self.optic_dofs] = rolled(self.X, curvature) - self.X
+        self.prescribed.x.scatter_forward()
+        self.chamber.opening = (1.0 - fraction) * self.opening
+
+
+def fold(params: Parameters, ctx: RunContext, shell: LensShell, frames_dir: Path | None):
+    """Run the folding on ``shell`` (its u ends folded); returns the per-step records."""
+    folding = Folding(shell, params)
+    contact = NodalContact(shell.u, {"chamber": folding.chamber}, params.contact_stiffness,
+                           excluded=folding.optic_dofs)
+    dynamics = ImplicitDynamics(shell.u, shell.mass(), [folding.bc], scheme_name="backward-euler",
+                                damping=params.fold_damping)
+    solver = NonlinearSolver(shell.residual(), shell.u, [folding.bc], options=lens_newton(ctx),
+                             timings=ctx.timings,
+                             residual_hooks=[dynamics.residual_hook, contact.residual_hook],
+                             jacobian_hooks=[dynamics.jacobian_hook, contact.jacobian_hook])
+    self_distance = self_distance_probe(shell.u)
+    strain = StrainProbe(shell)
+    steps = max(1, int(round(params.fold_time / params.time_step)))
+    every = max(1, steps // params.frames)
+    frames: list[Path] = []
+    history = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": []}
+
+    def apply(t: float, dt: float) -> None:
+        folding.apply(t / params.fold_time)
+        dynamics.set_step(dt)
+
+    def converged(record) -> None:
+        dynamics.advance()
+        history["time"].append(record.load)
+        history["penetration"].append(max(contact.max_penetration().values(), default=0.0))
+        history["strain"].append(strain.haptic_max())
+        frame = record.step % every == 0 or record.load >= params.fold_time - 1e-9
+        if self_distance is not None:
+            with ctx.timings("measurements"):
+                distance, crossing = self_distance(distances=frame)
+            history["self_distance"].append(distance)
+            history["intersecting"].append(crossing)
+        ctx.record_step(step=record.step, time=record.load, newton_iterations=record.iterations,
+                        cuts=record.cuts, max_penetration_mm=history["penetration"][-1])
+        if frames_dir is not None and frame:
+            path = frames_dir / f"fold_{len(frames):03d}.png"
+            with ctx.timings("output"):
+                render_frame(shell, path, f"iol-fold  t = {record.load:.2f} s",
+                             {"chamber": folding.chamber})
+            frames.append(path)
+
+    start = time.perf_counter()
+    with ctx.timings("time_stepping"):
+        follow_path(solver, apply, Stepping(0.0, params.fold_time, initial_step=1.0 / steps,
+                                            max_step=1.0 / steps, grow=2.0, min_step=1e-3 / steps),
+                    on_converged=converged, label="iol-fold", quiet=ctx.options.quiet)
+    history["wall"] = time.perf_counter() - start
+    history["steps"] = len(history["time"])
+    history["contact_seconds"] = contact.seconds
+    history["frames"] = frames
+    return history
+
+
+def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
+        options: RunOptions | None = None):
+    with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        with ctx.timings("mesh"):
+            shell = LensShell(params, ctx.comm)
+        pictures = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
+        history = fold(params, ctx, shell, pictures)
+        q = ctx.result.quantities
+        distances = [d for d in history["self_distance"] if np.isfinite(d)]
+        q.update(steps=history["steps"], steps_per_second=history["steps"] / history["wall"],
+                 max_penetration_mm=float(max(history["penetration"], default=0.0)),
+                 haptic_max_strain=float(max(history["strain"], default=0.0)),
+                 min_self_distance_mm=float(min(distances)) if distances else None,
+                 self_intersecting=bool(any(history["intersecting"])),
+                 self_contact_forces="not applied", contact_seconds=history["contact_seconds"],
+                 triangles=shell.mesh.topology.index_map(2).size_global,
+                 nodes=shell.mesh.geometry.index_map().size_global, dofs=shell.dofs())
+        if ctx.out is not None:
+            save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
+            ctx.result.fields.append("folded_state.npz")
+            if pictures is not None and ctx.rank0 and history["frames"]:
+                ctx.result.pictures += [p.name for p in history["frames"]]
+                gif = write_animation(history["frames"], ctx.out / "fold.gif")
+                if gif:
+                    ctx.result.pictures.append(gif)
+    return ctx.result
+
+
+SCENE = Scene(name="iol-fold", kind="scene", parameters=Parameters, run=run,
+              summary="intra-ocular lens rolled about the injector axis while the loading chamber "
+                      "closes on its haptics (damped quasi-static, saves the folded state)")
