@@ -6,8 +6,9 @@
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
-# Extras: the DOLFINx wheel unless told otherwise (EXTRAS=test for a conda DOLFINx).
-EXTRAS ?= dolfinx,test
+# Extras: the DOLFINx wheel and the lens scenes' ipctk unless told otherwise
+# (EXTRAS=test,iol for a conda DOLFINx).
+EXTRAS ?= dolfinx,test,iol
 OUT    ?= results
 # The main job: the scleral-buckling operation (issue #5).
 MAIN   ?= scleral-buckling
