@@ -20,3 +20,12 @@ def compressible_neo_hooke(u, youngs_modulus: float, poisson_ratio: float):
     F = ufl.Identity(len(u)) + ufl.grad(u)
     J = ufl.det(F)
     return 0.5 * mu * (ufl.tr(F.T * F) - 3 - 2 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
+
+
+def spring_support_energy(u, stiffness, measure):
+    """Elastic (Winkler) support of a boundary: Π_s = ∫ ½ k |u|² dA over ``measure``
+    (reference area), k in MPa/mm. Its variation ∫ k u·δu dA is a traction −k u: the
+    boundary is held by distributed springs in all three directions. A stand-in for
+    the tissue beyond the boundary (the sclera at the corneal limbus): k ≈ E_s / ℓ for
+    a support of modulus E_s acting over a length ℓ; k → ∞ is the clamp."""
+    return 0.5 * stiffness * ufl.dot(u, u) * measure

@@ -3,7 +3,8 @@ creeping over hours (issue 6, item 5 — a first version, see docs/viscoelastic.
 
 Two runs on the same mesh (same cells, same time grid): the intact cornea and the cornea
 with ``incisions`` real cuts (meshes/cornea.py). Both are loaded at t = 0 by the IOP as a
-follower pressure on the posterior surface (glassy response, Cv = I), the limbus clamped,
+follower pressure on the posterior surface (glassy response, Cv = I), the limbus clamped
+(``support`` = clamped) or on distributed springs (``elastic``, ``limbus_stiffness``),
 then creep with backward Euler on a geometric time grid (``first_dt`` growing by
 ``dt_growth``) to ``t_end``. The keratometric power is 337.5 / R with R from a least-
 squares sphere through the deformed anterior nodes inside the central ``fit_diameter``;
@@ -26,6 +27,7 @@ from mpi4py import MPI
 
 from eyemech.forms import follower_pressure
 from eyemech.forms import viscoelastic as ve
+from eyemech.forms.elastic import spring_support_energy
 from eyemech.meshes import MeshError
 from eyemech.meshes.cornea import CorneaGeometry, cornea
 from eyemech.problems._viscous_bar import ViscousHistory
@@ -39,6 +41,33 @@ from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure
 import dolfinx
 
 MMHG = 1.33322e-4  # MPa
+SUPPORTS = ("clamped", "elastic")
+
+
+def validate_support(params) -> None:
+    """ParameterError for an unknown ``support`` or a non-positive ``limbus_stiffness``."""
+    if params.support not in SUPPORTS:
+        raise ParameterError("support", f"unknown limbus support {params.support!r}; choose one of "
+                             f"{', '.join(SUPPORTS)}")
+    if params.support == "elastic":
+        params.require_positive("limbus_stiffness")
+        if not np.isfinite(params.limbus_stiffness):
+            raise ParameterError("limbus_stiffness", "must be finite")
+
+
+def limbus_support(params, u, v, tagged, ds):
+    """The limbus held by ``params.support``: (residual term or None, Dirichlet conditions).
+    ``clamped``: u = 0 on the limbus face. ``elastic``: distributed springs of stiffness
+    ``limbus_stiffness`` per area in all directions (forms/elastic.py), the sclera's
+    compliance in place of a rigid wall."""
+    V = u.function_space
+    if params.support == "elastic":
+        energy = spring_support_energy(u, params.limbus_stiffness, ds(tagged.tag("limbus")))
+        return ufl.derivative(energy, u, v), []
+    fdim = tagged.mesh.topology.dim - 1
+    clamp = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(
+        V, fdim, tagged.facets("limbus")), V)
+    return None, [clamp]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,7 +88,10 @@ class Parameters(SceneParameters):
     central_thickness: float = field(0.52, "central thickness", "mm")
     limbal_thickness: float = field(0.67, "thickness at the limbus", "mm")
     diameter: float = field(11.7, "planform diameter at the limbus", "mm")
-    support: Literal["clamped"] = field("clamped", "limbus support (elastic scleral ring: not yet)")
+    support: Literal["clamped", "elastic"] = field("clamped", "limbus support: clamped, or "
+                                                   "elastic (distributed springs standing in for the sclera)")
+    limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
+                                    "(≈ E_sclera / 5 mm)", "MPa/mm")
     mesh_size: float = field(1.0, "radial element size in the planform", "mm")
     azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))")
     layers: int = field(2, "element layers through the thickness (at least)")
@@ -73,6 +105,7 @@ class Parameters(SceneParameters):
             self.geometry(self.incisions).validate()
         except MeshError as err:
             raise ParameterError(getattr(err, "key", "geometry"), str(err)) from None
+        validate_support(self)
         if not self.dt_growth >= 1.0:
             raise ParameterError("dt_growth", f"must be >= 1, got {self.dt_growth}")
         if self.first_dt > self.t_end:
@@ -97,7 +130,7 @@ class Parameters(SceneParameters):
 
 class Cornea:
     """One cornea (intact or incised): mesh, mixed u–p viscoelastic residual with the IOP
-    as a follower load, clamped limbus, and the quantities of interest."""
+    as a follower load, the limbus support, and the quantities of interest."""
 
     def __init__(self, params: Parameters, incisions: int, comm: MPI.Comm,
                  azimuths: int):
@@ -115,9 +148,10 @@ class Cornea:
                     + follower_pressure(self.pressure, self.u, v, ds(self.tagged.tag("posterior"))))
         V = self.u.function_space
         fdim = mesh.topology.dim - 1
-        clamp = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(
-            V, fdim, self.tagged.facets("limbus")), V)
-        self.residual_blocks, self.bcs = list(ufl.extract_blocks(residual)), [clamp]
+        support, self.bcs = limbus_support(params, self.u, v, self.tagged, ds)
+        if support is not None:
+            residual += support
+        self.residual_blocks = list(ufl.extract_blocks(residual))
         self._central_anterior(V, fdim, params.fit_diameter / 2)
         self.has_cuts = incisions > 0
         if self.has_cuts:
