@@ -51,7 +51,9 @@ def save_chart(fig, path, *, dpi: int = 110, rect=(0, 0.03, 1, 1)) -> None:
     """Stamp the chart (machine, versions, date), lay it out, save it, free it."""
     import matplotlib.pyplot as plt
 
-    fig.text(0.01, 0.01, stamp(), fontsize=7, color="grey")
+    line = stamp()
+    fig.text(0.01, 0.01, line, fontsize=7, color="grey")
     fig.tight_layout(rect=rect)
-    fig.savefig(path, dpi=dpi)
+    # the stamp also as PNG text, so that tests (and readers) can check it without OCR
+    fig.savefig(path, dpi=dpi, metadata={"Comment": line})
     plt.close(fig)
