@@ -154,12 +154,15 @@ def _chart(path: Path, locking, checker, profiles, n_profile: int) -> Path:
         ok = [r for r in locking if r["elements_per_side"] == n and r["status"] == "ok"]
         ax.semilogx([r["bulk_over_shear"] for r in ok], [r["tip_over_incompressible"] for r in ok],
                     "o-", label=f"P1, {n}×{n}")
+        failed = [r for r in locking if r["elements_per_side"] == n and r["status"] != "ok"]
+        ax.semilogx([r["bulk_over_shear"] for r in failed], [0.04] * len(failed), "rv", ms=9)
         locked = [r for r in ok if r["tip_over_incompressible"] < 0.9]
         if locked:
             first = locked[0]
             ax.plot(first["bulk_over_shear"], first["tip_over_incompressible"], "kx", ms=11, mew=2)
     ax.axhline(1.0, color="k", lw=0.8, ls="--", label="incompressible, converged")
     ax.axhline(0.9, color="grey", lw=0.8, ls=":", label="−10 % (×: first locked case)")
+    ax.plot([], [], "rv", label="Newton failed (cut-back exhausted)")
     ax.axvline(5000, color="tab:red", lw=0.8, ls=":")
     ax.text(5000, 0.05, " K/μ of the references", fontsize=7, color="tab:red", rotation=90)
     ax.set(xlabel="K / μ", ylabel="tip displacement / incompressible limit", ylim=(0, 1.3),

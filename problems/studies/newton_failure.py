@@ -95,8 +95,10 @@ def _chart(path: Path, rows: list[dict], base: dict) -> Path:
             ax_map.scatter(r["pressure_over_limit"], y, marker=marker, color=colour, s=90)
             label = {"direct": f"{r['first_step_iterations']}", "cut": f"{r['first_step_cuts']}✂",
                      "failed": ""}[r["outcome"]]
+            crowded = r["pressure_over_limit"] > 0.955  # stagger labels near the limit point
             ax_map.annotate(label, (r["pressure_over_limit"], y), textcoords="offset points",
-                            xytext=(0, 9), ha="center", fontsize=7)
+                            xytext=(0, -14 if crowded and r["pressure_over_limit"] < 0.99 else 9),
+                            ha="center", fontsize=7)
         first_cut = [r["pressure_over_limit"] for r in rows
                      if r["line_search"] == search and r["outcome"] != "direct"]
         if first_cut:
@@ -105,12 +107,12 @@ def _chart(path: Path, rows: list[dict], base: dict) -> Path:
     ax_map.text(1.0, len(searches) - 0.45, " limit point", fontsize=8, color="grey")
     for outcome, (marker, colour) in style.items():
         ax_map.scatter([], [], marker=marker, color=colour, label=outcome)
-    ax_map.set(yticks=range(len(searches)), yticklabels=searches, ylim=(-0.6, len(searches) - 0.2),
+    ax_map.set(yticks=range(len(searches)), yticklabels=searches, ylim=(-0.6, len(searches) + 0.3),
                xlabel="single load step Δp / p_limit (from the unloaded sphere)",
                ylabel="SNES line search",
                title="first Newton solve: iterations (number) or cuts (✂); bar = first failure")
     ax_map.title.set_fontsize(9)
-    ax_map.legend(fontsize=8, loc="lower left")
+    ax_map.legend(fontsize=8, loc="upper left", ncol=3)
     for search in searches:
         ok = [r for r in rows if r["line_search"] == search and r["outcome"] != "failed"]
         ax_cost.plot([r["pressure_over_limit"] for r in ok],
