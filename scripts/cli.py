@@ -19,6 +19,7 @@ import argparse
 import json
 import logging
 import sys
+import time
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
@@ -69,7 +70,8 @@ def _parser() -> argparse.ArgumentParser:
     p_sweep.add_argument("--json", action="store_true", help="print the rows as JSON")
     p_study = sub.add_parser("study", help="accuracy-vs-cost and stability studies (CSV + PNG)")
     p_study.add_argument("name", help="study name, or 'all' (see 'eyemech study list')")
-    p_study.add_argument("--out", default="docs/studies", help="output folder")
+    p_study.add_argument("--out", help="output folder (default docs/studies; with --quick "
+                         "results/studies-quick, so coarse charts never replace the atlas's)")
     p_study.add_argument("--quick", action="store_true", help="coarse settings (for tests)")
     p_bench = sub.add_parser("bench", help="time a scene at its benchmark size (table in --out)")
     p_bench.add_argument("name", help="scene name")
@@ -158,9 +160,15 @@ def _study(args, comm, say) -> int:
     for name in chosen:
         if name not in known:
             raise KeyError(f"unknown study '{name}'; known: {', '.join(sorted(known))}")
+    out = Path(args.out or ("results/studies-quick" if args.quick else "docs/studies"))
+    began = time.perf_counter()
     for name in chosen:
-        files = known[name].run(out=Path(args.out), quick=args.quick, comm=comm)
-        say(f"{name}: wrote {', '.join(str(f) for f in files)}")
+        start = time.perf_counter()
+        files = known[name].run(out=out, quick=args.quick, comm=comm)
+        say(f"{name}: wrote {', '.join(str(f) for f in files)} "
+            f"({time.perf_counter() - start:.0f} s)")
+    if len(chosen) > 1:
+        say(f"{len(chosen)} studies in {time.perf_counter() - began:.0f} s")
     return 0
 
 

@@ -10,7 +10,6 @@ number); ``quick`` runs two cases.
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 from mpi4py import MPI
@@ -18,7 +17,7 @@ from mpi4py import MPI
 from eyemech.problems import scleral_buckling
 from eyemech.problems.context import RunOptions
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, stamp
+from eyemech.problems.studies._common import save_chart, write_csv
 from eyemech.problems.sweep import run_sweep
 
 # an encircling band alone (no tire), so that its width is what touches the sclera:
@@ -38,12 +37,8 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                      comm=comm)
     if comm.rank != 0:
         return []
-    table = out / "buckling_sweep.csv"
-    with table.open("w", newline="") as handle:
-        handle.write(f"# {stamp()}\n")
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    # a failed case's row has an ``error`` column and no quantities: union of the keys
+    table = write_csv(out / "buckling_sweep.csv", rows)
     chart = out / "buckling_sweep.png"
     _chart(rows, grid, chart)
     return [table, chart]
@@ -67,10 +62,16 @@ def _chart(rows: list[dict], grid: dict, path: Path) -> None:
             if str(r.get("tear_closed")) == "True":
                 axes[1].annotate("tear closed", (float(r["indentation"]),
                                                  float(r["retina_choroid_gap_mean_mm"])))
+    failed = [r for r in rows if r.get("status") != "ok"]
+    for r in failed:  # where the method failed: marked on the x axis
+        axes[0].plot(float(r["indentation"]), 0.0, "rx", ms=10, mew=2)
+    if failed:
+        widths = sorted({str(r["band_width"]) for r in failed})
+        axes[0].plot([], [], "rx", label=f"Newton failed (band {', '.join(widths)} mm)")
     axes[0].set(xlabel="buckle indentation (mm)", ylabel="axial length change after suturing (mm)")
     axes[1].set(xlabel="buckle indentation (mm)", ylabel="mean retina–choroid gap (mm)")
     for ax in axes:
-        ax.legend()
+        ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
     fig.suptitle("scleral-buckling: encircling band alone, coarse eye, Q1P0")
     save_chart(fig, path, dpi=110, rect=(0, 0.04, 1, 0.95))
