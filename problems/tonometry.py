@@ -51,7 +51,7 @@ from eyemech.meshes.cornea import CorneaGeometry, cornea
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.keratotomy import MMHG, SUPPORTS, limbus_support, validate_support
-from eyemech.problems.output import gather_grid, render_png
+from eyemech.problems.output import PyvistaSeries, gather_grid, render_png
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.rigid_contact import resultant_force
 from eyemech.problems.scene import Scene
@@ -321,6 +321,10 @@ def _picture(ctx: RunContext, body: Applanation, params: Parameters) -> None:
     if grid is None:
         return
     grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+    # the applanated cornea for notebooks (pyvista cannot read VTX .bp)
+    series = PyvistaSeries(ctx.out, ctx.comm)
+    series.write(ctx.result.quantities["applanation_depth_mm"], grid)
+    ctx.result.fields.extend(series.files)
     path = ctx.out / "tonometry.png"
     q = ctx.result.quantities
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.0, -1.0, 0.35),
