@@ -59,6 +59,7 @@ import dolfinx.fem.petsc
 from eyemech.meshes.tagged import MeshError, TaggedMesh
 from eyemech.problems.parameters import ParameterError
 from eyemech.problems.results import Timings
+from eyemech.problems.spaces import PetscNodeLayout
 
 
 @dataclasses.dataclass
@@ -105,12 +106,12 @@ class NodeToSurfaceContact:
         if self.bs != 3 or space.ufl_element().embedded_superdegree not in (1, 2):
             raise ValueError("node-to-surface contact needs a 3D vector P1 or P2 displacement")
         self.imap = space.dofmap.index_map
-        self._layout(block_spaces)
+        self.layout = PetscNodeLayout(space, block_spaces)
         self.reference = space.tabulate_dof_coordinates()
         self._slave_setup(tagged, slave)
         self._master_setup(tagged, master)
         self._drop_slaves_on_master()
-        self._constrained = self._constrained_dofs(bcs)
+        self._constrained = set(self.layout.constrained_dofs(bcs).tolist())
         self.state: ContactState | None = None
 
     # -- set-up ---------------------------------------------------------------------------
@@ -170,42 +171,6 @@ class NodeToSurfaceContact:
         self.triangle_nodes = np.searchsorted(self.master_nodes, self.triangles)
         if len(self.triangles) == 0:
             raise MeshError(f"the master region '{master}' has no facets")
-
-    def _constrained_dofs(self, bcs) -> set[int]:
-        """Global indices of Dirichlet-constrained dofs, known on every rank."""
-        mine = []
-        for bc in bcs:
-            local, _ = bc.dof_indices()
-            blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
-            mine.append(self._petsc_base(blocks) + local % self.bs)
-        mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
-        return set(np.concatenate(self.comm.allgather(mine)).tolist())
-
-    def _layout(self, block_spaces) -> None:
-        """Where each rank's displacement dofs sit in the PETSc vector.
-
-        A single field: global index = global node · bs + component. A blocked
-        system (``block_spaces`` = the spaces of ``NonlinearProblem(..., kind="mpi")``,
-        the displacement's first): each rank stores its owned dofs of every block one
-        after the other, so a node owned by rank r sits at Σ_{s<r} (owned dofs of all
-        blocks on s) + (its number on r) · bs."""
-        start = self.imap.local_range[0]
-        owned = self.bs * self.imap.size_local
-        if block_spaces is None:
-            rank_total = owned
-        else:
-            if block_spaces[0] != self.u.function_space:
-                raise ValueError("block_spaces must start with the displacement's space")
-            rank_total = sum(V.dofmap.index_map.size_local * V.dofmap.index_map_bs
-                             for V in block_spaces)
-        self._starts = np.array(self.comm.allgather(start), dtype=np.int64)
-        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
-
-    def _petsc_base(self, global_nodes: np.ndarray) -> np.ndarray:
-        """PETSc index of component 0 of the given global node numbers."""
-        global_nodes = np.asarray(global_nodes, dtype=np.int64)
-        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
-        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
         """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
@@ -307,7 +272,7 @@ class NodeToSurfaceContact:
     def _pair_dofs(self, state: ContactState) -> np.ndarray:
         """(n, 12) global dof indices: slave node then the three master nodes."""
         nodes = np.column_stack([self.slave_global[state.active], self.triangles[state.triangles]])
-        base = self._petsc_base(nodes.ravel()).reshape(nodes.shape)
+        base = self.layout.base(nodes.ravel()).reshape(nodes.shape)
         return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), 4 * self.bs)
 
     def _pair_vectors(self, state: ContactState) -> np.ndarray:

@@ -195,3 +195,45 @@ def lagrange_view(function: dolfinx.fem.Function, name: str):
 
     update()
     return view, update
+
+
+class PetscNodeLayout:
+    """Where the node blocks of a vector field sit in the PETSc vector of a system, for
+    hooks that add point terms (contact pairs, bars) straight into the assembled b and A.
+
+    A single field: global index = global node · bs + component. A blocked system
+    (``block_spaces`` = the spaces of ``NonlinearProblem(..., kind="mpi")``, the field's
+    first): each rank stores its owned dofs of every block one after the other, so a node
+    owned by rank r sits at Σ_{s<r} (owned dofs of all blocks on s) + (its number on r) · bs.
+    Collective to build."""
+
+    def __init__(self, space: dolfinx.fem.FunctionSpace, block_spaces=None):
+        self.comm = space.mesh.comm
+        self.imap = space.dofmap.index_map
+        self.bs = space.dofmap.index_map_bs
+        if block_spaces is None:
+            rank_total = self.bs * self.imap.size_local
+        else:
+            if block_spaces[0] != space:
+                raise ValueError("block_spaces must start with the field's own space")
+            rank_total = sum(V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+                             for V in block_spaces)
+        self._starts = np.array(self.comm.allgather(self.imap.local_range[0]), dtype=np.int64)
+        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
+
+    def base(self, global_nodes: np.ndarray) -> np.ndarray:
+        """PETSc index of component 0 of the given global node numbers."""
+        global_nodes = np.asarray(global_nodes, dtype=np.int64)
+        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
+        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
+
+    def constrained_dofs(self, bcs) -> np.ndarray:
+        """Sorted PETSc indices of the field's Dirichlet-constrained dofs, on every rank
+        (collective): point terms must not touch the rows the boundary conditions own."""
+        mine = []
+        for bc in bcs:
+            local, _ = bc.dof_indices()
+            blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
+            mine.append(self.base(blocks) + local % self.bs)
+        mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate(self.comm.allgather(mine)))

@@ -34,6 +34,7 @@ import dolfinx
 from petsc4py import PETSc
 
 from eyemech.meshes.tagged import MeshError
+from eyemech.problems.spaces import PetscNodeLayout
 
 
 class ZonuleBars:
@@ -58,8 +59,8 @@ class ZonuleBars:
         in_plane = np.all(np.abs(self.reference_pairs[:, :, 0]) < 1e-9, axis=1)
         self.in_plane = in_plane
         self.axial_stiffness = youngs_modulus * area * np.where(in_plane, 0.5, 1.0)  # E A
-        self._layout(block_spaces)
-        self._constrained = self._constrained_dofs(bcs)
+        self.layout = PetscNodeLayout(space, block_spaces)
+        self._constrained = self.layout.constrained_dofs(bcs)
         owned = self.imap.size_local
         start = self.imap.local_range[0]
         self.mine = (self.nodes[:, 0] >= start) & (self.nodes[:, 0] < start + owned)
@@ -86,29 +87,6 @@ class ZonuleBars:
             raise MeshError(f"{int(np.sum(found < 0))} zonule end points are not mesh nodes")
         return found.reshape(-1, 2)
 
-    def _layout(self, block_spaces) -> None:
-        """PETSc index of a node's first component (see NodeToSurfaceContact._layout)."""
-        start = self.imap.local_range[0]
-        owned = self.bs * self.imap.size_local
-        rank_total = owned if block_spaces is None else sum(
-            V.dofmap.index_map.size_local * V.dofmap.index_map_bs for V in block_spaces)
-        self._starts = np.array(self.comm.allgather(start), dtype=np.int64)
-        self._offsets = np.concatenate([[0], np.cumsum(self.comm.allgather(rank_total))]).astype(np.int64)
-
-    def _petsc_base(self, global_nodes: np.ndarray) -> np.ndarray:
-        global_nodes = np.asarray(global_nodes, dtype=np.int64)
-        owner = np.searchsorted(self._starts, global_nodes, side="right") - 1
-        return self._offsets[owner] + (global_nodes - self._starts[owner]) * self.bs
-
-    def _constrained_dofs(self, bcs) -> np.ndarray:
-        mine = []
-        for bc in bcs:
-            local, _ = bc.dof_indices()
-            blocks = self.imap.local_to_global((local // self.bs).astype(np.int32))
-            mine.append(self._petsc_base(blocks) + local % self.bs)
-        mine = np.concatenate(mine) if mine else np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate(self.comm.allgather(mine)))
-
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
         """A bar couples two nodes of different bodies: not in the FE pattern. The bars'
         blocks are inserted (as zeros) here, once, so that the matrix's allocation does not
@@ -126,7 +104,7 @@ class ZonuleBars:
     def coupling_entries(self) -> int:
         """Matrix entries the bars add to the finite-element pattern (the lens–ciliary
         blocks, both ways; the same on every rank)."""
-        base = self._petsc_base(self.nodes.ravel()).reshape(-1, 2)
+        base = self.layout.base(self.nodes.ravel()).reshape(-1, 2)
         free = [(~np.isin(base[:, k, None] + np.arange(self.bs), self._constrained)).sum(axis=1)
                 for k in (0, 1)]
         return int(2 * np.sum(free[0] * free[1]))
@@ -153,7 +131,7 @@ class ZonuleBars:
         return force, d / length[:, None], length
 
     def _dofs(self) -> np.ndarray:
-        base = self._petsc_base(self.nodes[self.mine].ravel()).reshape(-1, 2)
+        base = self.layout.base(self.nodes[self.mine].ravel()).reshape(-1, 2)
         return (base[:, :, None] + np.arange(self.bs)).reshape(-1, 2 * self.bs)
 
     # -- assembly hooks -------------------------------------------------------------------

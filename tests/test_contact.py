@@ -327,7 +327,7 @@ x = dolfinx.fem.petsc.create_vector([V, Q], kind="mpi")
 dolfinx.fem.petsc.assign([u, p], x)
 search = NodeToSurfaceContact(u, caps, "slave", "master", 1.0, block_spaces=[V, Q])
 owned = nodes[: imap.size_local]
-index = (search._petsc_base(owned)[:, None] + np.arange(3)).ravel()
+index = (search.layout.base(owned)[:, None] + np.arange(3)).ravel()
 ok = np.array_equal(x.getValues(index.astype(np.int32)), (owned[:, None] * 3 + np.arange(3) + 1).ravel())
 ok = MPI.COMM_WORLD.allreduce(bool(ok), op=MPI.LAND)
 if MPI.COMM_WORLD.rank == 0:
