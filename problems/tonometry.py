@@ -84,6 +84,8 @@ class Parameters(SceneParameters):
     mesh_size: float = field(0.5, "radial element size in the planform", "mm")
     azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of 8)")
     layers: int = field(2, "element layers through the thickness")
+    geometry_degree: int = field(2, "cell geometry: 2 = 27-node cells on the curved surfaces, "
+                                 "1 = trilinear (faceted) cells")
     max_depth: float = field(1.0, "give up if the applanator has moved this far past the apex "
                              "without reaching the contact diameter", "mm")
 
@@ -110,7 +112,8 @@ class Parameters(SceneParameters):
         # the clear zone (no incisions) puts a ring of nodes at the contact edge
         return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,
                               self.limbal_thickness, self.diameter, 0, 0.5, self.applanation_diameter,
-                              self.diameter / 2, self.mesh_size, self.azimuthal_divisions, self.layers)
+                              self.diameter / 2, self.mesh_size, self.azimuthal_divisions, self.layers,
+                              self.geometry_degree)
 
     @property
     def penalty_stiffness(self) -> float:
@@ -120,8 +123,8 @@ class Parameters(SceneParameters):
 class ContactEdge:
     """Mean radius (deformed, from the axis) of the contact disc: along each radial line
     of nodes on the anterior surface (the grid lines and the lines through the cell
-    centres, where the Q2 interpolant is quadratic between three nodes), the first zero
-    of the interpolated gap h − z going out from the apex."""
+    centres, where the Q2 interpolant is quadratic between three nodes), the outermost
+    zero of the interpolated gap h − z."""
 
     def __init__(self, u: dolfinx.fem.Function, tagged, geometry: CorneaGeometry):
         V = u.function_space
@@ -155,10 +158,12 @@ class ContactEdge:
     def _ray_edge(rows: np.ndarray, height: float) -> float:
         rows = rows[np.argsort(rows[:, 1], kind="stable")]
         gap = height - rows[:, 4]
-        outside = np.flatnonzero(gap > 0)
-        if len(outside) == 0:
+        # the outer edge: a stiff cornea can lift off at the centre (annular contact), and
+        # Goldmann's mires meet at the outer edge of the applanated area
+        touching = np.flatnonzero(gap <= 0)
+        i = max(touching[-1] + 1 if len(touching) else 0, 1)
+        if i >= len(rows):
             raise SolveFailure(0, 0.0, 0.0, [], "the contact disc reached the limbus")
-        i = max(outside[0], 1)
         i0 = i - 1 if i % 2 == 1 else i - 2  # three nodes of one quadratic edge: i0, i0+1, i0+2
         i0 = min(max(i0, 0), len(rows) - 3)
         s = np.linspace(0.0, 1.0, 401)
