@@ -246,6 +246,14 @@ def _push(body: Applanation, ctx: RunContext, params: Parameters, top: float) ->
 
     def converged(step) -> None:
         radius = body.contact_radius()
+        widest = max(r for _, r in visited)
+        if radius < widest - 0.05 * target:
+            # seen for stiff corneas (E ≳ 0.4 MPa here): the cap then deflects as a whole
+            # under the constant IOP and the disc shrinks; a reading from such a path
+            # would be meaningless
+            raise SolveFailure(len(visited), step.load, visited[-1][0], [],
+                               f"the contact disc shrank from {2 * widest:.3g} to {2 * radius:.3g} mm "
+                               "while the applanator advanced (the cap buckles)")
         visited.append((step.load, radius))
         ctx.record_step(stage="applanation", depth_mm=step.load, contact_radius_mm=radius,
                         force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts)
