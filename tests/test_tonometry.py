@@ -22,9 +22,9 @@ from eyemech.problems.parameters import ParameterError, build
 
 QUIET = RunOptions(fields=False, pictures=False, quiet=True)
 COARSE = dict(mesh_size=1.5, azimuthal_divisions=8)
-# The coarse mesh's discretisation error (0.45 mmHg against the finest mesh of the
-# convergence study) plus the Goldmann dial's resolution (0.1 g = 1 mmHg): a reading
-# within 1.5 mmHg of the truth is "true" at the resolution of the instrument.
+# The coarse mesh's discretisation error (0.25 mmHg below the finest mesh of the
+# convergence study, 0.7 mmHg spread over all meshes) plus the Goldmann dial's resolution
+# (0.1 g = 1 mmHg): within 1.5 mmHg of the truth is "true" at the instrument's resolution.
 CALIBRATION_TOLERANCE_MMHG = 1.5
 
 
@@ -48,10 +48,19 @@ def test_reads_the_true_iop_at_the_calibration_thickness(nominal):
     assert abs(nominal["iop_reading_mmHg"] - nominal["iop_mmHg"]) < CALIBRATION_TOLERANCE_MMHG
 
 
-def test_reading_rises_with_thickness_and_stiffness(nominal):
+def test_reading_rises_with_thickness_as_published(nominal):
+    """520 → 600 µm (the whole profile thicker): published slopes are 0.7 mmHg per 10 µm
+    (Ehlers et al. 1975, manometry) and ≈ 0.2 (Doughty & Zaman 2000, meta-analysis of
+    normal eyes); the model (measured 0.29) must lie in [0.1, 1.0], i.e. within the
+    published range widened by half its ends — the spread between the studies is that large."""
     thick = reading(central_thickness=0.60, limbal_thickness=0.75)
+    slope = (thick["iop_reading_mmHg"] - nominal["iop_reading_mmHg"]) / 8.0  # per 10 µm
+    assert 0.1 < slope < 1.0
+
+
+def test_reading_rises_with_stiffness(nominal):
+    """Liu & Roberts (2005): a stiffer cornea reads higher (here E × 2: measured +7 mmHg)."""
     stiff = reading(youngs_modulus=2 * tonometry.Parameters().youngs_modulus)
-    assert thick["iop_reading_mmHg"] > nominal["iop_reading_mmHg"] + 1.0
     assert stiff["iop_reading_mmHg"] > nominal["iop_reading_mmHg"] + 1.0
 
 
