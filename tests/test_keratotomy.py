@@ -87,13 +87,11 @@ def test_stiff_elastic_limbus_is_the_clamped_limbus(intact_clamped):
 
 
 def test_softer_limbus_lets_the_apex_move_more(intact_clamped):
-    """The default springs (0.4 MPa/mm ≈ E_sclera / 5 mm) and 10× softer ones: the apex
-    moves further out the softer the support, at t = 0 and after creep."""
-    default = solve(incisions=0, t_end=1800.0, support="elastic")
+    """Springs 10× softer than the default (0.04 MPa/mm): the limbus gives, and the apex
+    moves further out than with the clamped limbus, at t = 0 and after creep."""
     soft = solve(incisions=0, t_end=1800.0, support="elastic", limbus_stiffness=0.04)
     for t in (0, -1):
-        clamped = intact_clamped["intact_apex_displacement_mm"][t]
-        assert clamped < default["intact_apex_displacement_mm"][t] < soft["intact_apex_displacement_mm"][t]
+        assert soft["intact_apex_displacement_mm"][t] > 1.01 * intact_clamped["intact_apex_displacement_mm"][t]
 
 
 @pytest.mark.mpi
