@@ -24,7 +24,8 @@ take the copies, so the wound can gape; the crack front (the ends and the bottom
 stays connected.
 
 Tags: cell ``cornea``; facets ``anterior``, ``posterior``, ``limbus`` and, with incisions,
-``incision`` (both faces of every cut). First-order (trilinear) geometry.
+``incision`` (both faces of every cut). Trilinear (faceted) cells, or with ``geometry_degree`` = 2
+27-node cells whose extra nodes lie on the curved shape.
 """
 
 from __future__ import annotations
@@ -37,7 +38,13 @@ from mpi4py import MPI
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh, from_gmsh
 
-HEX8, QUAD4 = 5, 3  # gmsh element types
+HEX8, QUAD4, HEX27, QUAD9 = 5, 3, 12, 10  # gmsh element types
+# gmsh's hexahedron-27 / quadrangle-9 numbering: the vertices of every mid-edge and
+# mid-face node, then the centre
+HEX27_EDGES = ((0, 1), (0, 3), (0, 4), (1, 2), (1, 5), (2, 3), (2, 6), (3, 7), (4, 5), (4, 7),
+               (5, 6), (6, 7))
+HEX27_FACES = ((0, 1, 2, 3), (0, 1, 5, 4), (0, 3, 7, 4), (1, 2, 6, 5), (2, 3, 7, 6), (4, 5, 6, 7))
+QUAD9_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0))
 FACET_NAMES = ("anterior", "posterior", "limbus", "incision")
 
 
@@ -61,6 +68,7 @@ class CorneaGeometry:
     mesh_size: float = 0.5          # radial element size in the planform
     azimuthal_divisions: int = 24   # at least; rounded up to a multiple of lcm(8, incisions)
     layers: int = 2                 # element layers through the thickness (at least)
+    geometry_degree: int = 1        # 1: trilinear (faceted) cells; 2: 27-node cells on the shape
 
     def validate(self) -> None:
         """MeshError naming the offending value (its ``key`` attribute is the field name);
@@ -73,6 +81,8 @@ class CorneaGeometry:
         if not self.diameter < 2 * self.anterior_radius:
             raise _bad("diameter", f"cornea diameter {self.diameter} must be smaller than the "
                        f"anterior sphere's ({2 * self.anterior_radius})")
+        if self.geometry_degree not in (1, 2):
+            raise _bad("geometry_degree", f"geometry_degree must be 1 or 2, got {self.geometry_degree!r}")
         if self.incisions < 0:
             raise _bad("incisions", f"incisions must be >= 0, got {self.incisions}")
         if not 0 < self.incision_depth < 1:
@@ -128,6 +138,16 @@ class CorneaGeometry:
         normal = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], 1)
         rho = Ra - depth * self.thickness(theta)
         return np.array([0.0, 0.0, -Ra]) + rho[:, None] * normal
+
+    def shape_coordinates(self, points: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`map_to_cornea` for points on the shape: (x, y, depth)."""
+        Ra = self.anterior_radius
+        v = points - np.array([0.0, 0.0, -Ra])
+        rho = np.linalg.norm(v, axis=1)
+        theta = np.arccos(np.clip(v[:, 2] / rho, -1, 1))
+        phi = np.arctan2(v[:, 1], v[:, 0])
+        r = Ra * np.sin(theta)
+        return np.column_stack([r * np.cos(phi), r * np.sin(phi), (Ra - rho) / self.thickness(theta)])
 
     @property
     def azimuths(self) -> int:
@@ -232,23 +252,73 @@ def _hexahedra(g: CorneaGeometry):
     return points, hexes, faces
 
 
+def _mean_shape_point(rows: np.ndarray, polar_from: float) -> np.ndarray:
+    """Mean of (x, y, depth) rows; in the polar part of the planform the mean of the
+    radius and the azimuth, so that nodes between two rays stay on their ring."""
+    mean = rows.mean(axis=0)
+    r = np.hypot(rows[:, 0], rows[:, 1])
+    if np.all(r >= polar_from):
+        direction = (rows[:, :2] / r[:, None]).mean(axis=0)
+        mean[:2] = r.mean() * direction / np.linalg.norm(direction)
+    return mean
+
+
+def _quadratic(g: CorneaGeometry, points: np.ndarray, hexes: np.ndarray, faces: dict):
+    """Hexahedra-27 and quadrangles-9 whose extra nodes lie on the shape: each mid-edge,
+    mid-face and centre node is the mean of its vertices' (planform x, y, depth)
+    coordinates mapped by :meth:`CorneaGeometry.map_to_cornea`, so the anterior and
+    posterior faces lie on their curved surfaces instead of being flat facets. Extra
+    nodes are keyed by their vertex set, so a cut (duplicated vertices) stays open and
+    neighbouring cells share them otherwise."""
+    shape = g.shape_coordinates(points)
+    polar_from = 0.6 * g.optical_zone / 2 * (1 - 1e-9)  # _planform's r_polar
+    keys: dict[tuple, int] = {}
+    extra: list[np.ndarray] = []
+
+    def node(vertices) -> int:
+        key = tuple(sorted(int(v) for v in vertices))
+        if key not in keys:
+            keys[key] = len(points) + len(extra)
+            extra.append(_mean_shape_point(shape[list(key)], polar_from))
+        return keys[key]
+
+    hex27 = np.array([list(h) + [node(h[list(e)]) for e in HEX27_EDGES]
+                      + [node(h[list(f)]) for f in HEX27_FACES] + [node(h)] for h in hexes])
+    quad9 = {name: [list(q) + [node(np.array(q)[list(e)]) for e in QUAD9_EDGES] + [node(q)]
+                    for q in quads] for name, quads in faces.items()}
+    new = g.map_to_cornea(np.array(extra)[:, :2], 0.0) if extra else np.zeros((0, 3))
+    if extra:  # map_to_cornea takes one depth; apply each node's own along its normal
+        depth = np.array(extra)[:, 2]
+        centre = np.array([0.0, 0.0, -g.anterior_radius])
+        normal = (new - centre) / g.anterior_radius
+        r = np.hypot(np.array(extra)[:, 0], np.array(extra)[:, 1])
+        theta = np.arcsin(np.clip(r / g.anterior_radius, 0, 1))
+        new = centre + (g.anterior_radius - depth * g.thickness(theta))[:, None] * normal
+    return np.vstack([points, new]), hex27, quad9
+
+
 def cornea(geometry: CorneaGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
     """The cornea of ``geometry`` as a distributed DOLFINx mesh with named tags."""
     geometry.validate()
     points, hexes, faces = _hexahedra(geometry) if comm.rank == 0 else (None, None, None)
+    cell_type, facet_type, facet_nodes = HEX8, QUAD4, 4
+    if geometry.geometry_degree == 2:
+        cell_type, facet_type, facet_nodes = HEX27, QUAD9, 9
+        if comm.rank == 0:
+            points, hexes, faces = _quadratic(geometry, points, hexes, faces)
 
     def build(model):
         model.addDiscreteEntity(3, 1)
         model.mesh.addNodes(3, 1, np.arange(1, len(points) + 1), points.ravel())
-        model.mesh.addElementsByType(1, HEX8, np.arange(1, len(hexes) + 1), (hexes + 1).ravel())
+        model.mesh.addElementsByType(1, cell_type, np.arange(1, len(hexes) + 1), (hexes + 1).ravel())
         model.addPhysicalGroup(3, [1], tag=1, name="cornea")
         next_element = len(hexes) + 1
         for tag, name in enumerate(FACET_NAMES, start=1):
-            quads = np.array(faces[name], dtype=int).reshape(-1, 4)
+            quads = np.array(faces[name], dtype=int).reshape(-1, facet_nodes)
             if len(quads) == 0:
                 continue
             model.addDiscreteEntity(2, tag)
-            model.mesh.addElementsByType(tag, QUAD4, np.arange(next_element, next_element + len(quads)),
+            model.mesh.addElementsByType(tag, facet_type, np.arange(next_element, next_element + len(quads)),
                                          (quads + 1).ravel())
             next_element += len(quads)
             model.addPhysicalGroup(2, [tag], tag=tag, name=name)

@@ -95,6 +95,8 @@ class Parameters(SceneParameters):
     mesh_size: float = field(1.0, "radial element size in the planform", "mm")
     azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))")
     layers: int = field(2, "element layers through the thickness (at least)")
+    geometry_degree: int = field(1, "cell geometry: 1 = trilinear (faceted) cells, 2 = 27-node "
+                                 "cells on the curved surfaces")
     fit_diameter: float = field(3.0, "central zone of the anterior sphere fit", "mm")
     element: Literal["Q2P1"] = field("Q2P1", "element family (hexahedra)")
 
@@ -117,7 +119,7 @@ class Parameters(SceneParameters):
         return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,
                               self.limbal_thickness, self.diameter, incisions, self.incision_depth,
                               self.optical_zone, self.incision_end, self.mesh_size,
-                              self.azimuthal_divisions, self.layers)
+                              self.azimuthal_divisions, self.layers, self.geometry_degree)
 
     def time_grid(self) -> tuple[float, ...]:
         times, dt, t = [], self.first_dt, 0.0

@@ -52,11 +52,46 @@ def test_four_incisions_flatten_more_than_three():
 @pytest.mark.parametrize("key, value, words", [
     ("incision_depth", "1.2", "incision_depth"), ("incision_depth", "0", "incision_depth"),
     ("optical_zone", "12", "narrower than the cornea"), ("optical_zone", "0", "cross"),
-    ("tau", "0", "> 0"), ("incision_end", "1.0", "incision_end")])
+    ("incision_depth", "1.0", "incision_depth"), ("incision_depth", "-0.2", "incision_depth"),
+    ("optical_zone", "11.7", "narrower than the cornea"), ("optical_zone", "0.5", "cross"),
+    ("tau", "0", "> 0"), ("tau", "-60", "> 0"), ("incision_end", "1.0", "incision_end"),
+    ("limbus_stiffness", "0", "> 0")])
 def test_bad_input_is_one_clear_error(key, value, words):
+    """tau <= 0, incision_depth outside (0, 1), an optical zone as wide as the cornea,
+    incisions that would cross (radial cuts meet only at the apex: a zone below 1 mm)."""
+    changes = {key: value, "support": "elastic"} if key == "limbus_stiffness" else {key: value}
     with pytest.raises(ParameterError, match=words) as info:
-        build(keratotomy.Parameters, {key: value})
+        build(keratotomy.Parameters, changes)
     assert info.value.key == key
+
+
+def test_bad_input_on_the_command_line(tmp_path):
+    from conftest import run_cli
+
+    code, _, err = run_cli("run", "keratotomy", "--set", "incision_depth=1.5", "--out", str(tmp_path))
+    assert code == 2 and "incision_depth" in err
+
+
+@pytest.fixture(scope="module")
+def intact_clamped():
+    return solve(incisions=0, t_end=1800.0)
+
+
+def test_stiff_elastic_limbus_is_the_clamped_limbus(intact_clamped):
+    """Springs of 1e4 MPa/mm: the limbus moves by ≈ traction / k ≈ 0.01 MPa / 1e4 ≈ 1e-6 mm
+    against an apex displacement of ≈ 0.3 mm, so the two supports agree to ≈ 1e-5;
+    1e-3 leaves room for the conditioning of the stiff springs."""
+    stiff = solve(incisions=0, t_end=1800.0, support="elastic", limbus_stiffness=1e4)
+    for key in ("intact_apex_displacement_mm", "intact_power_D"):
+        assert stiff[key] == pytest.approx(intact_clamped[key], rel=1e-3)
+
+
+def test_softer_limbus_lets_the_apex_move_more(intact_clamped):
+    """Springs 10× softer than the default (0.04 MPa/mm): the limbus gives, and the apex
+    moves further out than with the clamped limbus, at t = 0 and after creep."""
+    soft = solve(incisions=0, t_end=1800.0, support="elastic", limbus_stiffness=0.04)
+    for t in (0, -1):
+        assert soft["intact_apex_displacement_mm"][t] > 1.01 * intact_clamped["intact_apex_displacement_mm"][t]
 
 
 @pytest.mark.mpi
