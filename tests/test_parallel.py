@@ -126,11 +126,18 @@ def _marks(name: str) -> list:
     return marks
 
 
+def _compare_marks(name: str, ranks: int) -> list:
+    known = CASES[name].xfail.get(ranks)
+    return _marks(name) + ([pytest.mark.xfail(reason=known, strict=False)] if known else [])
+
+
 CASES_AND_RANKS = [pytest.param(name, ranks, id=f"{name}-{ranks}", marks=_marks(name))
                    for name in CASES for ranks in ranks_of(name)]
+COMPARED = [pytest.param(name, ranks, id=f"{name}-{ranks}", marks=_compare_marks(name, ranks))
+            for name in CASES for ranks in ranks_of(name)]
 
 
-@pytest.mark.parametrize("name, ranks", CASES_AND_RANKS)
+@pytest.mark.parametrize("name, ranks", COMPARED)
 def test_same_quantities_on_more_ranks(runs, name, ranks):
     case = CASES[name]
     serial = _result(runs(1), name, 1)
