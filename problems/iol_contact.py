@@ -176,7 +176,8 @@ class NodalContact:
         for _nodes, d, _n, name in self._pressed(x):
             depth[name] = max(depth[name], float(d.max()))
         names = list(depth)
-        deepest = self.comm.allreduce(np.array([depth[n] for n in names]), op=MPI.MAX)
+        deepest = np.empty(len(names))
+        self.comm.Allreduce(np.array([depth[n] for n in names]), deepest, op=MPI.MAX)
         return dict(zip(names, map(float, deepest)))
 
     def forces(self) -> dict[str, np.ndarray]:
