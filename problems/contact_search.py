@@ -198,8 +198,8 @@ class NodeToSurfaceContact:
             self.search()
             gaps = self.slave_gaps
         pieces = self.comm.allgather((self.slave_global, gaps))
-        known = dict(zip(np.concatenate([p[0] for p in pieces]).tolist(),
-                         np.concatenate([p[1] for p in pieces]).tolist()))
+        known = dict(zip(np.concatenate([np.ravel(p[0]) for p in pieces]).tolist(),
+                         np.concatenate([np.ravel(p[1]) for p in pieces]).tolist()))
         return np.array([known.get(int(n), np.nan) for n in nodes])
 
     # -- geometry -------------------------------------------------------------------------
@@ -222,7 +222,8 @@ class NodeToSurfaceContact:
             corners = self._master_positions()[self.triangle_nodes]  # (T, 3, 3)
             slaves = self._positions(self.slave_blocks)
             k = min(self.candidates, len(corners))
-            if len(slaves) == 0:
+            if len(slaves) == 0:  # a rank without slave nodes (3 ranks on the coarse eye)
+                self.slave_gaps = np.zeros(0)
                 return ContactState(np.zeros(0, dtype=int), np.zeros(0), np.zeros((0, 3)),
                                     np.zeros(0, dtype=int), np.zeros((0, 3)), np.inf)
             _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
@@ -321,6 +322,15 @@ class NodeToSurfaceContact:
         depth = self.comm.allreduce(float(np.max(-state.gaps, initial=0.0)), op=MPI.MAX)
         return {"active_nodes": int(total[0]), "contact_area": float(total[1]),
                 "contact_normal_force": float(total[2]), "max_penetration": depth}
+
+    def pairs_across_ranks(self) -> int:
+        """Collective: touching pairs whose master triangle has a node another rank owns
+        (a parallel diagnostic: 0 on one rank; > 0 shows the partition cuts the contact)."""
+        state = self.state or self.search()
+        first, last = self.imap.local_range
+        nodes = self.triangles[state.triangles[state.gaps < 0]]
+        remote = ((nodes < first) | (nodes >= last)).any(axis=1)
+        return int(self.comm.allreduce(int(remote.sum()), op=MPI.SUM))
 
     def nodal_pressures(self) -> tuple[np.ndarray, np.ndarray]:
         """(reference positions (n, 3), contact pressure p(g)) of this rank's slave nodes

@@ -25,6 +25,7 @@ import dataclasses
 import time
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 try:
@@ -111,6 +112,7 @@ class NodalContact:
         self.owned = V.dofmap.index_map.size_local
         self.X = V.tabulate_dof_coordinates()[: self.owned]
         self.u, self.obstacles, self.stiffness = u, obstacles, float(stiffness)
+        self.comm = V.mesh.comm
         self.smoothing = float(smoothing)
         self.active = np.ones(self.owned, bool)
         if excluded is not None:
@@ -167,36 +169,47 @@ class NodalContact:
         self.seconds += PETSc.Log.getTime() - start
 
     def max_penetration(self) -> dict[str, float]:
-        """Deepest penetration (mm) of the current state, per obstacle."""
+        """Deepest penetration (mm) of the current state, per obstacle (over all ranks:
+        each rank holds only its owned nodes)."""
         x = self.positions()
         depth = {name: 0.0 for name in self.obstacles}
         for _nodes, d, _n, name in self._pressed(x):
             depth[name] = max(depth[name], float(d.max()))
-        return depth
+        names = list(depth)
+        deepest = np.empty(len(names))
+        self.comm.Allreduce(np.array([depth[n] for n in names]), deepest, op=MPI.MAX)
+        return dict(zip(names, map(float, deepest)))
 
     def forces(self) -> dict[str, np.ndarray]:
-        """Resultant force (N) each obstacle exerts on the lens."""
+        """Resultant force (N) each obstacle exerts on the lens (summed over the ranks)."""
         x = self.positions()
         total = {name: np.zeros(3) for name in self.obstacles}
         for _nodes, d, normal, name in self._pressed(x, self.smoothing):
             total[name] += self.stiffness * (self._smoothed(d)[0][:, None] * normal).sum(axis=0)
-        return total
+        return {name: self.comm.allreduce(force, op=MPI.SUM) for name, force in total.items()}
 
 
 def self_distance_probe(u: dolfinx.fem.Function):
-    """A :class:`SelfDistance` when it can run (ipctk installed, one rank), else None."""
-    if u.function_space.mesh.comm.size != 1:
-        return None
-    try:
-        import ipctk  # noqa: F401
-    except ImportError:
-        return None
-    return SelfDistance(u)
+    """A :class:`SelfDistance` when ipctk is installed (on rank 0, which measures), else None."""
+    comm = u.function_space.mesh.comm
+    available = False
+    if comm.rank == 0:
+        try:
+            import ipctk  # noqa: F401
+            available = True
+        except ImportError:
+            pass
+    return SelfDistance(u) if comm.bcast(available, root=0) else None
 
 
 class SelfDistance:
     """Smallest distance between distant parts of the lens mid-surface, by ipctk, on the
-    flat triangles through the P2 vertex nodes (serial; the lens is small).
+    flat triangles through the P2 vertex nodes.
+
+    The lens is small (hundreds of nodes), so under MPI its triangles and node positions
+    are gathered on rank 0, which measures and broadcasts the result: every rank count
+    measures the same surface (each rank alone sees only its part, and two parts of the
+    lens that meet may sit on different ranks).
 
     Only pairs of primitives whose vertices all lie more than ``exclusion`` apart in the
     reference (flat) lens count: on a flat mesh, neighbouring elements are a fraction of
@@ -206,29 +219,60 @@ class SelfDistance:
     """
 
     def __init__(self, u: dolfinx.fem.Function, exclusion: float = 1.0):
+        V = u.function_space
+        self.u, self.comm = u, V.mesh.comm
+        index_map = V.dofmap.index_map
+        self.owned = index_map.size_local
+        local_count = self.owned + index_map.num_ghosts
+        to_global = index_map.local_to_global(np.arange(local_count, dtype=np.int32))
+        self.owned_global = to_global[: self.owned]
+        owned_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+        cells = to_global[V.dofmap.list[:owned_cells, :3]]  # the vertex nodes of each P2 triangle
+        X = V.tabulate_dof_coordinates()[: self.owned]
+        gathered = self.comm.gather((cells, self.owned_global, X), root=0)
+        self.exclusion = exclusion
+        if self.comm.rank != 0:
+            return
         import ipctk
 
-        V = u.function_space
-        self.u = u
-        cells = V.dofmap.list[:, :3]  # the vertex nodes of each P2 triangle
+        cells = np.vstack([g[0] for g in gathered])
         self.nodes, faces = np.unique(cells, return_inverse=True)
         faces = faces.reshape(-1, 3)
-        self.X = V.tabulate_dof_coordinates()[self.nodes]
+        self.slot = np.full(max(int(g[1].max(initial=-1)) for g in gathered) + 1, -1, np.int64)
+        self.slot[self.nodes] = np.arange(len(self.nodes))
+        self.X = np.empty((len(self.nodes), 3))
+        for _, node, x in gathered:
+            keep = self.slot[node] >= 0
+            self.X[self.slot[node[keep]]] = x[keep]
         self.faces = np.asfortranarray(faces.astype(np.int32))
         self.edges = np.asfortranarray(ipctk.edges(self.faces))
         self.mesh = ipctk.CollisionMesh(np.asfortranarray(self.X), self.edges, self.faces)
-        self.exclusion = exclusion
         self._ipctk = ipctk
 
-    def positions(self) -> np.ndarray:
-        return np.asfortranarray(self.X + self.u.x.array.reshape(-1, 3)[self.nodes])
+    def positions(self) -> np.ndarray | None:
+        """Deformed positions of the vertex nodes on rank 0 (None elsewhere); collective."""
+        x = self.u.x.array[: 3 * self.owned].reshape(-1, 3)
+        gathered = self.comm.gather((self.owned_global, x), root=0)
+        if self.comm.rank != 0:
+            return None
+        u = np.empty_like(self.X)
+        for node, values in gathered:
+            keep = self.slot[node] >= 0
+            u[self.slot[node[keep]]] = values[keep]
+        return np.asfortranarray(self.X + u)
 
     def __call__(self, search_radius: float = 0.25, distances: bool = True) -> tuple[float, bool]:
         """(minimum distance in mm — ``inf`` when nothing distant is within
         ``search_radius``, NaN when ``distances`` is False —, whether the surface
-        intersects itself: ipctk's exact triangle–edge test, cheap, always done)."""
-        ipctk = self._ipctk
+        intersects itself); collective, measured on rank 0."""
         x = self.positions()
+        found = self._measure(x, search_radius, distances) if self.comm.rank == 0 else None
+        return self.comm.bcast(found, root=0)
+
+    def _measure(self, x: np.ndarray, search_radius: float, distances: bool) -> tuple[float, bool]:
+        """The measurement on rank 0: ipctk's exact triangle–edge intersection test is
+        cheap and always done, the distance search only when ``distances``."""
+        ipctk = self._ipctk
         if not distances:
             return float("nan"), bool(ipctk.has_intersections(self.mesh, x))
         collisions = ipctk.NormalCollisions()

@@ -58,45 +58,42 @@ def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fe
                 cell_data: dict[str, np.ndarray] | None = None):
     """A pyvista grid of the whole mesh on rank 0 (None elsewhere), built on the
     degrees of freedom of ``function``'s (Lagrange) space, with ``function`` and the
-    ``point_data`` functions (same space) attached."""
+    ``point_data`` functions (same space) attached.
+
+    Each rank sends its owned cells, with their nodes in the global numbering, and its
+    owned nodes: every node appears once, so the grid on N ranks is the serial grid
+    (same points, connected across the partition boundaries)."""
     import pyvista
 
     space = function.function_space
     comm = space.mesh.comm
     topology, cell_types, geometry = dolfinx.plot.vtk_mesh(space)
     n_cells = space.mesh.topology.index_map(space.mesh.topology.dim).size_local
+    index_map = space.dofmap.index_map
+    owned = index_map.size_local
+    to_global = index_map.local_to_global(np.arange(owned + index_map.num_ghosts, dtype=np.int32))
     # keep owned cells only so that each cell is drawn once
     nodes_per_cell = topology[0] + 1 if len(topology) else 0
-    topology = topology[: n_cells * nodes_per_cell] if nodes_per_cell else topology
+    topology = topology[: n_cells * nodes_per_cell].reshape(-1, max(nodes_per_cell, 1)).astype(np.int64)
+    topology[:, 1:] = to_global[topology[:, 1:]]
     cell_types = cell_types[:n_cells]
-    values = {function.name: _point_values(function)}
+    values = {function.name: _point_values(function)[:owned]}
     for name, f in (point_data or {}).items():
-        values[name] = _point_values(f)
+        values[name] = _point_values(f)[:owned]
     cells_extra = {name: np.asarray(v)[:n_cells] for name, v in (cell_data or {}).items()}
-    gathered = comm.gather((topology, cell_types, geometry, values, cells_extra), root=0)
+    gathered = comm.gather((topology.ravel(), cell_types, geometry[:owned], values, cells_extra),
+                           root=0)
     if comm.rank != 0:
         return None
-    offset = 0
-    tops, types, geoms = [], [], []
-    merged: dict[str, list] = {name: [] for name in values}
-    merged_cells: dict[str, list] = {name: [] for name in cells_extra}
-    for top, ctype, geom, vals, cvals in gathered:
-        top = top.copy().reshape(-1, nodes_per_cell) if len(top) else top.reshape(0, max(nodes_per_cell, 1))
-        if len(top):
-            top[:, 1:] += offset
-        tops.append(top.ravel())
-        types.append(ctype)
-        geoms.append(geom)
-        for name in merged:
-            merged[name].append(vals[name])
-        for name in merged_cells:
-            merged_cells[name].append(cvals[name])
-        offset += geom.shape[0]
-    grid = pyvista.UnstructuredGrid(np.concatenate(tops), np.concatenate(types), np.vstack(geoms))
-    for name, chunks in merged.items():
-        grid.point_data[name] = np.concatenate(chunks)
-    for name, chunks in merged_cells.items():
-        grid.cell_data[name] = np.concatenate(chunks)
+    # the global node numbering is contiguous by rank: stacking owned nodes in rank order
+    # puts every node at its global index
+    grid = pyvista.UnstructuredGrid(np.concatenate([g[0] for g in gathered]),
+                                    np.concatenate([g[1] for g in gathered]),
+                                    np.vstack([g[2] for g in gathered]))
+    for name in values:
+        grid.point_data[name] = np.concatenate([g[3][name] for g in gathered])
+    for name in cells_extra:
+        grid.cell_data[name] = np.concatenate([g[4][name] for g in gathered])
     return grid
 
 

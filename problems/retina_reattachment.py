@@ -140,6 +140,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         q["dofs"] = global_dofs(u)
         q["slave_nodes"] = ctx.comm.allreduce(len(contact.slave_blocks))
         q["master_triangles"] = len(contact.triangles)
+        q["contact_pairs_across_ranks"] = contact.pairs_across_ranks()
         q["jacobian_nonzeros_fe"] = nonzeros_before
         q["jacobian_nonzeros_with_contact"] = solver.jacobian_nonzeros()
         if ctx.options.pictures and ctx.out is not None:

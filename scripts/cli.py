@@ -81,10 +81,10 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(message)s", stream=sys.stderr)
     # Imported here so that `eyemech --help` is instant.
     from mpi4py import MPI
+
+    _only_rank_0_reports(MPI.COMM_WORLD.rank, args.verbose)
 
     from eyemech import problems
     from eyemech.problems.checkpoint import CheckpointError, Interrupted
@@ -135,6 +135,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"eyemech: rank {comm.rank} of {comm.size} failed:\n{traceback.format_exc()}",
               file=sys.stderr, flush=True)
         comm.Abort(1)
+
+
+def _only_rank_0_reports(rank: int, verbose: bool) -> None:
+    """Log records and Python warnings from rank 0 only: every rank runs the same code,
+    so the others would repeat each line (a step cut under -v, a missing checkpoint, a
+    library's DeprecationWarning) once per rank. Errors are still logged on every rank:
+    they can be one rank's own."""
+    level = logging.INFO if verbose else logging.WARNING
+    logging.basicConfig(level=level if rank == 0 else logging.ERROR,
+                        format="%(levelname)s %(message)s", stream=sys.stderr, force=True)
+    if rank != 0:
+        import warnings
+
+        warnings.simplefilter("ignore")
 
 
 def _list(problems, verbose: bool, say) -> int:
