@@ -79,7 +79,7 @@ ITERATIVE_OPTIONS = {
     "ksp_gmres_restart": 200,
     "pc_type": "fieldsplit",
     "pc_fieldsplit_type": "schur",
-    "pc_fieldsplit_schur_fact_type": "upper",
+    "pc_fieldsplit_schur_fact_type": "lower",
     "pc_fieldsplit_schur_precondition": "user",
     "fieldsplit_u_ksp_type": "preonly",
     "fieldsplit_u_pc_type": "gamg",
