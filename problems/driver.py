@@ -69,7 +69,9 @@ class NewtonOptions:
     linear_solver: str = "mumps"  # mumps | superlu_dist | petsc (LU) | iterative via petsc
     petsc: dict[str, str] = dataclasses.field(default_factory=dict)
 
-    def as_petsc(self) -> dict[str, str]:
+    def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
+        """SNES options, then the KSP/PC options: MUMPS LU, or ``linear`` (an iterative
+        solver's, see :mod:`~eyemech.problems.linear_solvers`); ``petsc`` overrides all."""
         options = {
             "snes_type": "newtonls",
             "snes_linesearch_type": self.line_search,
@@ -84,6 +86,10 @@ class NewtonOptions:
             # MUMPS: more working space for the indefinite saddle-point systems
             "mat_mumps_icntl_14": 100,
         }
+        if linear is not None:
+            for key in ("pc_factor_mat_solver_type", "mat_mumps_icntl_14"):
+                del options[key]
+            options.update(linear)
         options.update(self.petsc)
         return {k: str(v) for k, v in options.items()}
 
@@ -98,6 +104,10 @@ class NonlinearSolver:
     ``residual`` is a UFL form or a list of block forms (``ufl.extract_blocks``).
     Hooks run after DOLFINx has assembled the residual or the Jacobian, on the
     same vector or matrix, e.g. to add node-to-surface contact.
+    ``iterative``: a Krylov solver with a block preconditioner instead of MUMPS LU
+    (:class:`~eyemech.problems.linear_solvers.IterativeSolver`: its ``options``,
+    ``install(solver)`` after the options are set, ``update(x, A)`` after every
+    Jacobian and its hooks).
     """
 
     _count = 0
@@ -106,7 +116,8 @@ class NonlinearSolver:
                  options: NewtonOptions | None = None, timings: Timings | None = None,
                  residual_hooks: Sequence[ResidualHook] = (),
                  jacobian_hooks: Sequence[JacobianHook] = (),
-                 matrix_kind: str | None = None):
+                 matrix_kind: str | None = None, iterative=None):
+        self.iterative = iterative
         self.options = options or NewtonOptions()
         self.timings = timings or Timings()
         self.unknowns = list(unknowns) if isinstance(unknowns, (list, tuple)) else [unknowns]
@@ -122,7 +133,10 @@ class NonlinearSolver:
         self.jacobian_hooks = list(jacobian_hooks)
         self._wrap_callbacks()
         self._set_options(prefix)
+        if iterative is not None:
+            iterative.install(self)
         self.residual_history: list[float] = []
+        self.linear_iterations = 0  # Krylov iterations of the last Newton solve (all its steps)
         self.snes.setMonitor(lambda _snes, _it, norm: self.residual_history.append(float(norm)))
 
     # -- set-up -----------------------------------------------------------------
@@ -155,6 +169,8 @@ class NonlinearSolver:
                 j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
                 for hook in self.jacobian_hooks:
                     hook(x, mat)
+                if self.iterative is not None:
+                    self.iterative.update(x, mat)
             self.timings.add("assembly", time.perf_counter() - start)
 
         self.snes.setFunction(residual, b)
@@ -173,11 +189,15 @@ class NonlinearSolver:
 
     def _set_options(self, prefix: str) -> None:
         opts = PETSc.Options()
-        values = self.options.as_petsc()
+        linear = None if self.iterative is None else self.iterative.options(len(self.unknowns))
+        values = self.options.as_petsc(linear)
         for key, value in values.items():
             opts[f"{prefix}{key}"] = value
         self.snes.setFromOptions()
         self.snes.getKSP().setFromOptions()
+        if self.iterative is not None:
+            return  # kept (this solver's own prefix): the fieldsplit's inner solvers and
+            # GAMG's levels read theirs when PETSc sets them up, at the first solve
         for key in values:
             del opts[f"{prefix}{key}"]
 
@@ -215,6 +235,7 @@ class NonlinearSolver:
         assembly = self.timings.seconds["assembly"] - assembly_before
         self.timings.add("solve", elapsed - assembly)
         iterations = self.snes.getIterationNumber()
+        self.linear_iterations = self.snes.getLinearSolveIterations()
         converged = reason > 0 and all(np.isfinite(self.residual_history))
         return converged, iterations
 
@@ -255,6 +276,7 @@ class StepRecord:
     iterations: int
     cuts: int
     residuals: list[float]
+    linear_iterations: int = 0  # Krylov iterations of the converged solve
 
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
@@ -317,7 +339,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 bar.close()
                 raise SolveFailure(step, target, value, history, solver.reason())
         record = StepRecord(step, target, target - value, iterations, cuts,
-                            list(solver.residual_history))
+                            list(solver.residual_history), solver.linear_iterations)
         value = target
         records.append(record)
         if on_converged is not None:

@@ -34,9 +34,10 @@ from eyemech.problems._viscous_bar import ViscousHistory
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.output import gather_grid, render_png
+from eyemech.problems.linear_solvers import SolverChoice
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure
+from eyemech.problems.spaces import ELEMENTS, global_dofs, mixed_displacement_pressure
 
 import dolfinx
 
@@ -71,7 +72,7 @@ def limbus_support(params, u, v, tagged, ds):
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, SolverChoice):
     incisions: int = field(8, "number of radial incisions (0 = intact only)")
     incision_depth: float = field(0.9, "incision depth, fraction of the local thickness")
     optical_zone: float = field(3.0, "clear central zone diameter", "mm")
@@ -154,6 +155,8 @@ class Cornea:
         if support is not None:
             residual += support
         self.residual_blocks = list(ufl.extract_blocks(residual))
+        # the glassy shear modulus (the load step) scales the pressure Schur complement
+        self.iterative = params.linear_solver(params.mu_inf + params.mu_v, dx)
         self._central_anterior(V, fdim, params.fit_diameter / 2)
         self.has_cuts = incisions > 0
         if self.has_cuts:
@@ -175,7 +178,8 @@ class Cornea:
 
     def solver(self, ctx: RunContext) -> NonlinearSolver:
         return NonlinearSolver(self.residual_blocks, [self.u, self.p], self.bcs,
-                               options=ctx.options.newton, timings=ctx.timings)
+                               options=ctx.options.newton, timings=ctx.timings,
+                               iterative=self.iterative)
 
     def register_checkpoint(self, checkpoints, label: str, series: dict[str, list]) -> None:
         """The state of this cornea's run for checkpoints (docs/restart.md)."""
@@ -233,7 +237,8 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> 
         record(step.load)  # before the update: the outputs read Cv_n of this step
         body.history.update()
         ctx.record_step(run=label, time=step.load, dt=step.increment,
-                        newton_iterations=step.iterations, cuts=step.cuts)
+                        newton_iterations=step.iterations, cuts=step.cuts,
+                        krylov_iterations=step.linear_iterations)
 
     follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, initial_step=1.0,
                                         max_step=1.0, min_step=1e-6, stops=params.time_grid()),
@@ -270,6 +275,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             q["power_D"] = reference["power_D"]
             shown = intact
         q["cells"] = shown.tagged.mesh.topology.index_map(3).size_global
+        q["dofs"] = global_dofs(shown.u, shown.p)
         if ctx.options.pictures and ctx.out is not None:
             with ctx.timings("output"):
                 _picture(ctx, shown, params)

@@ -26,6 +26,7 @@ from eyemech.problems import analytic
 from eyemech.problems.cavity import SubstitutedCavity, check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.linear_solvers import SolverChoice
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
 from eyemech.problems.solid import solid_residual
@@ -39,7 +40,7 @@ SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, SolverChoice):
     inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm")
     outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
     c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa")
@@ -62,6 +63,9 @@ class Parameters(SceneParameters):
         if self.cavity_formulation not in ("real", "substituted"):
             raise ParameterError("cavity_formulation", f"must be real or substituted, got "
                                  f"{self.cavity_formulation!r}")
+        if self.solver == "iterative" and self.cavity_formulation == "substituted":
+            raise ParameterError("solver", "iterative needs cavity_formulation = real (the "
+                                 "substituted formulation's dense wall block defeats multigrid)")
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius})")
         if self.mesh_size > self.outer_radius:
@@ -106,7 +110,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                        params.bulk_modulus)
             residual += follower_pressure(cavity.pressure, u, v, wall)
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
-                                 options=ctx.options.newton, timings=ctx.timings)
+                                 options=ctx.options.newton, timings=ctx.timings,
+                                 iterative=params.linear_solver(2 * params.c10, dx))
         if cavity is not None:
             cavity.install(solver)
 
@@ -137,6 +142,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             newton["iterations"] += record.iterations
             ctx.record_step(step=record.step, load_factor=record.load,
                             newton_iterations=record.iterations, cuts=record.cuts,
+                            krylov_iterations=record.linear_iterations,
                             residuals=record.residuals, **quantities())
 
         if real:

@@ -53,6 +53,7 @@ from eyemech.problems.cavity import check_closed, real_pressure_space
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.contact_search import NodeToSurfaceContact
 from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
+from eyemech.problems.linear_solvers import SolverChoice
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.probes import CellField, NodeProbe, SurfacePairing, facet_nodes
 from eyemech.problems.scene import Scene
@@ -71,7 +72,7 @@ BENCHMARK = {"resolution": "paper"}
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, SolverChoice):
     resolution: Literal["coarse", "default", "paper"] = field(
         "default", "mesh: coarse (tests), default, paper (>= the paper's 7,421 hexahedra)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
@@ -229,6 +230,7 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
     values = model.measure()
     ctx.record_step(step=record.step, load=record.load, stage=stage,
                     newton_iterations=record.iterations, cuts=record.cuts,
+                    krylov_iterations=record.linear_iterations,
                     residuals=record.residuals, **values)
     model.sutures.update_directions(model.u, model.suture_anchors())
     if abs(record.load - round(record.load)) < 1e-12:
@@ -291,8 +293,10 @@ class BucklingModel:
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
 
         self.bcs = self._boundary_conditions()
+        # μ = 2c per cell weights the iterative solver's pressure mass matrix
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
-                                      options=ctx.options.newton, timings=ctx.timings)
+                                      options=ctx.options.newton, timings=ctx.timings,
+                                      iterative=params.linear_solver(2 * self.stiffness, dx))
         self.element_size = element_size
         self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries
         self.zonules = self._zonules() if params.lens else None

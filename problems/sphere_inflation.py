@@ -21,6 +21,7 @@ from eyemech.problems import analytic
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, render_png
+from eyemech.problems.linear_solvers import SolverChoice
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
 from eyemech.problems.solid import solid_residual
@@ -32,7 +33,7 @@ import dolfinx.fem
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, SolverChoice):
     inner_radius: float = field(10.0, "inner radius of the unloaded sphere", "mm")
     outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
     c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa")
@@ -74,7 +75,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         bcs = symmetry_bcs(u.function_space, shell, {"symmetry_x": 0, "symmetry_y": 1,
                                                      "symmetry_z": 2})
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
-                                 options=ctx.options.newton, timings=ctx.timings)
+                                 options=ctx.options.newton, timings=ctx.timings,
+                                 iterative=params.linear_solver(2 * params.c10, dx))
 
         volume_form = dolfinx.fem.form(8.0 * enclosed_volume(u, ds(shell.tag("cavity_wall"))))
         x = ufl.SpatialCoordinate(shell.mesh) + u
@@ -119,6 +121,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             values = quantities()
             ctx.record_step(step=record.step, load_factor=record.load,
                             pressure=record.load * params.pressure, newton_iterations=record.iterations,
+                            krylov_iterations=record.linear_iterations,
                             cuts=record.cuts, residuals=record.residuals, **values)
             write_state(record.load)
 
