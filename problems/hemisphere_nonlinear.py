@@ -2,12 +2,14 @@
 deflection — Sze, Liu & Lo, "Popular benchmark problems for geometric nonlinear
 analysis of shells", Finite Elem. Anal. Des. 40 (2004) 1551–1569, problem 3.4.
 
-R = 10, h = 0.04, E = 6.825e7, ν = 0.3, free edges; four radial dead loads P on the
-equator (P on the whole shell = P/2 on the quarter model), alternating in sign,
-P_max = 400. The reference is Sze et al.'s load–deflection table (their ABAQUS S4R
-16 × 16 quarter-model result): the radial displacement of the point pulled outward
-and of the point pushed inward at P/P_max = 0.05, 0.10, …, 1.0. At P_max the linear
-shell would move 0.0465 P = 18.6 (1.9 R); the nonlinear shell moves 4.07 and 8.18.
+R = 10, h = 0.04, E = 6.825e7, ν = 0.3, free edges; four radial dead loads on the
+equator alternating in sign, P_max = 400. Load convention: P is each point load on
+the WHOLE shell; the usual quarter model (symmetry planes through the loaded points)
+carries P/2 at each of its two loaded points (as Elmer's and TACS's versions of this
+benchmark do: quarter load × 2 = P, P_max = 400). The reference is Sze et al.'s
+load–deflection table: radial displacement of the point pulled outward and of the
+point pushed inward (positive inward) at P/P_max = 0.05, 0.10, …, 1.0. At P_max the
+linear shell would move 0.0465 P = 18.6 (1.9 R); the table has 4.067 and 8.178.
 
 The whole hemisphere is meshed (see ``hemisphere``); the load path lands on the
 tabulated load levels.
@@ -28,9 +30,11 @@ from eyemech.problems.parameters import field
 from eyemech.problems.scene import Scene
 
 # Sze, Liu & Lo (2004), problem 3.4, the table of the hemisphere's load–deflection
-# curve (S4R, 16 × 16 mesh on a quarter). Columns: P/P_max, radial displacement of
-# the point loaded outward, radial displacement (inward, positive) of the point
-# loaded inward. (Transcribed in ElmerCSC/elmerfem, fem/tests, hemisphere benchmark.)
+# curve. Columns: P/P_max, radial displacement of the point loaded outward, radial
+# displacement (inward, positive) of the point loaded inward. Taken from the copy in
+# ElmerCSC/elmerfem, fem/tests/Shell_OpenHemisphere_High_Order/runhemisphere.m (its
+# .sif pairs the first column with the point loaded outward); not checked against
+# the paper itself.
 SZE_LOAD_FRACTION = (0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.35, 0.40, 0.45, 0.50,
                      0.55, 0.60, 0.65, 0.70, 0.75, 0.80, 0.85, 0.90, 0.95, 1.00)
 SZE_OUTWARD = (0.855, 1.499, 1.969, 2.321, 2.596, 2.819, 3.002, 3.158, 3.291, 3.406,
