@@ -131,6 +131,9 @@ def nodal_value(u: dolfinx.fem.Function, point: np.ndarray) -> np.ndarray:
 
 # -- the plate benchmarks -------------------------------------------------------------
 
+InPlane = Literal["immovable", "sliding"]
+
+
 @dataclasses.dataclass(frozen=True)
 class PlateParameters(SceneParameters):
     q: float = field(1.0, "uniform transverse load (dead load, per reference area)", "MPa")
@@ -145,6 +148,8 @@ class PlateParameters(SceneParameters):
                                                         "(total Lagrangian)")
     penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)")
+    in_plane: InPlane = field("immovable", "in-plane edge condition: immovable (u = 0) or sliding "
+                                           "(normal in-plane displacement 0, tangential free: Levy 1942)")
 
     def validate(self) -> None:
         self.require_positive("length", "divisions", "load_steps")
@@ -159,9 +164,50 @@ class PlateParameters(SceneParameters):
 # 0.00126532 and 0.00406235 are the converged series values.
 PLATE_COEFFICIENT = {"clamped": 0.00126532, "simply-supported": 0.00406235}
 
+# Large deflections of the clamped square plate under uniform pressure (von Kármán
+# plate): S. Levy, "Square plate with clamped edges under normal pressure producing
+# large deflections", NACA Technical Note 847 (1942) = NACA Report 740, Table 5.
+# Edges clamped against rotation and against in-plane displacement NORMAL to the
+# edge, free to slide along it (no edge shear); ν = 0.316. Load parameter
+# Q = q a⁴/(E h⁴), centre deflection w₀/h.
+LEVY_LOAD_PARAMETER = (17.79, 38.3, 63.4, 95.0, 134.9, 184.0, 245.0, 318.0, 402.0)
+LEVY_CENTER_DEFLECTION = (0.237, 0.471, 0.695, 0.912, 1.121, 1.323, 1.521, 1.714, 1.902)
+LEVY_POISSON_RATIO = 0.316
+
+
+def levy_center_deflection(load_parameter: float) -> float:
+    """w₀/h of Levy's table at Q = q a⁴/(E h⁴), monotone cubic (PCHIP) through the
+    origin and the nine tabulated points; NaN beyond the table (Q > 402)."""
+    from scipy.interpolate import PchipInterpolator
+
+    if not 0.0 <= load_parameter <= LEVY_LOAD_PARAMETER[-1] * (1.0 + 1e-9):
+        return float("nan")
+    curve = PchipInterpolator((0.0,) + LEVY_LOAD_PARAMETER, (0.0,) + LEVY_CENTER_DEFLECTION)
+    return float(curve(min(load_parameter, LEVY_LOAD_PARAMETER[-1])))
+
+
+def levy_conditions(support: str, params: PlateParameters) -> bool:
+    """Levy's plate: clamped, large deflection, edges sliding, ν = 0.316."""
+    return (support == "clamped" and params.kinematics == "nonlinear" and params.in_plane == "sliding"
+            and bool(np.isclose(params.poisson_ratio, LEVY_POISSON_RATIO)))
+
+
+def plate_supports(shell: Shell, length: float, in_plane: InPlane) -> list:
+    """w = 0 on every edge; in-plane u = 0 (immovable) or only the component normal
+    to each edge (sliding: u_x = 0 on x = 0, L and u_y = 0 on y = 0, L)."""
+    if in_plane == "immovable":
+        return shell.fix("edge")
+    L = length
+    return (shell.fix("edge", (2,))
+            + shell.fix_where(lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], L), 0)
+            + shell.fix_where(lambda x: np.isclose(x[1], 0.0) | np.isclose(x[1], L), 1))
+
 
 def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
-              params: PlateParameters, comm: MPI.Comm | None, out, options: RunOptions | None):
+              params: PlateParameters, comm: MPI.Comm | None, out, options: RunOptions | None,
+              stops: tuple[float, ...] = ()):
+    """The plate benchmarks; ``stops`` (load factors in (0, 1]) are values the load
+    path must land on exactly (e.g. the loads of a reference table)."""
     with RunContext(scene_name, params, comm, out, options) as ctx:
         L = params.length
         with ctx.timings("mesh"):
@@ -175,9 +221,10 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
         load = shell.constant(0.0)
         residual = (ufl.derivative(shell.energy(params.kinematics), shell.u, shell.v)
                     - load * shell.v[2] * shell.dx)
-        # immovable edges (w = 0 and no in-plane motion) for both supports; the
-        # clamped one also fixes the rotation (weakly, in the energy)
-        solver = NonlinearSolver(residual, shell.u, shell.fix("edge"),
+        # w = 0 and the in-plane condition for both supports; the clamped one also
+        # fixes the rotation (weakly, in the energy). The linear plate does not see
+        # the in-plane condition (its membrane part is decoupled and unloaded).
+        solver = NonlinearSolver(residual, shell.u, plate_supports(shell, L, params.in_plane),
                                  options=newton_options(ctx, params.kinematics),
                                  timings=ctx.timings)
         centre = (L / 2, L / 2, 0.0)
@@ -186,17 +233,28 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
         def apply(value: float, _increment: float) -> None:
             load.value = value * params.q
 
+        load_scale = L ** 4 / (params.youngs_modulus * params.thickness ** 4)
+        levy = levy_conditions(support, params)
+        if levy:  # land on the load levels of Levy's table that the path passes
+            total = abs(params.q) * load_scale
+            stops = tuple(stops) + tuple(Q / total for Q in LEVY_LOAD_PARAMETER if Q <= total)
+
         def converged(record) -> None:
-            ctx.record_step(step=record.step, load_factor=record.load, q=record.load * params.q,
-                            center_deflection=float(shell.value_at(centre)[2]),
-                            newton_iterations=record.iterations, cuts=record.cuts)
+            values = dict(step=record.step, load_factor=record.load, q=record.load * params.q,
+                          load_parameter=record.load * params.q * load_scale,
+                          center_deflection=float(shell.value_at(centre)[2]),
+                          newton_iterations=record.iterations, cuts=record.cuts)
+            reference = levy_center_deflection(abs(values["load_parameter"])) if levy else np.nan
+            if np.isfinite(reference):
+                values["center_deflection_levy"] = float(np.sign(params.q) * reference * params.thickness)
+            ctx.record_step(**values)
             with ctx.timings("output"):
                 writer.write(record.load)
 
         steps = 1 if params.kinematics == "linear" else params.load_steps
         try:
-            follow_path(solver, apply, Stepping(initial_step=1.0 / steps), on_converged=converged,
-                        label=scene_name, quiet=ctx.options.quiet)
+            follow_path(solver, apply, Stepping(initial_step=1.0 / steps, stops=tuple(stops)),
+                        on_converged=converged, label=scene_name, quiet=ctx.options.quiet)
         finally:
             writer.close()
             ctx.result.fields = writer.files
@@ -210,6 +268,12 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
             quantities["center_deflection_linear_reference"] = linear
             if params.kinematics == "linear":
                 quantities["center_deflection_error"] = deflection / linear - 1.0
+        quantities["load_parameter"] = params.q * load_scale
+        if levy:
+            reference = levy_center_deflection(abs(params.q) * load_scale) * params.thickness
+            if np.isfinite(reference):
+                quantities["center_deflection_levy"] = float(np.sign(params.q) * reference)
+                quantities["center_deflection_levy_error"] = abs(deflection) / reference - 1.0
         if ctx.options.pictures and ctx.out is not None:
             with ctx.timings("output"):
                 picture(shell.u, ctx, f"{scene_name}, q = {params.q:g} MPa", "w (mm)",

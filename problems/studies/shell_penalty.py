@@ -8,9 +8,7 @@
   number like α.
 - Degree: P2 against P3 on refined meshes, error against unknowns and against wall
   time (assembly + solve; form compilation excluded — it is cached once per degree).
-- Large deflection: the shell paper's load range q = 0…5 on the clamped plate with
-  ``kinematics=nonlinear`` (immovable edges) against the linear line. No published
-  large-deflection table is compared (see docs/shell.md).
+(The large-deflection plate curve is the study ``shell-plate-nonlinear``.)
 """
 
 from __future__ import annotations
@@ -100,42 +98,13 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
         for n in sequence:
             error, dofs, seconds = _deflection_error(divisions=n, degree=degree)
             degree_rows.append([degree, n, dofs, error, seconds])
-    curve = plate_clamped.run(
-        plate_clamped.Parameters(divisions=4 if quick else 16, q=2.0 if quick else 5.0,
-                                 kinematics="nonlinear", load_steps=2 if quick else 10),
-        comm=MPI.COMM_SELF, options=QUIET)
-    linear_slope = curve.quantities["center_deflection_linear_reference"] / curve.parameters["q"]
-    curve_rows = [[0.0, 0.0, 0.0]] + [[step["q"], step["center_deflection"], linear_slope * step["q"]]
-                                      for step in curve.steps]
-    files = [out / "shell_penalty.csv", out / "shell_degree.csv", out / "shell_plate_nonlinear.csv"]
-    _write_csv(files[2], ["q", "center_deflection_nonlinear", "center_deflection_linear_reference"],
-               curve_rows)
+    files = [out / "shell_penalty.csv", out / "shell_degree.csv"]
     _write_csv(files[0], ["penalty_factor", "center_deflection_error", "condition_number", "dofs"],
                penalty_rows)
     _write_csv(files[1], ["degree", "divisions", "dofs", "center_deflection_error", "seconds"],
                degree_rows)
     files += _charts(out, divisions, np.array(penalty_rows), degree_rows)
-    files.append(_curve_chart(out, np.array(curve_rows), curve.parameters))
     return files
-
-
-def _curve_chart(out: Path, rows: np.ndarray, parameters: dict) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    h = parameters["thickness"]
-    fig, axis = plt.subplots(figsize=(6, 4.4))
-    axis.plot(rows[:, 0], rows[:, 2] / h, "k--", label="linear (Timoshenko, 0.1265 q)")
-    axis.plot(rows[:, 0], rows[:, 1] / h, "o-", label="nonlinear shell, immovable clamped edges")
-    axis.set(xlabel="q (MPa)", ylabel="centre deflection / thickness",
-             title=f"clamped plate, P{parameters['degree']} crossed "
-                   f"{parameters['divisions']}×{parameters['divisions']}")
-    axis.legend()
-    path = out / "shell_plate_nonlinear.png"
-    save_chart(fig, path, dpi=110, rect=(0, 0.04, 1, 1))
-    return path
 
 
 def _charts(out: Path, divisions: int, penalty: np.ndarray, degree_rows: list) -> list[Path]:
