@@ -327,10 +327,15 @@ def tip_nodes(shell: LensShell) -> np.ndarray:
 
 
 def make_capsule(shell: LensShell, params: Parameters, u0: np.ndarray) -> Capsule:
-    """The capsule centred on the rolled lens' bounding box (acting everywhere)."""
+    """The capsule centred on the rolled lens' bounding box, acting everywhere; its semi-axes
+    are ``capsule_semi_axes`` grown uniformly, if needed, until the rolled lens starts 1 %
+    inside it (a start in penetration is a violent, unphysical first step). The lens then
+    touches it as it unrolls."""
     x = shell.node_coordinates() + u0.reshape(-1, 3)
     centre = 0.5 * (x.min(axis=0) + x.max(axis=0))
-    return Capsule(centre, np.asarray(params.capsule_semi_axes, float), -np.inf)
+    semi = np.asarray(params.capsule_semi_axes, float)
+    reach = np.sqrt(np.max(np.sum(((x - centre) / semi) ** 2, axis=1)))
+    return Capsule(centre, semi * max(1.0, reach / 0.99), -np.inf)
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -342,15 +347,17 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             shell = _lens(params)
         with ctx.timings("form_compilation"):
             u0 = initial_roll(shell, params.roll_radius)
-            contact = None
+            contact, capsule = None, None
             if params.contact:
-                contact = NodalContact(shell.u, {"capsule": make_capsule(shell, params, u0)},
-                                       params.contact_stiffness)
+                capsule = make_capsule(shell, params, u0)
+                contact = NodalContact(shell.u, {"capsule": capsule}, params.contact_stiffness)
             dynamics = ImplicitDynamics(shell.u, shell.mass(), [], scheme_name=params.scheme,
                                         damping=params.damping)
             solver = StepSolver(shell, dynamics, contact, params)
         runs = [_timed_run(params, shell, dynamics, solver, contact, u0, ctx) for _ in range(params.repeats)]
         _report(ctx, params, shell, runs)
+        if capsule is not None:
+            ctx.result.quantities["capsule_semi_axes_mm"] = capsule.semi_axes.tolist()
     return ctx.result
 
 
