@@ -99,6 +99,9 @@ class Parameters(LensParameters):
         if self.jacobian not in JACOBIANS:
             raise ParameterError("jacobian", f"must be one of {JACOBIANS}, got {self.jacobian!r}")
         self.require_positive("stall", "krylov_rtol", "krylov_max_it")
+        if self.method == "linearised" and SCHEMES[self.scheme].alpha_f:
+            raise ParameterError("scheme", "generalized-alpha needs the residual at the accepted state "
+                                 "(R(u_n)); the linearised step does not evaluate it: use method=newton")
         if self.scheme not in SCHEMES:
             raise ParameterError("scheme", f"must be one of {sorted(SCHEMES)}, got {self.scheme!r}")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
