@@ -119,7 +119,7 @@ class Parameters(LensParameters):
 
 
 # the paper's resolution, the default method: `eyemech bench iol-speed`
-BENCHMARK = {"steps": 20, "repeats": 3}
+BENCHMARK = {"steps": 10, "repeats": 2}
 
 
 class PhaseClock:
