@@ -13,6 +13,17 @@ static and in a dynamic scene. Per step, with the known state (u_n, v_n, a_n):
   ω_h Δt = 2 atan(ω Δt/2)); γ > ½ damps high frequencies.
 - Backward Euler: v = (u − u_n)/Δt, a = (v − v_n)/Δt, i.e. α_u = 1/Δt², α_v = 1/Δt, α_a = 0,
   γ = 1: first order, L-stable, strongly damped — the choice for a lens in viscous fluid.
+- Generalised-α (Chung & Hulbert, J. Appl. Mech. 60, 1993) with high-frequency spectral
+  radius ρ∞: α_m = (2ρ∞ − 1)/(ρ∞ + 1), α_f = ρ∞/(ρ∞ + 1), γ = ½ − α_m + α_f,
+  β = ¼(1 − α_m + α_f)², the Newmark updates above and the balance
+      M a_{n+1−α_m} + c M v_{n+1−α_f} + (1 − α_f) R(u_{n+1}) + α_f R(u_n) = 0
+  (x_{n+1−α} = (1 − α) x_{n+1} + α x_n; the static residual R = f_int − f_ext is averaged
+  rather than evaluated at an averaged u — the same method for linear systems, and what a
+  hook can do without touching the compiled form). Second order, ρ∞ = 1 is the trapezoidal
+  rule, ρ∞ < 1 damps the highest modes. ``generalized-alpha`` is ρ∞ = 0.8; R(u_n) is the
+  last residual the solver evaluated, so the step must end with a residual evaluation at
+  the accepted state (Newton's convergence check does; a single linearised iteration does not).
+  Hooks after this one (contact) enter unaveraged, at t_{n+1}.
 
 The Δt of each step is the increment that :func:`follow_path` passes to ``apply``, so
 step cut-back works in time as it does in load. :func:`oscillator_response` runs the
@@ -45,6 +56,8 @@ class Scheme:
     name: str
     beta: float | None  # None: backward Euler
     gamma: float
+    alpha_m: float = 0.0  # generalised-α weights (0, 0: Newmark / backward Euler)
+    alpha_f: float = 0.0
 
     def coefficients(self, dt: float) -> tuple[float, float, float]:
         """(α_u, α_v, α_a) for the step Δt."""
@@ -53,7 +66,18 @@ class Scheme:
         return 1.0 / (self.beta * dt ** 2), 1.0 / (self.beta * dt), 0.5 / self.beta - 1.0
 
 
+def generalized_alpha(rho_infinity: float, name: str = "generalized-alpha") -> Scheme:
+    """Chung–Hulbert parameters for the spectral radius ρ∞ ∈ [0, 1] at ωΔt → ∞."""
+    if not 0.0 <= rho_infinity <= 1.0:
+        raise ValueError(f"rho_infinity must lie in [0, 1], got {rho_infinity!r}")
+    alpha_m = (2.0 * rho_infinity - 1.0) / (rho_infinity + 1.0)
+    alpha_f = rho_infinity / (rho_infinity + 1.0)
+    gamma = 0.5 - alpha_m + alpha_f
+    return Scheme(name, 0.25 * (1.0 - alpha_m + alpha_f) ** 2, gamma, alpha_m, alpha_f)
+
+
 SCHEMES = {"backward-euler": Scheme("backward-euler", None, 1.0),
+           "generalized-alpha": generalized_alpha(0.8),
            "newmark": Scheme("newmark", 0.25, 0.5),
            # γ = 0.6, β = (γ + ½)²/4: second-order-accurate amplitude loss at high ω only
            "newmark-damped": Scheme("newmark-damped", 0.3025, 0.6)}
@@ -65,25 +89,34 @@ def scheme(name: str) -> Scheme:
     return SCHEMES[name]
 
 
-def oscillator_response(omega: float, damping: float, dt: float, steps: int, name: str,
+def oscillator_response(omega: float, damping: float, dt: float, steps: int, name: str | Scheme,
                         u0: float = 1.0, v0: float = 0.0) -> np.ndarray:
     """u_0 … u_steps of ü + c u̇ + ω² u = 0 integrated by the scheme ``name``: the same
     recurrence as :class:`ImplicitDynamics`, solved exactly for one degree of freedom."""
-    s = scheme(name)
-    a_u, a_v, a_a = s.coefficients(dt)
-    u, v = u0, v0
-    a = -damping * v - omega ** 2 * u
-    history = [u]
+    s = name if isinstance(name, Scheme) else scheme(name)
+    state = np.array([u0, v0, -damping * v0 - omega ** 2 * u0])
+    history = [u0]
     for _ in range(steps):
-        # (1 + c γ Δt)(α_u (u' − u) − α_v v − α_a a) + c (v + Δt (1−γ) a) + ω² u' = 0
-        k = (1.0 + damping * s.gamma * dt)
-        rhs = k * (a_u * u + a_v * v + a_a * a) - damping * (v + dt * (1.0 - s.gamma) * a)
-        u_new = rhs / (k * a_u + omega ** 2)
-        a_new = a_u * (u_new - u) - a_v * v - a_a * a
-        v = v + dt * ((1.0 - s.gamma) * a + s.gamma * a_new)
-        u, a = u_new, a_new
-        history.append(u)
+        state = oscillator_step(s, omega, damping, dt, state)
+        history.append(state[0])
     return np.asarray(history)
+
+
+def oscillator_step(s: Scheme, omega: float, damping: float, dt: float, state: np.ndarray) -> np.ndarray:
+    """(u, v, a)_{n+1} from (u, v, a)_n for one mode (linear in the state: its amplification
+    matrix is this applied to the unit states)."""
+    a_u, a_v, a_a = s.coefficients(dt)
+    am, af, g, c = s.alpha_m, s.alpha_f, s.gamma, damping
+    u, v, a = state
+    # k a' + α_m a + c v + c (1−α_f) Δt (1−γ) a + ω² ((1−α_f) u' + α_f u) = 0,
+    # k = 1 − α_m + c (1−α_f) γ Δt,  a' = α_u (u' − u) − α_v v − α_a a
+    k = 1.0 - am + c * (1.0 - af) * g * dt
+    rhs = (k * (a_u * u + a_v * v + a_a * a) - am * a - c * v - c * (1.0 - af) * dt * (1.0 - g) * a
+           - omega ** 2 * af * u)
+    u_new = rhs / (k * a_u + omega ** 2 * (1.0 - af))
+    a_new = a_u * (u_new - u) - a_v * v - a_a * a
+    v_new = v + dt * ((1.0 - g) * a + g * a_new)
+    return np.array([u_new, v_new, a_new])
 
 
 class ImplicitDynamics:
@@ -105,6 +138,8 @@ class ImplicitDynamics:
         self._M_solve = dolfinx.fem.petsc.assemble_matrix(compiled, bcs=list(bcs), diag=1.0)
         self._M_solve.assemble()
         self.u_n, self.v_n, self.a_n = (self.M.createVecRight() for _ in range(3))
+        # generalised-α: the static residual R(u_n) and the last one the solver evaluated
+        self._static_n, self._static = self.M.createVecRight(), self.M.createVecRight()
         self._work, self._Mw = self.M.createVecRight(), self.M.createVecRight()
         self._read(self.u_n)
         self.dt = np.nan
@@ -124,6 +159,7 @@ class ImplicitDynamics:
         compiled = dolfinx.fem.form(static_residual)
         F = dolfinx.fem.petsc.assemble_vector(compiled)
         F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        F.copy(self._static_n)
         self._read(self.u_n)
         self.M.mult(self.v_n, self._Mw)
         F.axpy(self.damping, self._Mw)
@@ -170,6 +206,8 @@ class ImplicitDynamics:
         self.v_n.axpy(self.dt * g, a_new)
         a_new.copy(self.a_n)
         x.copy(self.u_n)
+        if self.scheme.alpha_f:
+            self._static.copy(self._static_n)
         x.destroy()
         a_new.destroy()
 
@@ -179,18 +217,31 @@ class ImplicitDynamics:
 
     # -- hooks for NonlinearSolver ---------------------------------------------------------
     def residual_hook(self, x: PETSc.Vec, F: PETSc.Vec) -> None:
-        """F += M ((1 + c γ Δt) a(x) + c (v_n + Δt (1−γ) a_n))."""
+        """F += M ((1 + c γ Δt) a(x) + c (v_n + Δt (1−γ) a_n)); generalised-α:
+        F ← (1−α_f) F + α_f R(u_n) + M ((1 − α_m + c (1−α_f) γ Δt) a(x) + α_m a_n
+        + c v_n + c (1−α_f) Δt (1−γ) a_n)."""
         c, g = self.damping, self.scheme.gamma
+        am, af = self.scheme.alpha_m, self.scheme.alpha_f
+        if af:
+            F.copy(self._static)
+            F.scale(1.0 - af)
+            F.axpy(af, self._static_n)
         w = self._work
         self._acceleration(x, w)
-        w.scale(1.0 + c * g * self.dt)
+        w.scale(1.0 - am + c * (1.0 - af) * g * self.dt)
+        if am:
+            w.axpy(am, self.a_n)
         if c:
             w.axpy(c, self.v_n)
-            w.axpy(c * self.dt * (1.0 - g), self.a_n)
+            w.axpy(c * (1.0 - af) * self.dt * (1.0 - g), self.a_n)
         self.M.mult(w, self._Mw)
         F.axpy(1.0, self._Mw)
 
     def jacobian_hook(self, _x: PETSc.Vec, J: PETSc.Mat) -> None:
-        """J += (1 + c γ Δt) α_u M (M's pattern is a subset of the shell's)."""
-        factor = (1.0 + self.damping * self.scheme.gamma * self.dt) * self.coefficients[0]
+        """J += (1 + c γ Δt) α_u M (M's pattern is a subset of the shell's); generalised-α:
+        J ← (1−α_f) J + (1 − α_m + c (1−α_f) γ Δt) α_u M."""
+        am, af = self.scheme.alpha_m, self.scheme.alpha_f
+        if af:
+            J.scale(1.0 - af)
+        factor = (1.0 - am + self.damping * (1.0 - af) * self.scheme.gamma * self.dt) * self.coefficients[0]
         J.axpy(factor, self.M, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
