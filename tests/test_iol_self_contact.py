@@ -169,7 +169,7 @@ def test_an_intersecting_start_is_refused(sheets):
     contact = SelfContact(u, dhat=0.03, stiffness=1.0)
     upper = V.tabulate_dof_coordinates()[:, 2] > 0.5 * GAP
     values = u.x.array.reshape(-1, 3)
-    values[upper, 2] = -2 * GAP
-    values[upper, 0] = 0.3 * V.tabulate_dof_coordinates()[upper, 1]  # tilted: crossing
+    X = V.tabulate_dof_coordinates()
+    values[upper, 2] = -3 * GAP * (X[upper, 0] - 0.2) / 0.6  # tilted through the lower sheet
     with pytest.raises(SelfContactError, match="intersects"):
         contact.check()
