@@ -182,7 +182,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     solver_before = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"]
     with ctx.timings("time_stepping"):
         follow_path(solver, apply, Stepping(0.0, steps * dt, initial_step=1.0 / steps, max_step=1.0 / steps,
-                                            grow=2.0, min_step=1e-3 / steps, stops=(push_time,)),
+                                            grow=2.0, min_step=1e-3 / steps, stops=(push_time,),
+                                            easy_iterations=iol_fold.EASY_ITERATIONS),
                     on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
     h["wall"] = time.perf_counter() - begin
     # assembly + factorisation + solves of the steps, contact hooks included (subtracted later)
