@@ -46,12 +46,24 @@ class LensParameters(SceneParameters):
     contact_stiffness: float = field(1.0, "nodal penalty stiffness k of rigid contact", "N/mm")
     damping: float = field(2.0e4, "mass-proportional damping c standing in for the viscoelastic "
                                   "fluid: c = μ/(δ ρ h), μ ≈ 10 Pa·s over a δ ≈ 2 mm layer", "1/s")
+    self_contact: bool = field(True, "lens self-contact by ipctk's barrier with CCD-limited Newton steps "
+                                     "(needs ipctk and one rank)")
+    self_contact_distance: float = field(0.05, "barrier reach d̂: mid-surfaces closer than this repel", "mm")
+    self_contact_stiffness: float = field(1.0, "barrier stiffness κ (Π = κ Σ b(d², d̂²); at d = d̂/2 a pair "
+                                               "pushes with ≈ 4.3 κ d̂³)", "N/mm³")
+    friction: float = field(0.2, "Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion; 0 = none)")
+    friction_slip: float = field(1e-3, "slip per step below which friction is regularised (viscous)", "mm")
 
     def validate(self) -> None:
         self.require_positive("youngs_modulus", "density", "optic_thickness", "haptic_thickness",
                               "optic_diameter", "overall_length", "mesh_size", "penalty_factor",
                               "bore_radius", "nozzle_radius", "fold_radius", "contact_stiffness")
-        self.require_nonnegative("damping")
+        self.require_nonnegative("damping", "friction")
+        self.require_positive("self_contact_distance", "self_contact_stiffness", "friction_slip")
+        if self.self_contact_distance > 0.5 * self.haptic_thickness + 0.5 * self.optic_thickness:
+            raise ParameterError("self_contact_distance", f"{self.self_contact_distance} mm is more than the "
+                                 "half thicknesses of two touching layers: the barrier would hold parts "
+                                 "apart that are not touching")
         if not -1.0 < self.poisson_ratio < 0.5:
             raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio!r}")
         if self.degree not in (2, 3):
@@ -182,6 +194,25 @@ def load_state(path: Path, shell: LensShell) -> None:
                              f"(nodes {np.max(distance):.3g} mm apart)")
     shell.u.x.array[:] = data["displacement"][index].ravel()
     shell.u.x.scatter_forward()
+
+
+def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=None):
+    """The lens' self-contact (:class:`~eyemech.problems.iol_self_contact.SelfContact`), or
+    None when ``self_contact`` is off. Needs ipctk (the ``iol`` extra) and one rank."""
+    if not params.self_contact:
+        return None
+    try:
+        import ipctk  # noqa: F401
+    except ImportError as err:
+        raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
+                             "or set self_contact=false") from err
+    if shell.mesh.comm.size != 1:
+        raise ParameterError("self_contact", "runs on one rank only (ipctk works on the whole lens); "
+                             "run serially or set self_contact=false")
+    from eyemech.problems.iol_self_contact import SelfContact
+
+    return SelfContact(shell.u, params.self_contact_distance, params.self_contact_stiffness,
+                       friction=params.friction, slip=params.friction_slip, excluded_dofs=excluded_dofs)
 
 
 def lens_newton(ctx) -> "NewtonOptions":

@@ -9,8 +9,9 @@ capsule (acting outside the injector) by a nodal penalty. The plunger moves at
 is left to settle for ``settle_time``. The folded state comes from ``iol-fold`` (run first
 when ``folded_state`` is empty).
 
-Not modelled: self-contact forces (the smallest self distance is measured by ipctk and
-reported, with whether the surface intersects itself), friction, a soft capsule.
+Self-contact: ipctk's barrier with CCD-limited Newton updates and lagged friction
+(:mod:`eyemech.problems.iol_self_contact`); a folded state that already intersects itself
+is refused before any solve. Not modelled: a soft capsule.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ except ImportError:
 from eyemech.problems import iol_fold
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, load_state,
-                                  optic_center, optic_normal, render_frame, write_animation)
+from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
+                                  load_state, optic_center, optic_normal, render_frame, write_animation)
 from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
@@ -90,12 +91,26 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             shell = LensShell(params, ctx.comm)
         if params.folded_state:
             load_state(Path(params.folded_state), shell)
+            _refuse_intersecting(params, shell)
         else:
             with ctx.timings("folding"):
                 iol_fold.fold(params, ctx, shell, None)
         history = inject(params, ctx, shell)
         report(params, ctx, shell, history)
     return ctx.result
+
+
+def _refuse_intersecting(params: Parameters, shell: LensShell) -> None:
+    """A saved fold that passes through itself cannot start a barrier (infinite energy)."""
+    if not (params.self_contact and params.contact):
+        return
+    from eyemech.problems.iol_self_contact import SelfContactError
+
+    try:
+        lens_self_contact(shell, params).check(what=f"the folded state {params.folded_state}")
+    except SelfContactError as err:
+        raise ParameterError("folded_state", f"{err} (it was folded without self-contact: rerun "
+                             "iol-fold)") from None
 
 
 def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
@@ -114,12 +129,17 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
                              timings=ctx.timings,
                              residual_hooks=[dynamics.residual_hook, contact.residual_hook],
                              jacobian_hooks=[dynamics.jacobian_hook, contact.jacobian_hook])
+    # contact=false is the deformation-only benchmark: no self-contact either
+    self_contact = lens_self_contact(shell, params) if params.contact else None
+    if self_contact is not None:
+        self_contact.check(what="the folded lens")
+        self_contact.attach(solver)
     if params.scheme != "backward-euler":
         dynamics.initial_acceleration(shell.residual())
     stop = layout.tip + params.plunger_overshoot
     push_time = (stop - start) / params.plunger_speed
     end = push_time + params.settle_time
-    self_distance = self_distance_probe(shell.u)
+    self_distance = self_distance_probe(shell.u) if self_contact is None else None
     strain = StrainProbe(shell)
     frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
     h = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": [],
@@ -128,6 +148,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     def apply(t: float, dt: float) -> None:
         plunger.position = start + params.plunger_speed * min(t, push_time)
         dynamics.set_step(dt)
+        if self_contact is not None:
+            self_contact.begin_step()
 
     def converged(record) -> None:
         dynamics.advance()
@@ -138,7 +160,10 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         frame = record.step % params.frames_every == 1 or record.load >= end - 1e-9
         with ctx.timings("measurements"):
             h["strain"].append(strain.haptic_max())
-            if self_distance is not None:  # the distance search on frames, intersections always
+            if self_contact is not None:  # C++, cheap: every step
+                h["self_distance"].append(self_contact.min_distance())
+                h["intersecting"].append(self_contact.intersecting())
+            elif self_distance is not None:  # the distance search on frames, intersections always
                 distance, crossing = self_distance(distances=frame)
                 h["self_distance"].append(distance)
                 h["intersecting"].append(crossing)
@@ -157,13 +182,15 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     solver_before = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"]
     with ctx.timings("time_stepping"):
         follow_path(solver, apply, Stepping(0.0, steps * dt, initial_step=1.0 / steps, max_step=1.0 / steps,
-                                            grow=2.0, min_step=1e-3 / steps, stops=(push_time,)),
+                                            grow=2.0, min_step=1e-3 / steps, stops=(push_time,),
+                                            easy_iterations=iol_fold.EASY_ITERATIONS),
                     on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
     h["wall"] = time.perf_counter() - begin
     # assembly + factorisation + solves of the steps, contact hooks included (subtracted later)
     h["solver_seconds"] = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"] - solver_before
     h["contact_seconds"] = contact.seconds
     h["contact"] = contact
+    h["self_contact"] = self_contact
     return h
 
 
@@ -186,7 +213,9 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
         haptic_max_strain=float(max(h["strain"], default=0.0)),
         min_self_distance_mm=float(min(distances)) if distances else None,
         self_intersecting=bool(any(h["intersecting"])),
-        self_contact_forces="not applied",
+        self_contact_forces=iol_fold._self_contact_kind(params),
+        self_contact_seconds=getattr(h["self_contact"], "seconds", 0.0),
+        ccd_limited_updates=len(getattr(h["self_contact"], "step_limits", [])),
         lens_exited=bool(exited),
         optic_normal_z=float(normal[2]),
         optic_flipped=bool(normal[2] < 0.0),

@@ -102,6 +102,24 @@ def test_bad_input_is_refused_before_any_solve():
         iol_injection.Parameters(optic_diameter=11.0, overall_length=14.0).validate()
 
 
+def test_a_folded_state_that_passes_through_itself_is_refused(tmp_path):
+    """The barrier cannot start from an intersecting state: refused before any solve."""
+    pytest.importorskip("ipctk")
+    from mpi4py import MPI
+
+    from eyemech.problems.iol import LensShell, save_state
+
+    params = iol_injection.Parameters()
+    shell = LensShell(params, MPI.COMM_WORLD)
+    X = shell.node_coordinates()
+    shell.u.x.array[:] = (rolled(X, 1.0 / 0.9) - X).ravel()  # 2π · 0.9 < 6: overlaps
+    save_state(tmp_path / "bad.npz", shell, MPI.COMM_WORLD)
+    with pytest.raises(ParameterError, match="folded_state.*intersects"):
+        iol_injection.run(iol_injection.Parameters(folded_state=str(tmp_path / "bad.npz")), options=QUIET)
+    with pytest.raises(ParameterError, match="self_contact_distance"):
+        LensParameters(self_contact_distance=0.5).validate()
+
+
 def test_short_fold_keeps_the_lens_out_of_the_chamber_wall():
     """0.03 s of iol-fold (the compiled lens form is shared with the scenes)."""
     params = iol_fold.Parameters(fold_time=0.03, frames=1)
@@ -110,3 +128,4 @@ def test_short_fold_keeps_the_lens_out_of_the_chamber_wall():
     # the penalty's penetration f/k: shell forces are ~1e-4 N, k = 1 N/mm
     assert q["max_penetration_mm"] < 1e-3
     assert not q["self_intersecting"]
+    assert q["min_self_distance_mm"] > 0.0
