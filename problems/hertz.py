@@ -31,7 +31,7 @@ from eyemech.forms import compressible_neo_hooke, contact
 from eyemech.meshes.contact_bodies import quarter_hemisphere
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.output import FieldWriter
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.rigid_contact import (NodalPenetration, refuse_initial_penetration,
                                             resultant_force, surface_integral)

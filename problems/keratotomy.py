@@ -33,7 +33,7 @@ from eyemech.meshes.cornea import CorneaGeometry, cornea
 from eyemech.problems._viscous_bar import ViscousHistory
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import gather_grid, render_png
+from eyemech.problems.output import displacement_grid, render_png
 from eyemech.problems.linear_solvers import SolverChoice
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
@@ -283,13 +283,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
 
 def _picture(ctx: RunContext, body: Cornea, params: Parameters) -> None:
-    nodal = dolfinx.fem.functionspace(body.tagged.mesh, ("Lagrange", 1, (3,)))
-    u1 = dolfinx.fem.Function(nodal, name="displacement")
-    u1.interpolate(body.u)
-    grid = gather_grid(u1)
+    grid = displacement_grid(body.u)
     if grid is None:
         return
-    grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
     path = ctx.out / "cornea.png"
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.3, -1.0, 1.4),
                title=f"{params.incisions} incisions, OZ {params.optical_zone:g} mm, "

@@ -97,6 +97,22 @@ def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fe
     return grid
 
 
+def displacement_grid(displacement: dolfinx.fem.Function):
+    """The gathered grid (rank 0, None elsewhere) of a vector displacement on the mesh's
+    corner nodes, with its magnitude as ``"displacement (mm)"`` for colouring.
+
+    Interpolating to P1 first keeps pictures of P2/Q2 solids light and works for any
+    geometry degree (pyvista draws linear cells)."""
+    mesh = displacement.function_space.mesh
+    nodal = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (mesh.geometry.dim,)))
+    corner_displacement = dolfinx.fem.Function(nodal, name="displacement")
+    corner_displacement.interpolate(displacement)
+    grid = gather_grid(corner_displacement)
+    if grid is not None:
+        grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+    return grid
+
+
 def _point_values(function: dolfinx.fem.Function) -> np.ndarray:
     bs = function.function_space.dofmap.index_map_bs
     values = function.x.array.reshape(-1, bs) if bs > 1 else function.x.array.copy()

@@ -65,7 +65,7 @@ def convert(cls: type, key: str, raw: Any) -> Any:
     kind = types[key]
     try:
         return _convert_value(kind, raw)
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError):
         raise ParameterError(key, f"cannot read {raw!r} as {_type_name(kind)}") from None
 
 

@@ -53,7 +53,7 @@ from eyemech.meshes.cornea import CorneaGeometry, cornea
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.keratotomy import MMHG, SUPPORTS, limbus_support, validate_support
-from eyemech.problems.output import PyvistaSeries, gather_grid, render_png
+from eyemech.problems.output import PyvistaSeries, displacement_grid, render_png
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.rigid_contact import resultant_force
 from eyemech.problems.scene import Scene
@@ -330,13 +330,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
 
 def _picture(ctx: RunContext, body: Applanation, params: Parameters) -> None:
-    nodal = dolfinx.fem.functionspace(body.tagged.mesh, ("Lagrange", 1, (3,)))
-    u1 = dolfinx.fem.Function(nodal, name="displacement")
-    u1.interpolate(body.u)
-    grid = gather_grid(u1)
+    grid = displacement_grid(body.u)
     if grid is None:
         return
-    grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
     # the applanated cornea for notebooks (pyvista cannot read VTX .bp)
     series = PyvistaSeries(ctx.out, ctx.comm)
     series.write(ctx.result.quantities["applanation_depth_mm"], grid)

@@ -20,7 +20,7 @@ from mpi4py import MPI
 from eyemech.problems import viscoelastic_reference as reference
 from eyemech.problems._viscous_bar import BarParameters, ViscousBar, load_instantly, march, plot_history
 from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, SolveFailure
+from eyemech.problems.driver import NonlinearSolver
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
 

@@ -3,7 +3,6 @@ the penalty factor (α = factor · E / h), to justify the default factor."""
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 from mpi4py import MPI
@@ -12,7 +11,7 @@ from eyemech.problems import hertz
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, stamp
+from eyemech.problems.studies._common import save_chart, write_csv
 
 FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0)
 QUICK_FACTORS = (10.0, 100.0)
@@ -40,13 +39,7 @@ def run(out: Path, quick: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     stem = "contact_penalty" + ("_quick" if quick else "")
     table = out / f"{stem}.csv"
-    keys = sorted({k for row in rows for k in row}, key=lambda k: list(rows[0]).index(k)
-                  if k in rows[0] else 99)
-    with table.open("w", newline="") as handle:
-        handle.write(f"# {stamp()}\n")
-        writer = csv.DictWriter(handle, fieldnames=keys)
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(table, rows)
     chart = out / f"{stem}.png"
     _chart([r for r in rows if r["status"] == "ok"], chart)
     return [table, chart]

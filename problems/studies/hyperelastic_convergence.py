@@ -17,8 +17,6 @@ and paid once per family, not per mesh).
 
 from __future__ import annotations
 
-import csv
-import math
 from pathlib import Path
 
 from mpi4py import MPI
@@ -27,7 +25,7 @@ from eyemech.problems import cook_membrane, liquid_sphere, sphere_inflation
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, stamp
+from eyemech.problems.studies._common import save_chart, write_csv
 
 FAMILIES = ("P2P1", "P2P0", "Q1P0", "Q2P1", "P1")
 SPHERE_SIZES = {"P2P1": (2.0, 1.0, 0.7), "P2P0": (2.0, 1.0, 0.7), "Q1P0": (2.0, 1.0, 0.7, 0.5),
@@ -114,15 +112,6 @@ def cavity_rows(quick: bool, comm) -> list[dict]:
                          "seconds_per_newton_step": q["seconds_per_newton_step"],
                          "cavity_pressure_error": abs(q["cavity_pressure_error"])})
     return rows
-
-
-def _write_csv(path: Path, rows: list[dict], note: str) -> Path:
-    with open(path, "w", newline="") as handle:
-        handle.write(f"# {note}\n# {stamp()}\n")
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    return path
 
 
 def _chart(path: Path, rows: list[dict], error_key: str, title: str, ylabel: str,
@@ -230,18 +219,18 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
     if comm.rank != 0:
         return []
     files = [
-        _write_csv(out / "sphere_inflation_convergence.csv", sphere,
+        write_csv(out / "sphere_inflation_convergence.csv", sphere,
                    "sphere-inflation, p = 0.02 MPa: errors against the exact solution"),
         _chart(out / "sphere_inflation_convergence.png", sphere, "displacement_error",
                "sphere-inflation (exact solution): relative L² displacement error",
                "‖u − u_exact‖ / ‖u_exact‖", extra=_slopes),
-        _write_csv(out / "cook_membrane_convergence.csv", cook,
+        write_csv(out / "cook_membrane_convergence.csv", cook,
                    f"cook-membrane: tip error against {reference:.5f} mm (Richardson, Q2P1); "
                    f"published ≈ {PUBLISHED_TIP} mm"),
         _chart(out / "cook_membrane_convergence.png", cook, "tip_error",
                f"cook-membrane: tip displacement error (reference {reference:.4f} mm, "
                f"published ≈ {PUBLISHED_TIP})", "|u_tip / u_ref − 1|"),
-        _write_csv(out / "cavity_formulations.csv", cavity,
+        write_csv(out / "cavity_formulations.csv", cavity,
                    "liquid-sphere: Real-space pressure against the substituted formulation"),
         _cavity_chart(out / "cavity_formulations.png", cavity),
     ]

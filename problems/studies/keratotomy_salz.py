@@ -12,7 +12,6 @@ is reported as is.
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 from mpi4py import MPI
@@ -20,7 +19,7 @@ from mpi4py import MPI
 from eyemech.problems import keratotomy
 from eyemech.problems.context import RunOptions
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, stamp
+from eyemech.problems.studies._common import save_chart, write_csv
 
 SALZ_ZONES = {3.0: 9.06, 4.0: 6.44, 5.0: 5.23, 6.0: 2.29}
 SALZ_COUNTS = {3: 4.84, 4: 6.08}
@@ -89,12 +88,7 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
             else SALZ_COUNTS.get(row["incisions"])
         row["salz_1985_D"] = published
     path = out / "keratotomy_salz.csv"
-    with open(path, "w", newline="") as handle:
-        handle.write("# keratotomy vs Salz et al. 1985 (flattening = -power change, D)\n")
-        handle.write(f"# {stamp()}\n")
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(path, rows, "keratotomy vs Salz et al. 1985 (flattening = -power change, D)")
     return [path, _chart(out / "keratotomy_salz.png", zones, counts)]
 
 

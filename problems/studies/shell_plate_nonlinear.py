@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
 from eyemech.problems import plate_clamped

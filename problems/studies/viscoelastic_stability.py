@@ -17,7 +17,6 @@ Cv indefinite stops with UnstableIntegration; the study records the time it happ
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import shutil
@@ -31,7 +30,7 @@ from eyemech.problems import uniaxial_relaxation, viscoelastic_reference as refe
 from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, stamp
+from eyemech.problems.studies._common import save_chart, write_csv
 
 RATIOS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 1.25, 2.0, 2.5, 5.0, 10.0)
 QUICK_RATIOS = (0.1, 0.5, 2.5)
@@ -135,13 +134,8 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
     if comm.rank != 0:
         return []
     csv_path = out / "viscoelastic_stability.csv"
-    with open(csv_path, "w", newline="") as handle:
-        handle.write("# uniaxial-relaxation, step stretch 1.2, tau = 1 s, t_end = 10 tau; "
-                     "errors against the point ODE\n")
-        handle.write(f"# {stamp()}\n")
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(csv_path, rows, "uniaxial-relaxation, step stretch 1.2, tau = 1 s, t_end = 10 tau; "
+              "errors against the point ODE")
     return [csv_path, _chart(out / "viscoelastic_stability.png", rows, histories)]
 
 
