@@ -195,11 +195,21 @@ class NonlinearSolver:
             opts[f"{prefix}{key}"] = value
         self.snes.setFromOptions()
         self.snes.getKSP().setFromOptions()
-        if self.iterative is not None:
-            return  # kept (this solver's own prefix): the fieldsplit's inner solvers and
-            # GAMG's levels read theirs when PETSc sets them up, at the first solve
-        for key in values:
-            del opts[f"{prefix}{key}"]
+        self._pending_options = [f"{prefix}{key}" for key in values]
+        if self.iterative is None:
+            self._forget_options()
+        # else kept until the first solve: the fieldsplit's inner solvers and GAMG's
+        # levels read theirs when PETSc sets them up
+
+    def _forget_options(self) -> None:
+        """Remove this solver's entries from PETSc's global options database, so later
+        solvers do not inherit them and options an override made moot are not reported
+        as unused at exit."""
+        opts = PETSc.Options()
+        for name in self._pending_options:
+            if opts.hasName(name):
+                opts.delValue(name)
+        self._pending_options = []
 
     # -- state ------------------------------------------------------------------
     def save_state(self) -> list[np.ndarray]:
@@ -229,6 +239,8 @@ class NonlinearSolver:
             if self._callback_error is not None:
                 raise self._callback_error from None
             reason = -1
+        finally:
+            self._forget_options()
         elapsed = time.perf_counter() - start
         # assembly inside SNES is timed by the callbacks; "solve" is the rest
         # (factorisation, triangular solves, line search bookkeeping)
