@@ -164,6 +164,24 @@ def test_penalty_study_quick(tmp_path):
     assert abs(float(p3[0][3])) < 3e-3  # the P3 option: 4 × 4 crossed already within 0.3 %
 
 
+def test_thickness_study_quick_shows_membrane_locking(tmp_path):
+    """Study shell-thickness, coarse (4 divisions, R/h = 25 and 2500, loads ∝ h³): on a
+    fixed coarse mesh the scaled deflection u E h³/(F R²) collapses at R/h = 2500 for P2
+    and for P3 (membrane locking of the faceted shell; measured 0.44 and 0.32 against
+    1.99 and 2.10 at R/h = 25 — P3 is not locking-free; docs/shell.md has the sweep)."""
+    from eyemech.problems.studies import studies
+
+    files = studies()["shell-thickness"].run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
+    assert {f.name for f in files} == {"shell_thickness.csv", "shell_thickness.png"}
+    from eyemech.problems.studies._common import read_csv
+
+    scaled = {(int(r["degree"]), int(r["slenderness"])): float(r["scaled_displacement"])
+              for r in read_csv(tmp_path / "shell_thickness.csv")}
+    for degree in (2, 3):
+        assert scaled[degree, 2500] < 0.5 * scaled[degree, 25]
+        assert scaled[degree, 25] == pytest.approx(2.05, rel=0.05)  # thick end: near the plateau
+
+
 def test_thickness_as_a_field_matches_the_constant():
     """A thickness Function (the lens is thicker in the optic) enters the bulk and the
     edge terms (averaged across edges); a uniform field must reproduce the constant."""
