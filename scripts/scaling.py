@@ -3,12 +3,20 @@
     python -m eyemech.scripts.scaling run --ranks 1,2 --cases sb-coarse,sb-default \
         --solvers direct,iterative --out docs/scaling
     python -m eyemech.scripts.scaling report --out docs/scaling
+    python -m eyemech.scripts.scaling probe --cells 8,12,17 --element Q1P0 --until 1 \
+        --petsc fieldsplit_u_pc_gamg_threshold=0.05 --out docs/scaling
 
 ``run`` launches ``mpiexec -n N eyemech run SCENE ... --json`` for every case, rank
 count and solver (one after the other: timings need the machine), and appends one row
 per run to ``OUT/scaling.csv``; ``report`` writes ``OUT/scaling.png`` (time per Newton
 step and Krylov iterations per solve) and prints the Markdown table. Ready for any N:
 on a cluster pass ``--ranks 1,4,16,64`` (and ``--mpiexec`` for the site's launcher).
+
+``probe`` is the refinement check of the iterative solver on the eye: it runs
+scleral-buckling in-process (serial) with any number of cells per cube edge (the
+scene's resolutions are 8, 12 and 26) along the first part of the load path only
+(``--until 1``: the IOP step; 2: and the buckle), with the iterative solver and
+optional PETSc overrides, and appends Newton/Krylov counts to ``OUT/refinement.csv``.
 """
 
 from __future__ import annotations
@@ -76,14 +84,69 @@ def run_case(case: str, ranks: int, solver: str, out: Path, mpiexec: str) -> dic
             "peak_memory_mb_per_rank": round(data["peak_memory_mb"], 1)}
 
 
-def append(out: Path, row: dict) -> None:
-    table = out / "scaling.csv"
+def append(out: Path, row: dict, name: str = "scaling.csv",
+           columns: tuple[str, ...] = COLUMNS) -> None:
+    table = out / name
     rows = list(csv.DictReader(table.open())) if table.exists() else []
-    rows.append({k: row[k] for k in COLUMNS})
+    rows.append({k: row[k] for k in columns})
     with table.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
+        writer = csv.DictWriter(handle, fieldnames=columns)
         writer.writeheader()
         writer.writerows(rows)
+
+
+PROBE_COLUMNS = ("date", "machine", "load", "element", "cells_per_edge", "until", "dofs", "status",
+                 "newton_iterations", "krylov_iterations", "krylov_per_solve", "max_krylov_per_solve",
+                 "solve_s_per_newton", "options")
+
+
+def probe(cells: int, element: str, until: float, petsc: dict[str, str]) -> dict:
+    """Serial scleral-buckling with ``cells`` per cube edge, solver=iterative, along
+    the load path up to ``until`` (1: IOP step)."""
+    import dataclasses
+
+    from eyemech.problems import buckling_output, scleral_buckling as sb
+    from eyemech.problems.context import RunContext, RunOptions
+    from eyemech.problems.driver import NewtonOptions, Stepping, follow_path
+    from eyemech.problems.parameters import build
+
+    @dataclasses.dataclass(frozen=True)
+    class Refined(sb.Parameters):
+        def geometry(self):
+            return dataclasses.replace(super().geometry(), cells_per_edge=cells)
+
+    params = build(Refined, {"element": element, "solver": "iterative"})
+    options = RunOptions(fields=False, pictures=False, newton=NewtonOptions(petsc=petsc))
+    load = os.getloadavg()[0]
+    status = "ok"
+    with RunContext(sb.SCENE.name, params, None, None, options) as ctx:
+        model = sb.BucklingModel(params, ctx)
+        writer = buckling_output.Writer(model, ctx)
+        try:
+            follow_path(model.solver, model.apply,
+                        Stepping(0.0, until, initial_step=min(1 / 12, sb._max_step(params)),
+                                 max_step=sb._max_step(params),
+                                 stops=tuple(s for s in (1.0, 2.0) if s < until)),
+                        on_converged=lambda record: sb._converged(model, ctx, writer, record),
+                        label="probe", quiet=True)
+        except sb.SolveFailure as err:
+            status = f"failed: {err}"[:80]
+        finally:
+            writer.close()
+        dofs = sum(f.function_space.dofmap.index_map.size_global
+                   * f.function_space.dofmap.index_map_bs for f in model.fields)
+        steps, solve_s = ctx.result.steps, ctx.timings.as_dict().get("solve", 0.0)
+    newton = sum(s["newton_iterations"] for s in steps)
+    krylov = sum(s["krylov_iterations"] for s in steps)
+    return {"date": datetime.date.today().isoformat(),
+            "machine": f"{platform.node()} ({os.cpu_count()} cpus)", "load": round(load, 1),
+            "element": element, "cells_per_edge": cells, "until": until, "dofs": dofs,
+            "status": status, "newton_iterations": newton, "krylov_iterations": krylov,
+            "krylov_per_solve": round(krylov / max(newton, 1), 1),
+            "max_krylov_per_solve": max((round(s["krylov_iterations"] / s["newton_iterations"])
+                                         for s in steps if s["newton_iterations"]), default=0),
+            "solve_s_per_newton": round(solve_s / max(newton, 1), 3),
+            "options": " ".join(f"{k}={v}" for k, v in petsc.items())}
 
 
 def markdown(rows: list[dict]) -> str:
@@ -136,15 +199,26 @@ def chart(rows: list[dict], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("command", choices=("run", "report"))
+    parser.add_argument("command", choices=("run", "report", "probe"))
     parser.add_argument("--cases", default="sb-coarse,sb-default")
     parser.add_argument("--ranks", default="1,2")
     parser.add_argument("--solvers", default="direct,iterative")
     parser.add_argument("--out", default="docs/scaling")
     parser.add_argument("--mpiexec", default=str(BIN / "mpiexec"))
+    parser.add_argument("--cells", default="8,12", help="probe: cells per cube edge")
+    parser.add_argument("--element", default="Q1P0", help="probe: Q1P0 or Q2P1")
+    parser.add_argument("--until", type=float, default=1.0, help="probe: end of the load path")
+    parser.add_argument("--petsc", action="append", default=[], help="probe: OPTION=VALUE")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.command == "probe":
+        petsc = dict(item.split("=", 1) for item in args.petsc)
+        for cells in (int(n) for n in args.cells.split(",")):
+            row = probe(cells, args.element, args.until, petsc)
+            append(out, row, "refinement.csv", PROBE_COLUMNS)
+            print(json.dumps(row), flush=True)
+        return 0
     if args.command == "run":
         for case in args.cases.split(","):
             for ranks in (int(n) for n in args.ranks.split(",")):
