@@ -254,6 +254,16 @@ class StrainProbe:
             local = float(max(top.max(), bottom.max()))
         return self.comm.allreduce(local, op=MPI.MAX)
 
+    def cell_max(self) -> np.ndarray:
+        """Largest surface strain of every local cell (optic and haptics), for pictures."""
+        self.membrane.interpolate(self._expressions[0])
+        self.bending.interpolate(self._expressions[1])
+        E = self.membrane.x.array.reshape(-1, 3, 3)
+        K = self.bending.x.array.reshape(-1, 3, 3)
+        faces = [np.abs(np.linalg.eigvalsh(0.5 * (A + np.transpose(A, (0, 2, 1))))).max(axis=1)
+                 for A in (E + K, E - K)]
+        return np.maximum(*faces)
+
 
 def optic_normal(shell: LensShell) -> np.ndarray:
     """Mean deformed normal of the optic (area weighted, from the flat triangles of the
@@ -308,6 +318,25 @@ def render_frame(shell: LensShell, path: Path, title: str, obstacles: dict,
     plotter.screenshot(str(tmp))
     plotter.close()
     tmp.replace(path)
+
+
+def write_frame_grid(series, shell: LensShell, time: float, strain: StrainProbe | None = None) -> None:
+    """The deformed lens as one ``.vtu`` frame of ``series`` (a ``PyvistaSeries``): the P2
+    displacement, and per cell the thickness, the part (1 optic, 0 haptic) and the largest
+    surface strain — what notebooks read with ``pyvista.read``."""
+    from eyemech.problems.output import gather_grid
+
+    if series.out is None:  # no output folder, or fields off: nothing to gather
+        return
+    cells = shell.mesh.topology.index_map(2).size_local
+    part = np.zeros(cells)
+    optic = shell.tagged.cells("optic")
+    part[optic[optic < cells]] = 1.0
+    cell_data = {"thickness (mm)": shell.thickness.x.array[
+        shell.thickness.function_space.dofmap.list[:cells, 0]], "optic": part}
+    if strain is not None:
+        cell_data["surface strain"] = strain.cell_max()[:cells]
+    series.write(time, gather_grid(shell.u, cell_data=cell_data))
 
 
 def _obstacle_mesh(obstacle, bounds):

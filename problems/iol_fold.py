@@ -33,8 +33,10 @@ import dolfinx.fem
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.iol import (InjectorLayout, LensParameters, LensShell, StrainProbe, lens_newton,
-                                  lens_self_contact, render_frame, rolled, save_state, write_animation)
+                                  lens_self_contact, render_frame, rolled, save_state, write_animation,
+                                  write_frame_grid)
 from eyemech.problems.iol_contact import NodalContact, self_distance_probe
+from eyemech.problems.output import PyvistaSeries
 from eyemech.problems.parameters import field
 from eyemech.problems.scene import Scene
 from eyemech.problems.time_integration import ImplicitDynamics
@@ -105,6 +107,8 @@ def fold(params: Parameters, ctx: RunContext, shell: LensShell, frames_dir: Path
     every = max(1, steps // params.frames)
     frames: list[Path] = []
     history = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": []}
+    # the frames as .vtu + fold.pvd for notebooks (only when the scene writes its pictures)
+    history["series"] = PyvistaSeries(frames_dir if ctx.options.fields else None, ctx.comm, stem="fold")
 
     def apply(t: float, dt: float) -> None:
         folding.apply(t / params.fold_time)
@@ -128,6 +132,9 @@ def fold(params: Parameters, ctx: RunContext, shell: LensShell, frames_dir: Path
                 history["intersecting"].append(crossing)
         ctx.record_step(step=record.step, time=record.load, newton_iterations=record.iterations,
                         cuts=record.cuts, max_penetration_mm=history["penetration"][-1])
+        if frame:
+            with ctx.timings("output"):
+                write_frame_grid(history["series"], shell, record.load, strain)
         if frames_dir is not None and frame:
             path = frames_dir / f"fold_{len(frames):03d}.png"
             with ctx.timings("output"):
@@ -183,6 +190,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         if ctx.out is not None:
             save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
             ctx.result.fields.append("folded_state.npz")
+            ctx.result.fields.extend(history["series"].files)
             if pictures is not None and ctx.rank0 and history["frames"]:
                 ctx.result.pictures += [p.name for p in history["frames"]]
                 gif = write_animation(history["frames"], ctx.out / "fold.gif")

@@ -32,8 +32,10 @@ from eyemech.problems import iol_fold
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
-                                  load_state, optic_center, optic_normal, render_frame, write_animation)
+                                  load_state, optic_center, optic_normal, render_frame, write_animation,
+                                  write_frame_grid)
 from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
+from eyemech.problems.output import PyvistaSeries
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
 from eyemech.problems.time_integration import SCHEMES, ImplicitDynamics
@@ -144,6 +146,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
     h = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": [],
          "frames": [], "newton": []}
+    # the frames as .vtu + injection.pvd for notebooks (with the PNGs, or alone under --no-pictures)
+    h["series"] = PyvistaSeries(ctx.out if ctx.options.fields else None, ctx.comm, stem="injection")
 
     def apply(t: float, dt: float) -> None:
         plunger.position = start + params.plunger_speed * min(t, push_time)
@@ -170,6 +174,9 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         ctx.record_step(step=record.step, time=record.load, newton_iterations=record.iterations,
                         cuts=record.cuts, plunger=plunger.position, max_penetration_mm=h["penetration"][-1],
                         kinetic_energy=dynamics.kinetic_energy())
+        if frame:
+            with ctx.timings("output"):
+                write_frame_grid(h["series"], shell, record.load, strain)
         if frames_dir is not None and frame:
             path = frames_dir / f"frame_{len(h['frames']):03d}.png"
             with ctx.timings("output"):
@@ -225,6 +232,7 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
         time=h["time"], penetration_mm=h["penetration"], self_distance_mm=h["self_distance"],
         triangles=shell.mesh.topology.index_map(2).size_global,
         nodes=shell.mesh.geometry.index_map().size_global, dofs=shell.dofs())
+    ctx.result.fields.extend(h["series"].files)
     if h["frames"] and ctx.rank0:
         ctx.result.pictures += [p.name for p in h["frames"]]
         gif = write_animation(h["frames"], ctx.out / "injection.gif")
