@@ -285,6 +285,23 @@ def optic_normal(shell: LensShell) -> np.ndarray:
     return total / max(np.linalg.norm(total), 1e-300)
 
 
+def optic_flatness(shell: LensShell) -> float:
+    """|∫ n dA| / ∫ dA over the optic (flat triangles of the P2 vertices): 1 for a flat optic,
+    sin(θ/2)/(θ/2) for one rolled through the angle θ — 0.05 for the default fold
+    (θ = 6 mm / 1 mm), so > 0.9 means unrolled."""
+    owned = shell.mesh.topology.index_map(2).size_local
+    cells = shell.tagged.cells("optic")
+    cells = cells[cells < owned]
+    nodes = shell.V.dofmap.list[cells][:, :3]
+    p = (shell.node_coordinates() + shell.u.x.array.reshape(-1, 3))[nodes]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    sign = shell.orientation.x.array[shell.orientation.function_space.dofmap.list[cells, 0]]
+    comm = shell.mesh.comm
+    total = comm.allreduce((normal * sign[:, None]).sum(axis=0), op=MPI.SUM)
+    area = comm.allreduce(float(np.linalg.norm(normal, axis=1).sum()), op=MPI.SUM)
+    return float(np.linalg.norm(total) / max(area, 1e-300))
+
+
 def optic_center(shell: LensShell) -> np.ndarray:
     """Mean deformed position of the optic's nodes (the lens centre)."""
     owned = shell.V.dofmap.index_map.size_local

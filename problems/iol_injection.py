@@ -32,7 +32,7 @@ from eyemech.problems import iol_fold
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
-                                  load_state, save_state, optic_center, optic_normal, render_frame, write_animation)
+                                  load_state, save_state, optic_center, optic_flatness, optic_normal, render_frame, write_animation)
 from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
@@ -208,7 +208,7 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     strain = StrainProbe(shell)
     frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
     h = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": [],
-         "frames": [], "newton": []}
+         "frames": [], "newton": [], "cuts": [], "dt": []}
 
     def apply(t: float, dt: float) -> None:
         plunger.position = start + params.plunger_speed * min(t, push_time)
@@ -222,6 +222,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         dynamics.advance()
         h["time"].append(record.load)
         h["newton"].append(record.iterations)
+        h["cuts"].append(record.cuts)
+        h["dt"].append(record.increment)
         depth = {**contact.max_penetration(), **pushing.max_penetration()}
         h["penetration"].append(max(depth.values(), default=0.0))
         frame = record.step % params.frames_every == 1 or record.load >= end - 1e-9
@@ -253,6 +255,7 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
                                             easy_iterations=iol_fold.EASY_ITERATIONS),
                     on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
     h["wall"] = time.perf_counter() - begin
+    h["end"] = steps * dt
     # assembly + factorisation + solves of the steps, contact hooks included (subtracted later)
     h["solver_seconds"] = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"] - solver_before
     h["contact_seconds"] = contact.seconds + pushing.seconds
@@ -268,6 +271,7 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
     exited = ctx.comm.allreduce(float(x[:, 0].min()), op=MPI.MIN) > layout.tip
     center = optic_center(shell)
     normal = optic_normal(shell)
+    flatness = optic_flatness(shell)
     steps = len(h["time"])
     deformation = h["solver_seconds"] - h["contact_seconds"]
     distances = [d for d in h["self_distance"] if np.isfinite(d)]
@@ -286,6 +290,10 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
         lens_exited=bool(exited),
         optic_normal_z=float(normal[2]),
         optic_flipped=bool(normal[2] < 0.0),
+        optic_flatness=flatness, optic_unrolled=bool(flatness > 0.9),
+        end_time_s=h["end"], newton_iterations_per_step=float(np.mean(h["newton"])) if steps else 0.0,
+        step_cuts=int(sum(h["cuts"])), min_time_step_s=float(min(h["dt"], default=0.0)),
+        wall_seconds=h["wall"],
         final_decentration_mm=float(np.hypot(*(center - capsule.center)[:2])),
         final_optic_center=center.tolist(),
         contact_seconds=h["contact_seconds"],
