@@ -42,7 +42,7 @@ class LensParameters(SceneParameters):
     optic_diameter: float = field(6.0, "optic diameter", "mm")
     overall_length: float = field(13.0, "diameter of the circle enclosing the haptics", "mm")
     mesh_size: float = field(0.6, "triangle size in the optic (0.6: 752 triangles, the paper 743)", "mm")
-    resolution: str = field("paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) | "
+    resolution: str = field("paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) or "
                                      "'coarse' (every size × 2: 250 triangles, a quick run)")
     degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     penalty_factor: float = field(1.0, "α in the shell's edge penalty α p(p+1) D / h")

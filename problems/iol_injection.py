@@ -56,7 +56,7 @@ class Parameters(iol_fold.Parameters):
                                       "fluid, which the plunger drives through the bore (false: relative to "
                                       "rest, the session-3 drag that crushed the trailing haptic)")
     plunger_engages: str = field("optic", "what the plunger head pushes: 'optic' (the trailing haptic lies "
-                                          "beside the plunger tip, as loading instructions ask) | 'lens' "
+                                          "beside the plunger tip, as loading instructions ask) or 'lens' "
                                           "(every node: the trailing haptic is crushed)")
     jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm")
 
