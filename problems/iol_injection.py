@@ -32,7 +32,8 @@ from eyemech.problems import iol_fold
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
-                                  load_state, save_state, optic_center, optic_flatness, optic_normal, render_frame, write_animation)
+                                  load_state, optic_center, optic_flatness, optic_normal, render_frame,
+                                  save_state, write_animation)
 from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
@@ -190,7 +191,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         if params.fluid_carried else None
     solver = NonlinearSolver(shell.residual(), shell.u, [], options=_newton(ctx, params),
                              timings=ctx.timings,
-                             residual_hooks=[dynamics.residual_hook, contact.residual_hook, pushing.residual_hook]
+                             residual_hooks=[dynamics.residual_hook, contact.residual_hook,
+                                             pushing.residual_hook]
                              + ([fluid.residual_hook] if fluid is not None else []),
                              jacobian_hooks=[dynamics.jacobian_hook, contact.jacobian_hook,
                                              pushing.jacobian_hook])

@@ -43,7 +43,8 @@ converged or not — is intersection-free, whatever Δt, k or the plunger do.
 **Friction** (μ = ``friction`` > 0): IPC's lazy (lagged) smoothed Coulomb dissipation
 D(Δx) = Σ_k μ λ_k f₀(‖T_kᵀ Δx‖), with the normal forces λ_k and tangent bases T_k taken at
 the start of the step (x_n) and Δx = x − x_n; f₀ is C¹, linear (viscous) below the slip
-``slip`` (mm per step) and |·| above it. Residual += ∇D, Jacobian += ∇²D (PSD-projected: unprojected, Newton wandered).
+``slip`` (mm per step) and |·| above it. Residual += ∇D, Jacobian += ∇²D (PSD-projected:
+unprojected, Newton wandered).
 
 Serial only (ipctk works on the whole surface; the lens is small).
 """
