@@ -28,6 +28,10 @@ from eyemech.problems.iol_contact import Capsule, Plunger, TaperedBore
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 
 
+# every mesh size of the lens (optic, haptics, junctions) times this factor
+RESOLUTIONS = {"paper": 1.0, "coarse": 2.0}
+
+
 @dataclasses.dataclass(frozen=True)
 class LensParameters(SceneParameters):
     youngs_modulus: float = field(1.0, "Young's modulus of the acrylic (seed 000, Table 2)", "MPa")
@@ -38,6 +42,8 @@ class LensParameters(SceneParameters):
     optic_diameter: float = field(6.0, "optic diameter", "mm")
     overall_length: float = field(13.0, "diameter of the circle enclosing the haptics", "mm")
     mesh_size: float = field(0.6, "triangle size in the optic (0.6: 752 triangles, the paper 743)", "mm")
+    resolution: str = field("paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) or "
+                                     "'coarse' (every size × 2: 250 triangles, a quick run)")
     degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     penalty_factor: float = field(1.0, "α in the shell's edge penalty α p(p+1) D / h")
     bore_radius: float = field(1.25, "cartridge bore radius (loading chamber)", "mm")
@@ -66,6 +72,8 @@ class LensParameters(SceneParameters):
                                  "apart that are not touching")
         if not -1.0 < self.poisson_ratio < 0.5:
             raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio!r}")
+        if self.resolution not in RESOLUTIONS:
+            raise ParameterError("resolution", f"must be one of {sorted(RESOLUTIONS)}, got {self.resolution!r}")
         if self.degree not in (2, 3):
             raise ParameterError("degree", f"must be 2 or 3, got {self.degree!r}")
         if self.nozzle_radius > self.bore_radius:
@@ -79,8 +87,11 @@ class LensParameters(SceneParameters):
                                  f"fit the cartridge bore (radius {self.bore_radius} mm)")
 
     def geometry(self) -> LensGeometry:
+        scale = RESOLUTIONS[self.resolution]
+        reference = LensGeometry()
         return LensGeometry(optic_diameter=self.optic_diameter, overall_length=self.overall_length,
-                            mesh_size=self.mesh_size)
+                            mesh_size=scale * self.mesh_size, haptic_size=scale * reference.haptic_size,
+                            junction_size=scale * reference.junction_size)
 
     def axis_point(self) -> np.ndarray:
         """The injector axis runs along x through (0, 0, fold_radius): the optic's roll axis."""
@@ -160,9 +171,11 @@ class InjectorLayout:
     capsule_semi_axes: tuple[float, float, float] = (5.25, 5.25, 2.25)
     capsule_depth: float = 4.0  # capsule centre beyond the nozzle tip
 
-    def cartridge(self, params: LensParameters) -> TaperedBore:
+    nozzle_lip: float = 0.5  # mm, radius of the rounded nozzle exit (injection only)
+
+    def cartridge(self, params: LensParameters, lip: float = 0.0) -> TaperedBore:
         return TaperedBore(params.axis_point(), params.bore_radius, params.nozzle_radius,
-                           self.taper_start, self.taper_end, self.tip)
+                           self.taper_start, self.taper_end, self.tip, lip=lip)
 
     def capsule(self, params: LensParameters) -> Capsule:
         center = params.axis_point() + np.array([self.tip + self.capsule_depth, 0.0, 0.0])
@@ -280,6 +293,23 @@ def optic_normal(shell: LensShell) -> np.ndarray:
     # order is the geometry's, so the same sign applies
     total = shell.mesh.comm.allreduce((normal * sign[:, None]).sum(axis=0), op=MPI.SUM)
     return total / max(np.linalg.norm(total), 1e-300)
+
+
+def optic_flatness(shell: LensShell) -> float:
+    """|∫ n dA| / ∫ dA over the optic (flat triangles of the P2 vertices): 1 for a flat optic,
+    sin(θ/2)/(θ/2) for one rolled through the angle θ — 0.05 for the default fold
+    (θ = 6 mm / 1 mm), so > 0.9 means unrolled."""
+    owned = shell.mesh.topology.index_map(2).size_local
+    cells = shell.tagged.cells("optic")
+    cells = cells[cells < owned]
+    nodes = shell.V.dofmap.list[cells][:, :3]
+    p = (shell.node_coordinates() + shell.u.x.array.reshape(-1, 3))[nodes]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    sign = shell.orientation.x.array[shell.orientation.function_space.dofmap.list[cells, 0]]
+    comm = shell.mesh.comm
+    total = comm.allreduce((normal * sign[:, None]).sum(axis=0), op=MPI.SUM)
+    area = comm.allreduce(float(np.linalg.norm(normal, axis=1).sum()), op=MPI.SUM)
+    return float(np.linalg.norm(total) / max(area, 1e-300))
 
 
 def optic_center(shell: LensShell) -> np.ndarray:

@@ -58,14 +58,31 @@ class TaperedBore:
     taper_end: float
     tip: float
     opening: float = 0.0  # extra radius (mm) added everywhere: the chamber before it closes
+    lip: float = 0.0  # radius (mm) of the rounded nozzle exit (0: a sharp edge)
 
     def wall_radius(self, x: np.ndarray) -> np.ndarray:
         s = np.clip((x - self.taper_start) / (self.taper_end - self.taper_start), 0.0, 1.0)
         return self.radius + (self.nozzle_radius - self.radius) * s + self.opening
 
     def gap_normal(self, x):
+        """Inside the bore g = R(x) − ρ, n = −e_ρ. With a ``lip``, the last ``lip`` mm are the
+        inside of a torus (tube radius ``lip``) that turns the wall from axial to radial at the
+        tip: g = D − lip, n = (x − x_c, ρ − ρ_c)/D from the lip's centre circle (x_c, ρ_c).
+        Why: with a sharp edge the wall's force on a node at the nozzle radius jumps from
+        k (ρ − R) to 0 as the node crosses x = tip, and Newton cycled between two states
+        (residuals 4e-3 / 5e-4 for 25 iterations, the optic leaving the nozzle)."""
         rho, e = _radial(x, self.axis_point)
-        return self.wall_radius(x[:, 0]) - rho, -e, x[:, 0] < self.tip
+        gap, normal, acts = self.wall_radius(x[:, 0]) - rho, -e, x[:, 0] < self.tip
+        if self.lip > 0.0:
+            x_c, rho_c = self.tip - self.lip, self.nozzle_radius + self.opening + self.lip
+            dx, drho = x[:, 0] - x_c, rho - rho_c
+            on_lip = (dx > 0.0) & (drho < 0.0)
+            D = np.sqrt(dx ** 2 + drho ** 2) + 1e-300
+            gap = np.where(on_lip, D - self.lip, gap)
+            normal = np.where(on_lip[:, None], (dx / D)[:, None] * np.array([1.0, 0.0, 0.0])
+                              + (drho / D)[:, None] * e, normal)
+            acts = np.where(dx > 0.0, on_lip, acts)
+        return gap, normal, acts
 
 
 @dataclasses.dataclass

@@ -32,8 +32,8 @@ from eyemech.problems import iol_fold
 from eyemech.problems.context import RunContext, RunOptions
 from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
-                                  load_state, optic_center, optic_normal, render_frame, write_animation,
-                                  write_frame_grid)
+                                  load_state, optic_center, optic_flatness, optic_normal, render_frame,
+                                  save_state, write_animation, write_frame_grid)
 from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
 from eyemech.problems.output import PyvistaSeries
 from eyemech.problems.parameters import ParameterError, field
@@ -54,6 +54,13 @@ class Parameters(iol_fold.Parameters):
     contact: bool = field(True, "rigid contact on; false: the folded lens unfolds in free space "
                                 "(the deformation-only speed)")
     frames_every: int = field(4, "a PNG frame every this many steps")
+    fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
+                                      "fluid, which the plunger drives through the bore (false: relative to "
+                                      "rest, the session-3 drag that crushed the trailing haptic)")
+    plunger_engages: str = field("optic", "what the plunger head pushes: 'optic' (the trailing haptic lies "
+                                          "beside the plunger tip, as loading instructions ask) or 'lens' "
+                                          "(every node: the trailing haptic is crushed)")
+    jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm")
 
     def validate(self) -> None:
         layout = InjectorLayout()
@@ -64,6 +71,9 @@ class Parameters(iol_fold.Parameters):
         iol_fold.Parameters.validate(self)
         self.require_positive("plunger_speed", "frames_every", "jacobian_lag")
         self.require_nonnegative("settle_time", "plunger_overshoot")
+        self.require_positive("jet_length")
+        if self.plunger_engages not in ("optic", "lens"):
+            raise ParameterError("plunger_engages", f"must be 'optic' or 'lens', got {self.plunger_engages!r}")
         if self.scheme not in SCHEMES:
             raise ParameterError("scheme", f"must be one of {sorted(SCHEMES)}, got {self.scheme!r}")
         if self.folded_state and not Path(self.folded_state).is_file():
@@ -97,6 +107,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         else:
             with ctx.timings("folding"):
                 iol_fold.fold(params, ctx, shell, None)
+            if ctx.out is not None:  # reusable: folded_state=<out>/folded_state.npz
+                save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
+                ctx.result.fields.append("folded_state.npz")
         history = inject(params, ctx, shell)
         report(params, ctx, shell, history)
     return ctx.result
@@ -115,6 +128,45 @@ def _refuse_intersecting(params: Parameters, shell: LensShell) -> None:
                              "iol-fold)") from None
 
 
+class FluidDrag:
+    """The viscoelastic fluid's drag on the lens relative to the fluid's velocity:
+    f = −c M (v − v_f), i.e. a residual term −c M v_f next to the scheme's c M v.
+
+    Why: the damping c stands for the fluid (c = μ/(δ ρ h), see ``damping``), and that fluid
+    is pushed through the cartridge by the plunger ahead of and around the lens. A drag on the
+    absolute velocity resists the lens' rigid translation with c m v ≈ 2e4 /s × 1e-8 t ×
+    40 mm/s ≈ 8e-3 N — about a thousand times the Euler load of a haptic (π² EI/(4L²) ≈ 1e-5 N):
+    the plunger then crushes the trailing haptic before the lens moves (session 3: Δt cut to
+    0.1 ms). Fluid velocity (along the axis, lagged at the start of each step): the plunger's
+    speed times the bore's area ratio (R_bore/R(x))² inside the injector (incompressible plug
+    flow), then a jet decaying as exp(−(x − tip)/``jet_length``) in the capsule."""
+
+    def __init__(self, dynamics: ImplicitDynamics, shell: LensShell, bore, jet_length: float):
+        self.dynamics, self.shell, self.bore, self.jet_length = dynamics, shell, bore, jet_length
+        self.X = shell.node_coordinates()
+        self.v_fluid = dynamics.M.createVecRight()
+        self.drag = dynamics.M.createVecRight()
+
+    def fluid_velocity(self, speed: float) -> np.ndarray:
+        """Axial fluid speed (mm/s) at the current node positions."""
+        x = (self.X + self.shell.u.x.array.reshape(-1, 3))[:, 0]
+        inside = speed * (self.bore.radius / self.bore.wall_radius(np.minimum(x, self.bore.tip))) ** 2
+        return np.where(x < self.bore.tip, inside,
+                        inside * np.exp(-np.maximum(x - self.bore.tip, 0.0) / self.jet_length))
+
+    def begin_step(self, speed: float) -> None:
+        axial = self.fluid_velocity(speed)
+        with self.v_fluid.localForm() as local:
+            values = local.array.reshape(-1, 3)
+            values[:] = 0.0
+            values[: len(axial), 0] = axial[: len(values)]
+        self.dynamics.M.mult(self.v_fluid, self.drag)
+        self.drag.scale(-self.dynamics.damping)
+
+    def residual_hook(self, _x, F) -> None:
+        F.axpy(1.0, self.drag)
+
+
 def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     layout = InjectorLayout()
     axis = params.axis_point()
@@ -122,15 +174,29 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     start = ctx.comm.allreduce(float(x[:, 0].min()), op=MPI.MIN) - 0.05
     # the head fills the bore and more: a node sliding along the wall must not leave its reach
     plunger = Plunger(start, axis, params.bore_radius + 0.5)
-    obstacles = {"cartridge": layout.cartridge(params), "plunger": plunger,
+    obstacles = {"cartridge": layout.cartridge(params, lip=layout.nozzle_lip), "plunger": plunger,
                  "capsule": layout.capsule(params)} if params.contact else {}
-    contact = NodalContact(shell.u, obstacles, params.contact_stiffness)
+    walls = {k: v for k, v in obstacles.items() if k != "plunger"}
+    contact = NodalContact(shell.u, walls, params.contact_stiffness)
+    # the plunger on the optic only: a flat head pressed on the tip of a 0.13 mm haptic strip
+    # (Euler load ~1e-5 N against the ~1e-2 N the lens needs to leave the nozzle) crumples
+    # it against the optic; Newton then crawls at Δt ≈ 0.1 ms and failed (t = 0.243 s, coarse)
+    haptics = shell.nodes_of("haptic") if params.plunger_engages == "optic" else None
+    if haptics is not None:
+        haptics = np.setdiff1d(haptics, shell.nodes_of("optic"))
+    pushing = NodalContact(shell.u, {"plunger": plunger} if params.contact else {},
+                           params.contact_stiffness, excluded=haptics)
     dynamics = ImplicitDynamics(shell.u, shell.mass(), [], scheme_name=params.scheme,
                                 damping=params.damping)
+    fluid = FluidDrag(dynamics, shell, layout.cartridge(params), params.jet_length) \
+        if params.fluid_carried else None
     solver = NonlinearSolver(shell.residual(), shell.u, [], options=_newton(ctx, params),
                              timings=ctx.timings,
-                             residual_hooks=[dynamics.residual_hook, contact.residual_hook],
-                             jacobian_hooks=[dynamics.jacobian_hook, contact.jacobian_hook])
+                             residual_hooks=[dynamics.residual_hook, contact.residual_hook,
+                                             pushing.residual_hook]
+                             + ([fluid.residual_hook] if fluid is not None else []),
+                             jacobian_hooks=[dynamics.jacobian_hook, contact.jacobian_hook,
+                                             pushing.jacobian_hook])
     # contact=false is the deformation-only benchmark: no self-contact either
     self_contact = lens_self_contact(shell, params) if params.contact else None
     if self_contact is not None:
@@ -145,13 +211,15 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     strain = StrainProbe(shell)
     frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
     h = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": [],
-         "frames": [], "newton": []}
+         "frames": [], "newton": [], "cuts": [], "dt": []}
     # the frames as .vtu + injection.pvd for notebooks (with the PNGs, or alone under --no-pictures)
     h["series"] = PyvistaSeries(ctx.out if ctx.options.fields else None, ctx.comm, stem="injection")
 
     def apply(t: float, dt: float) -> None:
         plunger.position = start + params.plunger_speed * min(t, push_time)
         dynamics.set_step(dt)
+        if fluid is not None:  # u is u_n here: the step's start
+            fluid.begin_step(params.plunger_speed if t <= push_time + 1e-12 else 0.0)
         if self_contact is not None:
             self_contact.begin_step()
 
@@ -159,7 +227,9 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         dynamics.advance()
         h["time"].append(record.load)
         h["newton"].append(record.iterations)
-        depth = contact.max_penetration()
+        h["cuts"].append(record.cuts)
+        h["dt"].append(record.increment)
+        depth = {**contact.max_penetration(), **pushing.max_penetration()}
         h["penetration"].append(max(depth.values(), default=0.0))
         frame = record.step % params.frames_every == 1 or record.load >= end - 1e-9
         with ctx.timings("measurements"):
@@ -193,9 +263,10 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
                                             easy_iterations=iol_fold.EASY_ITERATIONS),
                     on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
     h["wall"] = time.perf_counter() - begin
+    h["end"] = steps * dt
     # assembly + factorisation + solves of the steps, contact hooks included (subtracted later)
     h["solver_seconds"] = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"] - solver_before
-    h["contact_seconds"] = contact.seconds
+    h["contact_seconds"] = contact.seconds + pushing.seconds
     h["contact"] = contact
     h["self_contact"] = self_contact
     return h
@@ -208,6 +279,7 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
     exited = ctx.comm.allreduce(float(x[:, 0].min()), op=MPI.MIN) > layout.tip
     center = optic_center(shell)
     normal = optic_normal(shell)
+    flatness = optic_flatness(shell)
     steps = len(h["time"])
     deformation = h["solver_seconds"] - h["contact_seconds"]
     distances = [d for d in h["self_distance"] if np.isfinite(d)]
@@ -226,6 +298,10 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
         lens_exited=bool(exited),
         optic_normal_z=float(normal[2]),
         optic_flipped=bool(normal[2] < 0.0),
+        optic_flatness=flatness, optic_unrolled=bool(flatness > 0.9),
+        end_time_s=h["end"], newton_iterations_per_step=float(np.mean(h["newton"])) if steps else 0.0,
+        step_cuts=int(sum(h["cuts"])), min_time_step_s=float(min(h["dt"], default=0.0)),
+        wall_seconds=h["wall"],
         final_decentration_mm=float(np.hypot(*(center - capsule.center)[:2])),
         final_optic_center=center.tolist(),
         contact_seconds=h["contact_seconds"],

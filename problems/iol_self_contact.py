@@ -21,8 +21,8 @@ not added: the barrier keeps the mid-surfaces apart (distance > 0), not h apart.
 b(s, ŝ) = −(s − ŝ)² ln(s/ŝ) for s < ŝ (ipctk's barrier on squared distances), summed over
 the point–triangle and edge–edge pairs k closer than d̂ whose vertices are not all within
 ``exclusion`` of each other in the reference (flat) lens. Residual hook: F += ∇Π_s;
-Jacobian hook: J += ∇²Π_s projected to positive semi-definite (ipctk, CLAMP) — the
-exact Hessian's negative parts come from the distance's curvature and only slow Newton.
+Jacobian hook: J += ∇²Π_s exact (session 4; projecting it to positive semi-definite, as IPC
+does for its energy line search, made our Newton converge only linearly).
 
 **Why the exclusion.** In the flat lens, neighbouring sub-triangles are a fraction of an
 element apart: pairs within d̂ at rest would feel the barrier before anything touches.
@@ -43,7 +43,8 @@ converged or not — is intersection-free, whatever Δt, k or the plunger do.
 **Friction** (μ = ``friction`` > 0): IPC's lazy (lagged) smoothed Coulomb dissipation
 D(Δx) = Σ_k μ λ_k f₀(‖T_kᵀ Δx‖), with the normal forces λ_k and tangent bases T_k taken at
 the start of the step (x_n) and Δx = x − x_n; f₀ is C¹, linear (viscous) below the slip
-``slip`` (mm per step) and |·| above it. Residual += ∇D, Jacobian += ∇²D (PSD-projected).
+``slip`` (mm per step) and |·| above it. Residual += ∇D, Jacobian += ∇²D (PSD-projected:
+unprojected, Newton wandered).
 
 Serial only (ipctk works on the whole surface; the lens is small).
 """
@@ -63,9 +64,14 @@ import dolfinx.fem
 
 # the four flat sub-triangles of a P2 triangle, in basix's node order (edge i is opposite
 # vertex i: 3 = (1, 2), 4 = (0, 2), 5 = (0, 1)); all counter-clockwise like the parent
-# the barrier Hessian is projected per pair to positive semi-definite (IPC practice: the
-# distance curvature makes it indefinite, and Newton then wanders); None = CLAMP
+# The barrier's Hessian is used exact (not projected): IPC projects it per pair to PSD for its
+# energy line search, but in our Newton (no energy line search; the CCD keeps iterates
+# intersection-free) the projection made convergence linear (factor 0.3-0.7 per iteration,
+# the injection crawling at dt ~ 0.1 ms and failing), the exact one quadratic (5-7
+# iterations; measured on the coarse injection, docs/iol.md §3b). The friction's lagged
+# Hessian stays projected: unprojected, Newton wandered (residuals up to 0.3). None = exact.
 HESSIAN_PROJECTION = None
+FRICTION_HESSIAN_PROJECTION = "CLAMP"
 P2_SUBTRIANGLES = np.array([[0, 5, 4], [1, 3, 5], [2, 4, 3], [3, 4, 5]])
 
 
@@ -212,9 +218,11 @@ class SelfContact:
         return grad
 
     def hessian(self, x: np.ndarray):
-        psd = HESSIAN_PROJECTION or self._ipctk.PSDProjectionMethod.CLAMP
+        methods = self._ipctk.PSDProjectionMethod
+        psd = getattr(methods, HESSIAN_PROJECTION or "NONE")
         hess = self.stiffness * self.barrier.hessian(self._collisions(x), self.mesh, x, psd)
         if self._tangential is not None and len(self._tangential):
+            psd = getattr(methods, FRICTION_HESSIAN_PROJECTION or "NONE")
             hess = hess + self.friction_potential.hessian(self._tangential, self.mesh,
                                                           x - self._x_start, psd)
         return hess
