@@ -306,6 +306,12 @@ class SelfDistance:
                 continue
             best = min(best, float(np.sqrt(collision.compute_distance(collision.dof(x, self.edges,
                                                                                      self.faces)))))
+        # An element of NormalCollisions refers into the container: let it go first. Python
+        # clears a frame's locals in the order they were bound, so a `collision` left alive
+        # outlived `collisions` and its deallocation read freed memory (SIGSEGV once VTK had
+        # reused that memory: the lens notebook's run, 2026-11-22).
+        collision = None
+        del collision, collisions
         t0 = time.perf_counter()
         crossing = bool(ipctk.has_intersections(self.mesh, x))
         self.timing.append(time.perf_counter() - t0)
