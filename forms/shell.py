@@ -192,3 +192,170 @@ def end_rotation(u, co_normal, reference_angle, plane=(0, 2)):
     along = c * a[i] + s * a[k]
     across = -s * a[i] + c * a[k]
     return reference_angle + ufl.atan2(across, along)
+
+
+class _Variations:
+    """The nonlinear shell's quantities with their first variations in the directions v
+    (``d``) and w (``D``): everything the explicit second variation needs. All of it is
+    unrestricted UFL; ``restricted(side)`` gives the same on one side of a facet."""
+
+    def __init__(self, u, v, w, orientation, restrict=None):
+        r = restrict or (lambda x: x)
+        mesh = ufl.domain.extract_unique_domain(u)
+        J = ufl.Jacobian(mesh)
+        g = [J[:, 0], J[:, 1]]
+        self.s = r(orientation)
+        self.N = r(orientation * _unit(ufl.cross(g[0], g[1])))
+        self.P = ufl.Identity(3) - ufl.outer(self.N, self.N)
+        self.F = self.P + r(ufl.grad(u))
+        a = [self.F * r(gi) for gi in g]
+        self.c = ufl.cross(a[0], a[1])
+        self.length = ufl.sqrt(ufl.dot(self.c, self.c))
+        self.c_hat = self.c / self.length
+        self.n = self.s * self.c_hat
+        self.H = r(ufl.grad(ufl.grad(u)))
+        i, j, k = ufl.indices(3)
+        self.K = ufl.as_tensor(self.n[k] * self.H[k, i, j], (i, j))
+        self.dG, self.DG = r(ufl.grad(v)), r(ufl.grad(w))
+        self.dH, self.DH = r(ufl.grad(ufl.grad(v))), r(ufl.grad(ufl.grad(w)))
+        da = [self.dG * r(gi) for gi in g]
+        Da = [self.DG * r(gi) for gi in g]
+        self.dc = ufl.cross(da[0], a[1]) + ufl.cross(a[0], da[1])
+        self.Dc = ufl.cross(Da[0], a[1]) + ufl.cross(a[0], Da[1])
+        self.dDc = ufl.cross(da[0], Da[1]) + ufl.cross(Da[0], da[1])
+        self.dn = self._unit_variation(self.dc)
+        self.Dn = self._unit_variation(self.Dc)
+        self.dK = ufl.as_tensor(self.dn[k] * self.H[k, i, j] + self.n[k] * self.dH[k, i, j], (i, j))
+        self.DK = ufl.as_tensor(self.Dn[k] * self.H[k, i, j] + self.n[k] * self.DH[k, i, j], (i, j))
+        # the part of ΔδK that is a product of first variations (the rest is Δδn · H)
+        self.dDK_products = ufl.as_tensor(self.dn[k] * self.DH[k, i, j] + self.Dn[k] * self.dH[k, i, j], (i, j))
+
+    def _unit_variation(self, dc):
+        """δn = s (δc − ĉ (ĉ·δc)) / |c|."""
+        return self.s * (dc - self.c_hat * ufl.dot(self.c_hat, dc)) / self.length
+
+    def normal_second_variation(self, x):
+        """Δδn · x for a u-only vector x (the weights back-propagated onto Δδn):
+        δcᵀ ∇²(s ĉ·x) Δc + (s P_c x/|c|) · Δδc, ∇²(s ĉ·x) = −s/|c|² (x ĉᵀ + ĉ xᵀ + (ĉ·x)(I − 3ĉĉᵀ))."""
+        return _unit_second_variation(self.c_hat, self.length, self.s, x, self.dc, self.Dc, self.dDc)
+
+
+def _unit_second_variation(c_hat, length, s, x, dc, Dc, dDc=None):
+    """Δδ(s ĉ) · x for ĉ = c/|c| with the variations δc, Δc, Δδc of c."""
+    dot = ufl.dot
+    hessian = -s / length ** 2 * (dot(dc, x) * dot(c_hat, Dc) + dot(dc, c_hat) * dot(x, Dc)
+                                  + dot(c_hat, x) * (dot(dc, Dc) - 3.0 * dot(dc, c_hat) * dot(c_hat, Dc)))
+    if dDc is None:
+        return hessian
+    y = s * (x - c_hat * dot(c_hat, x)) / length
+    return hessian + dot(y, dDc)
+
+
+def _weighted_hessian(H, weights):
+    """x_k = Σ_ij S_ij H_kij."""
+    i, j, k = ufl.indices(3)
+    return ufl.as_vector(weights[i, j] * H[k, i, j], k)
+
+
+def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int, penalty_factor,
+                   dx: ufl.Measure, dS: ufl.Measure):
+    """Π''(u)[v, w] of the nonlinear ``shell_energy`` (no clamped edges) written out by hand:
+    the same bilinear form as ``derivative(derivative(energy, u, v), u, w)`` up to
+    round-off, but every second variation of an intermediate quantity (the normal, the edge
+    tangent) is contracted at once with the u-only weight it meets in the energy, so the
+    argument-dependent factors stay first variations. UFL's symbolic derivative instead
+    carries Δδn, Δδm, … as full (test × trial) expressions through the whole composite
+    energy, and FFCx emits megabytes of C per kernel for it (issue 8 §4).
+
+    Bulk:   h [C(δE):ΔE + C(E):ΔδE] + h³/12 [C(δK):ΔK + C(K):ΔδK],
+            δE = sym(Fᵀ δG), ΔδE = sym(δGᵀ ΔG), δK = δn·H + n·δH,
+            ΔδK = Δδn·H + δn·ΔH + Δn·δH.
+    Edges:  e = −{M_νν} θ + ½ γ {D} θ²  ⇒
+            Δδe = −δ{M_νν} Δθ − Δ{M_νν} δθ + γ{D} δθ Δθ + (γ{D} θ − {M_νν}) Δδθ − θ Δδ{M_νν},
+            θ = atan2(S, C), S = n⁺·m⁻, C = n⁺·n⁻, m = t × n, t = Fτ/|Fτ|."""
+    h = material.thickness
+    E_Y, nu_p = material.youngs_modulus, material.poisson_ratio
+    Db = h ** 3 / 12.0
+    q = _Variations(u, v, w, orientation)
+
+    def C(A, P):
+        return material.plane_stress(A, P)
+
+    def sym(A):
+        return 0.5 * (A + A.T)
+
+    E = 0.5 * (q.F.T * q.F - q.P)
+    dE, DE = sym(q.F.T * q.dG), sym(q.F.T * q.DG)
+    dDE = sym(q.dG.T * q.DG)
+    CK = C(q.K, q.P)
+    bulk = (h * (ufl.inner(C(dE, q.P), DE) + ufl.inner(C(E, q.P), dDE))
+            + Db * (ufl.inner(C(q.dK, q.P), q.DK) + ufl.inner(CK, q.dDK_products)
+                    + q.normal_second_variation(_weighted_hessian(q.H, CK))))
+
+    mesh = ufl.domain.extract_unique_domain(u)
+    nu = ufl.FacetNormal(mesh)
+    size = ufl.CellDiameter(mesh)
+    D = material.bending_stiffness()
+    D_avg = 0.5 * (D("+") + D("-")) if ufl.algorithms.extract_coefficients(D) else D
+    gamma = penalty(degree, penalty_factor, 0.5 * (size("+") + size("-")))
+    p = _Variations(u, v, w, orientation, lambda x: x("+"))
+    m = _Variations(u, v, w, orientation, lambda x: x("-"))
+    dot, cross = ufl.dot, ufl.cross
+    # the deformed tangent of the "-" side and its variations (f = F τ is linear in u)
+    tau = cross(m.N, nu("-"))
+    f = m.F * tau
+    f_len = ufl.sqrt(dot(f, f))
+    t = f / f_len
+    df, Df = m.dG * tau, m.DG * tau
+    dt = (df - t * dot(t, df)) / f_len
+    Dt = (Df - t * dot(t, Df)) / f_len
+    co = cross(t, m.n)
+    dco = cross(dt, m.n) + cross(t, m.dn)
+    Dco = cross(Dt, m.n) + cross(t, m.Dn)
+    sine, cosine = dot(p.n, co), dot(p.n, m.n)
+    d_sine = dot(p.dn, co) + dot(p.n, dco)
+    D_sine = dot(p.Dn, co) + dot(p.n, Dco)
+    d_cosine = dot(p.dn, m.n) + dot(p.n, m.dn)
+    D_cosine = dot(p.Dn, m.n) + dot(p.n, m.Dn)
+    r2 = sine ** 2 + cosine ** 2
+    theta = ufl.atan2(sine, cosine) - ufl.atan2(dot(p.N, nu("-")), dot(p.N, m.N))
+    d_theta = (cosine * d_sine - sine * d_cosine) / r2
+    D_theta = (cosine * D_sine - sine * D_cosine) / r2
+    # Δδθ without the second variations of S and C (those are weighted below)
+    dD_theta_products = ((D_cosine * d_sine - D_sine * d_cosine) / r2
+                         - 2.0 * d_theta * (sine * D_sine + cosine * D_cosine) / r2
+                         + (cosine * (dot(p.dn, Dco) + dot(p.Dn, dco))
+                            - sine * (dot(p.dn, m.Dn) + dot(p.Dn, m.dn))) / r2
+                         + cosine * dot(p.n, cross(dt, m.Dn) + cross(Dt, m.dn)) / r2)
+
+    def M_nn(side_q, side, K):
+        n_ = nu(side)
+        return Db(side) * dot(n_, C(K, side_q.P) * n_) if _varies(Db) else Db * dot(n_, C(K, side_q.P) * n_)
+
+    def M_nn_weights(side_q, side):
+        """L with ν·C(X)ν = L:X (C of the material), times h³/12."""
+        n_ = nu(side)
+        scale = E_Y / (1.0 - nu_p ** 2) * (Db(side) if _varies(Db) else Db)
+        return scale * ((1.0 - nu_p) * ufl.outer(n_, n_) + nu_p * dot(n_, side_q.P * n_) * ufl.Identity(3))
+
+    M_avg = 0.5 * (M_nn(p, "+", p.K) + M_nn(m, "-", m.K))
+    dM = 0.5 * (M_nn(p, "+", p.dK) + M_nn(m, "-", m.dK))
+    DM = 0.5 * (M_nn(p, "+", p.DK) + M_nn(m, "-", m.DK))
+    dDM_products = 0.5 * (M_nn(p, "+", p.dDK_products) + M_nn(m, "-", m.dDK_products))
+    weight = gamma * D_avg * theta - M_avg  # what Δδθ meets
+    # Δδθ's second variations: (C ΔδS − S ΔδC)/r², ΔδS ∋ Δδn⁺·m⁻ + Δδt·(n⁻×n⁺) + Δδn⁻·(n⁺×t),
+    # ΔδC ∋ Δδn⁺·n⁻ + n⁺·Δδn⁻; and −θ Δδ{M_νν} ∋ −½θ Δδn·(L:H) on each side
+    x_plus = weight * (cosine * co - sine * m.n) / r2 \
+        - 0.5 * theta * _weighted_hessian(p.H, M_nn_weights(p, "+"))
+    x_minus = weight * (cosine * cross(p.n, t) - sine * p.n) / r2 \
+        - 0.5 * theta * _weighted_hessian(m.H, M_nn_weights(m, "-"))
+    y_t = weight * cosine * cross(m.n, p.n) / r2
+    edges = (-dM * D_theta - DM * d_theta + gamma * D_avg * d_theta * D_theta
+             + weight * dD_theta_products - theta * dDM_products
+             + p.normal_second_variation(x_plus) + m.normal_second_variation(x_minus)
+             + _unit_second_variation(t, f_len, 1.0, y_t, df, Df))
+    return bulk * dx + edges * dS
+
+
+def _varies(value) -> bool:
+    return bool(ufl.algorithms.extract_coefficients(value))
