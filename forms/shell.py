@@ -194,50 +194,98 @@ def end_rotation(u, co_normal, reference_angle, plane=(0, 2)):
     return reference_angle + ufl.atan2(across, along)
 
 
+
+
 class _Variations:
     """The nonlinear shell's quantities with their first variations in the directions v
-    (``d``) and w (``D``): everything the explicit second variation needs. All of it is
-    unrestricted UFL; ``restricted(side)`` gives the same on one side of a facet."""
+    (``d``) and w (``D``): everything the explicit second variation needs, in the cell's
+    covariant frame (2×2 strains: a_α = F g_α, E_αβ = g_α·E g_β = ½(a_α·a_β − g_α·g_β),
+    K_αβ = g_α·K g_β = n·∂_α∂_β x) — the same tensors as the 3×3 ones of ``ShellGeometry``
+    (E = Kᵀ E_αβ K with K the pseudo-inverse of the cell Jacobian), but with 3 independent
+    components instead of 9, which is what the size of the generated kernel scales with.
+    All of it is unrestricted UFL unless ``restrict`` (one side of a facet) is given."""
 
     def __init__(self, u, v, w, orientation, restrict=None):
         r = restrict or (lambda x: x)
         mesh = ufl.domain.extract_unique_domain(u)
         J = ufl.Jacobian(mesh)
-        g = [J[:, 0], J[:, 1]]
+        g = [r(J[:, 0]), r(J[:, 1])]
+        pseudo_inverse = r(ufl.JacobianInverse(mesh))
+        self.metric_inverse = pseudo_inverse * pseudo_inverse.T  # G^αβ
+        self.pseudo_inverse = pseudo_inverse
         self.s = r(orientation)
-        self.N = r(orientation * _unit(ufl.cross(g[0], g[1])))
+        self.N = r(orientation * _unit(ufl.cross(J[:, 0], J[:, 1])))
         self.P = ufl.Identity(3) - ufl.outer(self.N, self.N)
         self.F = self.P + r(ufl.grad(u))
-        a = [self.F * r(gi) for gi in g]
+        self.dG, self.DG = r(ufl.grad(v)), r(ufl.grad(w))
+        pairs = ((0, 0), (0, 1), (1, 1))
+
+        def second(f):  # ∂_α∂_β f for (αβ) in pairs: g_α · grad grad f · g_β
+            H = r(ufl.grad(ufl.grad(f)))
+            i, j, k = ufl.indices(3)
+            return [ufl.as_vector(H[k, i, j] * g[al][i] * g[be][j], k) for al, be in pairs]
+
+        self.U, self.dU, self.DU = second(u), second(v), second(w)
+        self.a = [self.F * gi for gi in g]
+        da = [self.dG * gi for gi in g]
+        Da = [self.DG * gi for gi in g]
+        self.da, self.Da = da, Da
+        dot = ufl.dot
+
+        def matrix(entries):  # symmetric 2×2 from the (00, 01, 11) entries
+            return ufl.as_matrix([[entries[0], entries[1]], [entries[1], entries[2]]])
+
+        a = self.a
+        self.E = matrix([0.5 * (dot(a[al], a[be]) - dot(g[al], g[be])) for al, be in pairs])
+        self.dE = matrix([0.5 * (dot(da[al], a[be]) + dot(a[al], da[be])) for al, be in pairs])
+        self.DE = matrix([0.5 * (dot(Da[al], a[be]) + dot(a[al], Da[be])) for al, be in pairs])
+        self.dDE = matrix([0.5 * (dot(da[al], Da[be]) + dot(Da[al], da[be])) for al, be in pairs])
         self.c = ufl.cross(a[0], a[1])
-        self.length = ufl.sqrt(ufl.dot(self.c, self.c))
+        self.length = ufl.sqrt(dot(self.c, self.c))
         self.c_hat = self.c / self.length
         self.n = self.s * self.c_hat
-        self.H = r(ufl.grad(ufl.grad(u)))
-        i, j, k = ufl.indices(3)
-        self.K = ufl.as_tensor(self.n[k] * self.H[k, i, j], (i, j))
-        self.dG, self.DG = r(ufl.grad(v)), r(ufl.grad(w))
-        self.dH, self.DH = r(ufl.grad(ufl.grad(v))), r(ufl.grad(ufl.grad(w)))
-        da = [self.dG * r(gi) for gi in g]
-        Da = [self.DG * r(gi) for gi in g]
         self.dc = ufl.cross(da[0], a[1]) + ufl.cross(a[0], da[1])
         self.Dc = ufl.cross(Da[0], a[1]) + ufl.cross(a[0], Da[1])
         self.dDc = ufl.cross(da[0], Da[1]) + ufl.cross(Da[0], da[1])
         self.dn = self._unit_variation(self.dc)
         self.Dn = self._unit_variation(self.Dc)
-        self.dK = ufl.as_tensor(self.dn[k] * self.H[k, i, j] + self.n[k] * self.dH[k, i, j], (i, j))
-        self.DK = ufl.as_tensor(self.Dn[k] * self.H[k, i, j] + self.n[k] * self.DH[k, i, j], (i, j))
-        # the part of ΔδK that is a product of first variations (the rest is Δδn · H)
-        self.dDK_products = ufl.as_tensor(self.dn[k] * self.DH[k, i, j] + self.Dn[k] * self.dH[k, i, j], (i, j))
+        n, dn, Dn = self.n, self.dn, self.Dn
+        self.K = matrix([dot(n, x) for x in self.U])
+        self.dK = matrix([dot(dn, x) + dot(n, dx) for x, dx in zip(self.U, self.dU)])
+        self.DK = matrix([dot(Dn, x) + dot(n, Dx) for x, Dx in zip(self.U, self.DU)])
+        # the part of ΔδK that is a product of first variations (the rest is Δδn · U)
+        self.dDK_products = matrix([dot(dn, Dx) + dot(Dn, dx) for dx, Dx in zip(self.dU, self.DU)])
 
     def _unit_variation(self, dc):
         """δn = s (δc − ĉ (ĉ·δc)) / |c|."""
         return self.s * (dc - self.c_hat * ufl.dot(self.c_hat, dc)) / self.length
 
+    def weighted_U(self, S):
+        """x = Σ_αβ S^αβ U_αβ (S symmetric 2×2): Δδn·x is S:(Δδn·U)."""
+        return S[0, 0] * self.U[0] + 2.0 * S[0, 1] * self.U[1] + S[1, 1] * self.U[2]
+
     def normal_second_variation(self, x):
         """Δδn · x for a u-only vector x (the weights back-propagated onto Δδn):
         δcᵀ ∇²(s ĉ·x) Δc + (s P_c x/|c|) · Δδc, ∇²(s ĉ·x) = −s/|c|² (x ĉᵀ + ĉ xᵀ + (ĉ·x)(I − 3ĉĉᵀ))."""
         return _unit_second_variation(self.c_hat, self.length, self.s, x, self.dc, self.Dc, self.dDc)
+
+
+class _CovariantLaw:
+    """Plane-stress St Venant–Kirchhoff on covariant 2×2 strains: with A = Kᵀ Ã K,
+    C(A):B = c ((1-ν) tr(Ã G⁻¹ B̃ G⁻¹) + ν tr(G⁻¹Ã) tr(G⁻¹B̃)), c = E_Y/(1-ν²)."""
+
+    def __init__(self, material: ShellMaterial, metric_inverse):
+        self.c = material.youngs_modulus / (1.0 - material.poisson_ratio ** 2)
+        self.nu = material.poisson_ratio
+        self.Gi = metric_inverse
+
+    def stress(self, A):
+        """S̃ with C(A):B = S̃:B̃ (contravariant)."""
+        Gi = self.Gi
+        return self.c * ((1.0 - self.nu) * Gi * A * Gi + self.nu * ufl.tr(Gi * A) * Gi)
+
+    def pair(self, A, B):
+        return ufl.inner(self.stress(A), B)
 
 
 def _unit_second_variation(c_hat, length, s, x, dc, Dc, dDc=None):
@@ -251,46 +299,31 @@ def _unit_second_variation(c_hat, length, s, x, dc, Dc, dDc=None):
     return hessian + dot(y, dDc)
 
 
-def _weighted_hessian(H, weights):
-    """x_k = Σ_ij S_ij H_kij."""
-    i, j, k = ufl.indices(3)
-    return ufl.as_vector(weights[i, j] * H[k, i, j], k)
-
-
 def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int, penalty_factor,
                    dx: ufl.Measure, dS: ufl.Measure):
     """Π''(u)[v, w] of the nonlinear ``shell_energy`` (no clamped edges) written out by hand:
     the same bilinear form as ``derivative(derivative(energy, u, v), u, w)`` up to
     round-off, but every second variation of an intermediate quantity (the normal, the edge
     tangent) is contracted at once with the u-only weight it meets in the energy, so the
-    argument-dependent factors stay first variations. UFL's symbolic derivative instead
-    carries Δδn, Δδm, … as full (test × trial) expressions through the whole composite
-    energy, and FFCx emits megabytes of C per kernel for it (issue 8 §4).
+    argument-dependent factors stay first variations, and the strains are the covariant
+    2×2 ones (``_Variations``). UFL's symbolic derivative instead carries Δδn, Δδm, … as
+    full (test × trial) expressions through the whole composite energy, and FFCx emits
+    megabytes of C per kernel for it (issue 8 §4).
 
     Bulk:   h [C(δE):ΔE + C(E):ΔδE] + h³/12 [C(δK):ΔK + C(K):ΔδK],
-            δE = sym(Fᵀ δG), ΔδE = sym(δGᵀ ΔG), δK = δn·H + n·δH,
-            ΔδK = Δδn·H + δn·ΔH + Δn·δH.
+            δE_αβ = ½(δa_α·a_β + a_α·δa_β), ΔδE_αβ = ½(δa_α·Δa_β + Δa_α·δa_β),
+            δK = δn·U + n·δU, ΔδK = Δδn·U + δn·ΔU + Δn·δU  (U_αβ = ∂_α∂_β u).
     Edges:  e = −{M_νν} θ + ½ γ {D} θ²  ⇒
             Δδe = −δ{M_νν} Δθ − Δ{M_νν} δθ + γ{D} δθ Δθ + (γ{D} θ − {M_νν}) Δδθ − θ Δδ{M_νν},
             θ = atan2(S, C), S = n⁺·m⁻, C = n⁺·n⁻, m = t × n, t = Fτ/|Fτ|."""
     h = material.thickness
-    E_Y, nu_p = material.youngs_modulus, material.poisson_ratio
     Db = h ** 3 / 12.0
     q = _Variations(u, v, w, orientation)
-
-    def C(A, P):
-        return material.plane_stress(A, P)
-
-    def sym(A):
-        return 0.5 * (A + A.T)
-
-    E = 0.5 * (q.F.T * q.F - q.P)
-    dE, DE = sym(q.F.T * q.dG), sym(q.F.T * q.DG)
-    dDE = sym(q.dG.T * q.DG)
-    CK = C(q.K, q.P)
-    bulk = (h * (ufl.inner(C(dE, q.P), DE) + ufl.inner(C(E, q.P), dDE))
-            + Db * (ufl.inner(C(q.dK, q.P), q.DK) + ufl.inner(CK, q.dDK_products)
-                    + q.normal_second_variation(_weighted_hessian(q.H, CK))))
+    law = _CovariantLaw(material, q.metric_inverse)
+    SK = law.stress(q.K)
+    bulk = (h * (law.pair(q.dE, q.DE) + law.pair(q.E, q.dDE))
+            + Db * (law.pair(q.dK, q.DK) + ufl.inner(SK, q.dDK_products)
+                    + q.normal_second_variation(q.weighted_U(SK))))
 
     mesh = ufl.domain.extract_unique_domain(u)
     nu = ufl.FacetNormal(mesh)
@@ -328,27 +361,25 @@ def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int
                             - sine * (dot(p.dn, m.Dn) + dot(p.Dn, m.dn))) / r2
                          + cosine * dot(p.n, cross(dt, m.Dn) + cross(Dt, m.dn)) / r2)
 
-    def M_nn(side_q, side, K):
+    def side_weights(side_q, side):
+        """L^αβ with M_νν = L:K (covariant): h³/12 ν·C(K)ν, ν̃ = K ν (K the pseudo-inverse)."""
         n_ = nu(side)
-        return Db(side) * dot(n_, C(K, side_q.P) * n_) if _varies(Db) else Db * dot(n_, C(K, side_q.P) * n_)
+        nt = side_q.pseudo_inverse * n_
+        law_ = _CovariantLaw(material, side_q.metric_inverse)
+        thick = Db(side) if _varies(Db) else Db
+        return thick * law_.c * ((1.0 - law_.nu) * ufl.outer(nt, nt)
+                                 + law_.nu * dot(n_, side_q.P * n_) * side_q.metric_inverse)
 
-    def M_nn_weights(side_q, side):
-        """L with ν·C(X)ν = L:X (C of the material), times h³/12."""
-        n_ = nu(side)
-        scale = E_Y / (1.0 - nu_p ** 2) * (Db(side) if _varies(Db) else Db)
-        return scale * ((1.0 - nu_p) * ufl.outer(n_, n_) + nu_p * dot(n_, side_q.P * n_) * ufl.Identity(3))
-
-    M_avg = 0.5 * (M_nn(p, "+", p.K) + M_nn(m, "-", m.K))
-    dM = 0.5 * (M_nn(p, "+", p.dK) + M_nn(m, "-", m.dK))
-    DM = 0.5 * (M_nn(p, "+", p.DK) + M_nn(m, "-", m.DK))
-    dDM_products = 0.5 * (M_nn(p, "+", p.dDK_products) + M_nn(m, "-", m.dDK_products))
+    L_p, L_m = side_weights(p, "+"), side_weights(m, "-")
+    M_avg = 0.5 * (ufl.inner(L_p, p.K) + ufl.inner(L_m, m.K))
+    dM = 0.5 * (ufl.inner(L_p, p.dK) + ufl.inner(L_m, m.dK))
+    DM = 0.5 * (ufl.inner(L_p, p.DK) + ufl.inner(L_m, m.DK))
+    dDM_products = 0.5 * (ufl.inner(L_p, p.dDK_products) + ufl.inner(L_m, m.dDK_products))
     weight = gamma * D_avg * theta - M_avg  # what Δδθ meets
     # Δδθ's second variations: (C ΔδS − S ΔδC)/r², ΔδS ∋ Δδn⁺·m⁻ + Δδt·(n⁻×n⁺) + Δδn⁻·(n⁺×t),
-    # ΔδC ∋ Δδn⁺·n⁻ + n⁺·Δδn⁻; and −θ Δδ{M_νν} ∋ −½θ Δδn·(L:H) on each side
-    x_plus = weight * (cosine * co - sine * m.n) / r2 \
-        - 0.5 * theta * _weighted_hessian(p.H, M_nn_weights(p, "+"))
-    x_minus = weight * (cosine * cross(p.n, t) - sine * p.n) / r2 \
-        - 0.5 * theta * _weighted_hessian(m.H, M_nn_weights(m, "-"))
+    # ΔδC ∋ Δδn⁺·n⁻ + n⁺·Δδn⁻; and −θ Δδ{M_νν} ∋ −½θ Δδn·(L:U) on each side
+    x_plus = weight * (cosine * co - sine * m.n) / r2 - 0.5 * theta * p.weighted_U(L_p)
+    x_minus = weight * (cosine * cross(p.n, t) - sine * p.n) / r2 - 0.5 * theta * m.weighted_U(L_m)
     y_t = weight * cosine * cross(m.n, p.n) / r2
     edges = (-dM * D_theta - DM * d_theta + gamma * D_avg * d_theta * D_theta
              + weight * dD_theta_products - theta * dDM_products
