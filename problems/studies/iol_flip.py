@@ -2,39 +2,61 @@ r"""Does the optic flip? Haptic stiffness and lens–lens friction against the w
 lands in the capsule (issue 8, "Done when" 3).
 
 Every case is a whole ``iol-injection`` on the coarse lens (``resolution=coarse``, 250
-triangles) from one folded state (``iol-fold`` with the default lens, run once and reused:
-the fold is the same for every case, so only the deployment differs). Varied:
+triangles) from one folded state — ``tests/data/iol_folded_coarse.npz`` (``iol-fold`` of the
+default coarse lens) when the source tree is at hand, else a fold run once here: the fold is
+the same for every case, so only the deployment differs. Varied, one at a time:
 
-- the haptics' thickness h_h (bending stiffness ∝ h_h³): 0.09, 0.13 (seed 000), 0.18 mm;
-- the Coulomb coefficient μ of lens–lens contact: 0, 0.2 (default), 0.5.
+- the Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion), h_h = 0.13 mm;
+- the haptics' thickness h_h (their bending stiffness ∝ h_h³; the lens has one Young's
+  modulus, so thickness is the model's haptic stiffness), μ = 0.2.
 
-``--quick`` does not answer the question (a whole coarse injection is ≈ 8 min here): it
-checks the pipeline on two short deformation-only runs (``contact=false``: no injector, no
-capsule, no self-contact) of the coarse lens released from an isometric roll of radius 2 mm,
-thin vs thick haptics, and says so on the chart.
+What decides the side it lands on: the optic lands upside down only if it turns by more than
+90° as a rigid body — about the injector axis while it is still rolled (it fits the capsule's
+4.5 mm height only while rolled: flat it is 6 mm wide), since unrolling an isometric roll
+keeps the normal of its middle line. So besides the flip itself (mean optic normal z < 0 at
+the end) every case records the **roll angle** φ of the optic about the injector axis over
+time, from the normal of the optic's middle strip (|y| < 0.6 mm in the flat lens) in the
+``.vtu`` frames (every ``frames_every`` steps): max |φ| is the margin to a flip (90°).
 
-Recorded per case: ``optic_flipped`` (the optic's mean normal points down, z < 0, at the
-end), the normal's z component, ``final_decentration_mm``, whether the optic unrolled,
-the run's steps, Newton iterations per step, cuts and wall time. A case whose Newton
-gives up is recorded as failed, with the time it reached — not dropped.
+Runs are kept in ``$EYEMECH_IOL_FLIP_RUNS`` (default ``<out>/iol_flip_runs``), one folder per
+case; a folder whose ``results.json`` holds the same parameters is read, not rerun — a case
+costs ≈ 8 min here. A case whose Newton gives up is recorded as failed, with the time it
+reached — not dropped.
+
+``--quick`` does not answer the question: it checks the pipeline on two short
+deformation-only runs (``contact=false``: no injector, no capsule, no self-contact) of the
+coarse lens released from an isometric roll of radius 2 mm, thin vs thick haptics, and says
+so on the chart.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import re
 import time
 from pathlib import Path
 
+import numpy as np
 from mpi4py import MPI
 
 from eyemech.problems import iol_fold, iol_injection
+from eyemech.problems.context import RunOptions
 from eyemech.problems.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import save_chart, write_csv
 
-CASES = [{"haptic_thickness": h, "friction": 0.2} for h in (0.09, 0.13, 0.18)] + \
-        [{"haptic_thickness": 0.13, "friction": mu} for mu in (0.0, 0.5)]
+BASE = {"haptic_thickness": 0.13, "friction": 0.2}
+FRICTIONS = (0.0, 0.2, 0.5, 1.0)
+THICKNESSES = (0.09, 0.13, 0.18)
+CASES = [{**BASE, "friction": mu} for mu in FRICTIONS] + \
+        [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]]
 QUICK_CASES = [{"haptic_thickness": 0.09, "friction": 0.2}, {"haptic_thickness": 0.18, "friction": 0.2}]
 QUICK_SETTINGS = {"contact": False, "settle_time": 0.0, "plunger_speed": 50.0}
+# frames as .vtu (the roll angle is read from them), no PNGs (25 s a run)
+FRAMES_ONLY = RunOptions(fields=True, pictures=False)
+FLIP_ANGLE = 90.0  # degrees of rigid roll beyond which the optic lands upside down
+COMMITTED_FOLD = Path(__file__).resolve().parents[2] / "tests" / "data" / "iol_folded_coarse.npz"
 
 
 def rolled_state(out: Path, comm) -> Path:
@@ -52,31 +74,99 @@ def rolled_state(out: Path, comm) -> Path:
 
 
 def folded_state(out: Path, comm) -> Path:
-    """The coarse lens folded once (reused when ``out`` already holds it)."""
+    """The committed coarse fold, or the coarse lens folded once here (reused)."""
+    if COMMITTED_FOLD.is_file():
+        return COMMITTED_FOLD
     path = out / "iol_flip_folded_coarse.npz"
     if not path.is_file():
         work = out / "iol_flip_fold"
-        iol_fold.run(iol_fold.Parameters(resolution="coarse"), comm=comm, out=work, options=QUIET)
+        iol_fold.run(iol_fold.Parameters(resolution="coarse"), comm=comm, out=work,
+                     options=RunOptions(fields=False, pictures=False))
         (work / "folded_state.npz").replace(path)
     return path
 
 
-def run_case(case: dict, folded: Path, comm, settings: dict | None = None) -> dict:
+def case_name(case: dict) -> str:
+    return "_".join(f"{key}{value:g}" if isinstance(value, float) else f"{key}{value}"
+                    for key, value in sorted(case.items()))
+
+
+def _same_run(results: Path, params: iol_injection.Parameters) -> bool:
+    """A saved run of exactly these parameters (the folded state compared by file name)."""
+    if not results.is_file():
+        return False
+    saved = json.loads(results.read_text())
+    if saved.get("status") not in ("ok", "failed"):
+        return False
+    wanted = params.as_dict()
+    old = saved.get("parameters", {})
+    keys = set(wanted) - {"folded_state"}
+    return all(old.get(k) == wanted[k] for k in keys) and \
+        Path(old.get("folded_state", "")).name == Path(wanted["folded_state"]).name
+
+
+def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None = None) -> dict:
     params = iol_injection.Parameters(resolution="coarse", folded_state=str(folded), **case, **(settings or {}))
+    folder = runs / case_name({**case, **(settings or {})})
+    if not _same_run(folder / "results.json", params):
+        start = time.perf_counter()
+        try:
+            iol_injection.run(params, comm=comm, out=folder, options=FRAMES_ONLY)
+        except SolveFailure:
+            pass  # results.json says failed, with the steps it converged
+        print(f"iol-flip: {folder.name} ran in {time.perf_counter() - start:.0f} s", flush=True)
+    return case_row(case, folder)
+
+
+def case_row(case: dict, folder: Path) -> dict:
+    """One CSV row from a case's results.json and its frames."""
+    saved = json.loads((folder / "results.json").read_text())
+    q = saved["quantities"]
     row = dict(case)
-    start = time.perf_counter()
-    try:
-        q = iol_injection.run(params, comm=comm, options=QUIET).quantities
-    except SolveFailure as err:
-        row.update(finished=False, reached_time_s=err.last_converged,
-                   wall_seconds=time.perf_counter() - start)
+    roll = roll_history(folder)
+    if len(roll):
+        worst = int(np.argmax(np.abs(roll[:, 1])))
+        row.update(max_roll_deg=float(abs(roll[worst, 1])), max_roll_time_s=float(roll[worst, 0]))
+    if saved["status"] != "ok":
+        steps = saved.get("steps", [])
+        row.update(finished=False, reached_time_s=steps[-1]["time"] if steps else 0.0,
+                   steps=len(steps), wall_seconds=saved["timings"]["total"])
         return row
     row.update(finished=True, optic_flipped=q["optic_flipped"], optic_normal_z=q["optic_normal_z"],
+               final_roll_deg=float(roll[-1, 1]) if len(roll) else None,
                optic_unrolled=q["optic_unrolled"], final_decentration_mm=q["final_decentration_mm"],
                min_self_distance_mm=q["min_self_distance_mm"], max_penetration_mm=q["max_penetration_mm"],
                steps=q["steps"], newton_iterations_per_step=q["newton_iterations_per_step"],
-               step_cuts=q["step_cuts"], wall_seconds=time.perf_counter() - start)
+               step_cuts=q["step_cuts"], wall_seconds=q["wall_seconds"])
     return row
+
+
+def roll_history(folder: Path, half_width: float = 0.6) -> np.ndarray:
+    """Rows (t, φ): the roll angle φ (degrees) about the injector axis (x) of the optic's
+    middle strip (|y| < ``half_width`` in the flat lens), from the normal of its triangles in
+    each ``injection_*.vtu`` frame. φ = 0: that strip faces +z as in the flat lens; the
+    isometric roll leaves it so, a rigid turn of the lens about the axis does not."""
+    import pyvista
+
+    pvd = folder / "injection.pvd"
+    if not pvd.is_file():
+        return np.zeros((0, 2))
+    rows = []
+    for t, name in re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd.read_text()):
+        if not (folder / name).is_file():
+            continue
+        grid = pyvista.read(folder / name)
+        X = np.asarray(grid.points)
+        x = X + np.asarray(grid.point_data["displacement"])
+        cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:4]  # the P2 triangles' vertices
+        optic = cells[np.asarray(grid.cell_data["optic"]) > 0.5]
+        middle = optic[np.abs(X[optic].mean(axis=1)[:, 1]) < half_width]
+        reference = np.cross(X[middle[:, 1]] - X[middle[:, 0]], X[middle[:, 2]] - X[middle[:, 0]])
+        normal = np.cross(x[middle[:, 1]] - x[middle[:, 0]], x[middle[:, 2]] - x[middle[:, 0]])
+        n = (normal * np.sign(reference[:, 2])[:, None]).sum(axis=0)
+        rows.append((float(t), float(np.degrees(np.arctan2(n[1], n[2])))))
+    rows.sort()
+    return np.array(rows).reshape(-1, 2)
 
 
 def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
@@ -84,46 +174,98 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     if quick:
         start = rolled_state(out, comm)
-        rows = [run_case(case, start, comm, QUICK_SETTINGS) for case in QUICK_CASES]
+        runs = out / "iol_flip_quick_runs"
+        rows = [run_case(case, start, comm, runs, QUICK_SETTINGS) for case in QUICK_CASES]
         note = ("QUICK (pipeline check, not the flip question): contact=false, lens released from a "
                 "2 mm roll, no injector/capsule/self-contact")
     else:
         folded = folded_state(out, comm)
-        rows = [run_case(case, folded, comm) for case in CASES]
-        note = "iol-injection, resolution=coarse, one folded state; optic_flipped: mean optic normal z < 0"
+        runs = Path(os.environ.get("EYEMECH_IOL_FLIP_RUNS", out / "iol_flip_runs"))
+        rows = [run_case(case, folded, comm, runs) for case in CASES]
+        note = (f"iol-injection, resolution=coarse, from {folded.name}; flipped: mean optic normal z < 0; "
+                f"roll: optic middle strip about the injector axis (flip needs > {FLIP_ANGLE:g}°)")
     csv = write_csv(out / "iol_flip.csv", rows, note)
-    return [csv, chart(rows, out / "iol_flip.png", note if quick else "")]
+    histories = {case_name(row_case(row)): roll_history(runs / case_name({**row_case(row),
+                                                                          **(QUICK_SETTINGS if quick else {})}))
+                 for row in rows}
+    return [csv, chart(rows, histories, out / "iol_flip.png", note if quick else "")]
 
 
-def chart(rows: list[dict], path: Path, note: str = "") -> Path:
+def row_case(row: dict) -> dict:
+    return {k: row[k] for k in ("haptic_thickness", "friction")}
+
+
+def chart(rows: list[dict], histories: dict, path: Path, note: str = "") -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.6))
+    panels = (("friction", "lens–lens friction μ (h_h = 0.13 mm)", {"haptic_thickness": BASE["haptic_thickness"]}),
+              ("haptic_thickness", "haptic thickness h_h, mm (μ = 0.2)", {"friction": BASE["friction"]}))
+    for ax, (key, label, fixed) in zip(axes[:2], panels):
+        _outcome_panel(ax, [r for r in rows if all(r[k] == v for k, v in fixed.items())], key, label)
+    ax = axes[2]
     for row in rows:
-        label = f"h = {row['haptic_thickness']} mm, μ = {row['friction']}"
-        if not row.get("finished"):
-            ax.scatter(row["haptic_thickness"], row["friction"], marker="x", color="grey", s=80)
-            ax.annotate(f"failed at t = {row.get('reached_time_s', float('nan')):.3g} s",
-                        (row["haptic_thickness"], row["friction"]), textcoords="offset points", xytext=(6, 6),
-                        fontsize=8)
-            continue
-        flipped = row["optic_flipped"]
-        ax.scatter(row["haptic_thickness"], row["friction"], s=120, marker="v" if flipped else "^",
-                   color="tab:red" if flipped else "tab:green", label=label)
-        ax.annotate(f"n_z = {row['optic_normal_z']:.2f}, dec. {row['final_decentration_mm']:.2f} mm",
-                    (row["haptic_thickness"], row["friction"]), textcoords="offset points", xytext=(6, 6),
-                    fontsize=8)
-    ax.set_xlabel("haptic thickness (mm)")
-    ax.set_ylabel("lens–lens friction μ")
-    ax.set_title("optic after deployment: ▲ right side up, ▼ flipped (coarse lens)"
-                 + (f"\n{note}" if note else ""), fontsize=9 if note else 11)
-    ax.margins(0.25)
+        h = histories.get(case_name(row_case(row)), np.zeros((0, 2)))
+        if len(h):
+            ax.plot(h[:, 0], h[:, 1], lw=1.2, label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness']:g}")
+    for sign in (1, -1):
+        ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("roll of the optic about the injector axis φ (°)")
+    ax.set_title("roll over the injection (±90°: lands upside down)", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.suptitle("Does the optic flip? coarse lens, whole injections" + (f"\n{note}" if note else ""),
+                 fontsize=10 if note else 12)
     save_chart(fig, path)
     return path
 
 
-STUDY = Study(name="iol-flip", summary="whether the optic lands flipped, against haptic thickness and "
-                                       "lens–lens friction (whole coarse injections)", run=run)
+def _outcome_panel(ax, rows: list[dict], key: str, label: str) -> None:
+    """Final optic normal z (▲ right side up, ▼ flipped, × failed) and max |roll| against
+    ``key``; a red band between neighbours whose outcome differs."""
+    rows = sorted(rows, key=lambda r: r[key])
+    roll_ax = ax.twinx()
+    for row in rows:
+        if not row.get("finished"):
+            ax.scatter(row[key], 0.0, marker="x", color="grey", s=80)
+            ax.annotate(f"failed at t = {row.get('reached_time_s', float('nan')):.3g} s", (row[key], 0.0),
+                        textcoords="offset points", xytext=(4, 6), fontsize=7)
+        else:
+            flipped = row["optic_flipped"]
+            ax.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
+                       color="tab:red" if flipped else "tab:green", zorder=3)
+            ax.annotate(f"n_z {row['optic_normal_z']:.2f}\ndec. {row['final_decentration_mm']:.2f} mm",
+                        (row[key], row["optic_normal_z"]), textcoords="offset points", xytext=(4, -24),
+                        fontsize=7)
+        if "max_roll_deg" in row:
+            roll_ax.bar(row[key], row["max_roll_deg"], width=_bar_width(rows, key), color="grey", alpha=0.3)
+    outcomes = [(r[key], r.get("optic_flipped") if r.get("finished") else None) for r in rows]
+    changed = False
+    for (a, fa), (b, fb) in zip(outcomes, outcomes[1:]):
+        if fa is not None and fb is not None and fa != fb:
+            ax.axvspan(a, b, color="tab:red", alpha=0.12)
+            ax.text(0.5 * (a + b), 0.0, "outcome\nchanges", ha="center", fontsize=8, color="tab:red")
+            changed = True
+    if not changed and len(outcomes) > 1:
+        ax.text(0.02, 0.04, "same outcome over this range", transform=ax.transAxes, fontsize=8)
+    ax.axhline(0.0, color="tab:red", ls=":", lw=1)
+    ax.set_ylim(-1.15, 1.15)
+    ax.set_xlabel(label)
+    ax.set_ylabel("final mean optic normal z (▲ up, ▼ flipped)")
+    roll_ax.set_ylim(0.0, 180.0)
+    roll_ax.axhline(FLIP_ANGLE, color="grey", ls="--", lw=0.8)
+    roll_ax.set_ylabel("max |roll| during injection (°, bars)", color="grey")
+    ax.margins(x=0.2)
+
+
+def _bar_width(rows: list[dict], key: str) -> float:
+    values = sorted({r[key] for r in rows})
+    return 0.25 * (min(np.diff(values)) if len(values) > 1 else 0.1)
+
+
+STUDY = Study(name="iol-flip", summary="whether the optic lands flipped, against lens–lens friction and "
+                                       "haptic thickness, with the optic's roll about the injector axis "
+                                       "(whole coarse injections)", run=run)
