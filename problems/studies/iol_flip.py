@@ -196,17 +196,24 @@ def row_case(row: dict) -> dict:
 
 
 def chart(rows: list[dict], histories: dict, path: Path, note: str = "") -> Path:
+    """Left two columns: the final optic normal z (top) and the largest roll during the
+    injection (bottom) against μ and against h_h; right: the roll over time, every case."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.6))
+    fig = plt.figure(figsize=(14, 6.4))
+    grid = fig.add_gridspec(2, 3)
     panels = (("friction", "lens–lens friction μ (h_h = 0.13 mm)", {"haptic_thickness": BASE["haptic_thickness"]}),
-              ("haptic_thickness", "haptic thickness h_h, mm (μ = 0.2)", {"friction": BASE["friction"]}))
-    for ax, (key, label, fixed) in zip(axes[:2], panels):
-        _outcome_panel(ax, [r for r in rows if all(r[k] == v for k, v in fixed.items())], key, label)
-    ax = axes[2]
+              ("haptic_thickness", "haptic thickness h_h, mm (μ = 0.2; bending stiffness ∝ h_h³)",
+               {"friction": BASE["friction"]}))
+    for column, (key, label, fixed) in enumerate(panels):
+        top = fig.add_subplot(grid[0, column])
+        bottom = fig.add_subplot(grid[1, column], sharex=top)
+        chosen = [r for r in rows if all(r[k] == v for k, v in fixed.items())]
+        _outcome_panel(top, bottom, chosen, key, label)
+    ax = fig.add_subplot(grid[:, 2])
     for row in rows:
         h = histories.get(case_name(row_case(row)), np.zeros((0, 2)))
         if len(h):
@@ -214,8 +221,8 @@ def chart(rows: list[dict], histories: dict, path: Path, note: str = "") -> Path
     for sign in (1, -1):
         ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("roll of the optic about the injector axis φ (°)")
-    ax.set_title("roll over the injection (±90°: lands upside down)", fontsize=10)
+    ax.set_ylabel("roll φ of the optic about the injector axis (°)")
+    ax.set_title("roll φ over time (beyond ±90°: upside down)", fontsize=10)
     ax.legend(fontsize=7)
     fig.suptitle("Does the optic flip? coarse lens, whole injections" + (f"\n{note}" if note else ""),
                  fontsize=10 if note else 12)
@@ -223,47 +230,48 @@ def chart(rows: list[dict], histories: dict, path: Path, note: str = "") -> Path
     return path
 
 
-def _outcome_panel(ax, rows: list[dict], key: str, label: str) -> None:
-    """Final optic normal z (▲ right side up, ▼ flipped, × failed) and max |roll| against
-    ``key``; a red band between neighbours whose outcome differs."""
+def _outcome_panel(top, bottom, rows: list[dict], key: str, label: str) -> None:
+    """``top``: final mean optic normal z (▲ right side up, ▼ flipped, × failed) against
+    ``key``; ``bottom``: max |φ| during the injection. A red band between neighbours whose
+    outcome differs, or a note that none does."""
     rows = sorted(rows, key=lambda r: r[key])
-    roll_ax = ax.twinx()
     for row in rows:
         if not row.get("finished"):
-            ax.scatter(row[key], 0.0, marker="x", color="grey", s=80)
-            ax.annotate(f"failed at t = {row.get('reached_time_s', float('nan')):.3g} s", (row[key], 0.0),
-                        textcoords="offset points", xytext=(4, 6), fontsize=7)
-        else:
-            flipped = row["optic_flipped"]
-            ax.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
-                       color="tab:red" if flipped else "tab:green", zorder=3)
-            ax.annotate(f"n_z {row['optic_normal_z']:.2f}\ndec. {row['final_decentration_mm']:.2f} mm",
-                        (row[key], row["optic_normal_z"]), textcoords="offset points", xytext=(4, -24),
-                        fontsize=7)
-        if "max_roll_deg" in row:
-            roll_ax.bar(row[key], row["max_roll_deg"], width=_bar_width(rows, key), color="grey", alpha=0.3)
+            top.scatter(row[key], 0.0, marker="x", color="grey", s=80)
+            top.annotate(f"failed at\nt = {row.get('reached_time_s', float('nan')):.3g} s", (row[key], 0.0),
+                         textcoords="offset points", xytext=(4, 6), fontsize=7)
+            continue
+        flipped = row["optic_flipped"]
+        top.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
+                    color="tab:red" if flipped else "tab:green", zorder=3)
+        top.annotate(f"n_z {row['optic_normal_z']:.3f}\ndec. {row['final_decentration_mm']:.2f} mm",
+                     (row[key], row["optic_normal_z"]), textcoords="offset points", xytext=(4, -26), fontsize=7)
+    rolled = [r for r in rows if "max_roll_deg" in r]
+    bottom.plot([r[key] for r in rolled], [r["max_roll_deg"] for r in rolled], "D-", color="tab:blue", ms=5)
+    for r in rolled:
+        bottom.annotate(f"{r['max_roll_deg']:.1f}°", (r[key], r["max_roll_deg"]), textcoords="offset points",
+                        xytext=(4, 4), fontsize=7)
+    bottom.axhline(FLIP_ANGLE, color="tab:red", ls=":", lw=1)
+    bottom.annotate("roll needed to land upside down", xy=(0.01, FLIP_ANGLE), xycoords=("axes fraction", "data"),
+                    fontsize=7, color="tab:red", va="top")
     outcomes = [(r[key], r.get("optic_flipped") if r.get("finished") else None) for r in rows]
     changed = False
     for (a, fa), (b, fb) in zip(outcomes, outcomes[1:]):
         if fa is not None and fb is not None and fa != fb:
-            ax.axvspan(a, b, color="tab:red", alpha=0.12)
-            ax.text(0.5 * (a + b), 0.0, "outcome\nchanges", ha="center", fontsize=8, color="tab:red")
+            for ax in (top, bottom):
+                ax.axvspan(a, b, color="tab:red", alpha=0.12)
+            top.text(0.5 * (a + b), 0.0, "outcome\nchanges", ha="center", fontsize=8, color="tab:red")
             changed = True
     if not changed and len(outcomes) > 1:
-        ax.text(0.02, 0.04, "same outcome over this range", transform=ax.transAxes, fontsize=8)
-    ax.axhline(0.0, color="tab:red", ls=":", lw=1)
-    ax.set_ylim(-1.15, 1.15)
-    ax.set_xlabel(label)
-    ax.set_ylabel("final mean optic normal z (▲ up, ▼ flipped)")
-    roll_ax.set_ylim(0.0, 180.0)
-    roll_ax.axhline(FLIP_ANGLE, color="grey", ls="--", lw=0.8)
-    roll_ax.set_ylabel("max |roll| during injection (°, bars)", color="grey")
-    ax.margins(x=0.2)
-
-
-def _bar_width(rows: list[dict], key: str) -> float:
-    values = sorted({r[key] for r in rows})
-    return 0.25 * (min(np.diff(values)) if len(values) > 1 else 0.1)
+        top.text(0.02, 0.05, "no change of outcome over this range", transform=top.transAxes, fontsize=8)
+    top.axhline(0.0, color="tab:red", ls=":", lw=1)
+    top.set_ylim(-1.1, 1.1)
+    top.set_ylabel("final optic normal z\n(▲ up, ▼ flipped)")
+    top.tick_params(labelbottom=False)
+    bottom.set_ylim(0.0, 100.0)
+    bottom.set_ylabel("max |φ| during injection (°)")
+    bottom.set_xlabel(label)
+    top.margins(x=0.2)
 
 
 STUDY = Study(name="iol-flip", summary="whether the optic lands flipped, against lens–lens friction and "
