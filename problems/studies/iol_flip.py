@@ -127,6 +127,9 @@ def case_row(case: dict, folder: Path) -> dict:
     if len(roll):
         worst = int(np.argmax(np.abs(roll[:, 1])))
         row.update(max_roll_deg=float(abs(roll[worst, 1])), max_roll_time_s=float(roll[worst, 0]))
+    torque = capsule_torque(folder, iol_injection.Parameters(**saved["parameters"]))
+    if len(torque):
+        row.update(max_capsule_torque_Nmm=float(np.max(np.abs(torque[:, 1]))))
     if saved["status"] != "ok":
         steps = saved.get("steps", [])
         row.update(finished=False, reached_time_s=steps[-1]["time"] if steps else 0.0,
@@ -146,26 +149,53 @@ def roll_history(folder: Path, half_width: float = 0.6) -> np.ndarray:
     middle strip (|y| < ``half_width`` in the flat lens), from the normal of its triangles in
     each ``injection_*.vtu`` frame. φ = 0: that strip faces +z as in the flat lens; the
     isometric roll leaves it so, a rigid turn of the lens about the axis does not."""
-    import pyvista
-
-    pvd = folder / "injection.pvd"
-    if not pvd.is_file():
-        return np.zeros((0, 2))
     rows = []
-    for t, name in re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd.read_text()):
-        if not (folder / name).is_file():
-            continue
-        grid = pyvista.read(folder / name)
-        X = np.asarray(grid.points)
-        x = X + np.asarray(grid.point_data["displacement"])
+    for t, X, x, grid in _frames(folder):
         cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:4]  # the P2 triangles' vertices
         optic = cells[np.asarray(grid.cell_data["optic"]) > 0.5]
         middle = optic[np.abs(X[optic].mean(axis=1)[:, 1]) < half_width]
         reference = np.cross(X[middle[:, 1]] - X[middle[:, 0]], X[middle[:, 2]] - X[middle[:, 0]])
         normal = np.cross(x[middle[:, 1]] - x[middle[:, 0]], x[middle[:, 2]] - x[middle[:, 0]])
         n = (normal * np.sign(reference[:, 2])[:, None]).sum(axis=0)
-        rows.append((float(t), float(np.degrees(np.arctan2(n[1], n[2])))))
-    rows.sort()
+        rows.append((t, float(np.degrees(np.arctan2(n[1], n[2])))))
+    return np.array(rows).reshape(-1, 2)
+
+
+def _frames(folder: Path):
+    """(t, reference points, deformed points, grid) of every ``injection_*.vtu`` frame."""
+    import pyvista
+
+    pvd = folder / "injection.pvd"
+    if not pvd.is_file():
+        return
+    for t, name in sorted(re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd.read_text()),
+                          key=lambda e: float(e[0])):
+        if (folder / name).is_file():
+            grid = pyvista.read(folder / name)
+            X = np.asarray(grid.points)
+            yield float(t), X, X + np.asarray(grid.point_data["displacement"]), grid
+
+
+def capsule_torque(folder: Path, params: iol_injection.Parameters, smoothing: float = 2e-3) -> np.ndarray:
+    """Rows (t, T_x): the moment (N mm) about the injector axis of the rigid capsule's nodal
+    penalty forces on the lens in each frame — the one external torque about that axis (the
+    bore, lip and taper are surfaces of revolution about it and frictionless, the plunger
+    face and the fluid push along it). Same force law as ``NodalContact``."""
+    if not params.contact:
+        return np.zeros((0, 2))
+    from eyemech.problems.iol import InjectorLayout
+
+    capsule = InjectorLayout().capsule(params)
+    axis = params.axis_point()
+    rows = []
+    for t, _X, x, _grid in _frames(folder):
+        gap, normal, acts = capsule.gap_normal(x)
+        depth = -gap
+        push = np.where(depth > smoothing, depth, np.where(depth > -smoothing,
+                                                           (depth + smoothing) ** 2 / (4 * smoothing), 0.0))
+        force = (params.contact_stiffness * np.where(acts, push, 0.0))[:, None] * normal
+        r = x - axis
+        rows.append((t, float(np.sum(r[:, 1] * force[:, 2] - r[:, 2] * force[:, 1]))))
     return np.array(rows).reshape(-1, 2)
 
 
