@@ -127,9 +127,11 @@ def case_row(case: dict, folder: Path) -> dict:
     if len(roll):
         worst = int(np.argmax(np.abs(roll[:, 1])))
         row.update(max_roll_deg=float(abs(roll[worst, 1])), max_roll_time_s=float(roll[worst, 0]))
-    torque = capsule_torque(folder, iol_injection.Parameters(**saved["parameters"]))
+    params = iol_injection.Parameters(**saved["parameters"])
+    torque = capsule_torque(folder, params)
     if len(torque):
         row.update(max_capsule_torque_Nmm=float(np.max(np.abs(torque[:, 1]))))
+        row.update(angular_balance(folder, params, torque))
     if saved["status"] != "ok":
         steps = saved.get("steps", [])
         row.update(finished=False, reached_time_s=steps[-1]["time"] if steps else 0.0,
@@ -197,6 +199,44 @@ def capsule_torque(folder: Path, params: iol_injection.Parameters, smoothing: fl
         r = x - axis
         rows.append((t, float(np.sum(r[:, 1] * force[:, 2] - r[:, 2] * force[:, 1]))))
     return np.array(rows).reshape(-1, 2)
+
+
+def angular_balance(folder: Path, params: iol_injection.Parameters, torque: np.ndarray) -> dict:
+    """Where the optic's roll can come from, as degrees of roll of the rolled optic.
+
+    The lens is overdamped (c = ``damping``): c M (v − v_f) balances the forces, the fluid
+    moves along the axis, and the only external moment about the axis is the capsule's T_x,
+    so Σ m_i (r_i × Δx_i)_x over the lens = ∫ T_x dt / c (lumped masses, r from the axis).
+    Split into the optic's part (its roll, × its moment of inertia I_o) and the haptics' part
+    (the reaction: haptics unwinding one way turn the optic the other), each is divided by
+    I_o of the folded optic: ``haptic_swirl_deg`` (largest |haptic part| / I_o) is the roll
+    the haptics can give the optic by unwinding, ``capsule_roll_deg`` (largest |∫T dt| / c I_o)
+    the roll the capsule's torque can; a flip needs 90°."""
+    frames = list(_frames(folder))
+    if len(frames) < 2 or len(torque) != len(frames):
+        return {}
+    _t, X, x, grid = frames[0]
+    cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:]
+    area = 0.5 * np.linalg.norm(np.cross(X[cells[:, 1]] - X[cells[:, 0]], X[cells[:, 2]] - X[cells[:, 0]]), axis=1)
+    mass = np.zeros(len(X))
+    # P2 row-sum lumping: the vertices get 0, each mid-edge node a third of the cell
+    np.add.at(mass, cells[:, 3:].ravel(), np.repeat(params.density * np.asarray(grid.cell_data["thickness (mm)"])
+                                                      * area / 3.0, 3))
+    optic = np.zeros(len(X), bool)
+    optic[cells[np.asarray(grid.cell_data["optic"]) > 0.5].ravel()] = True
+    axis = params.axis_point()
+    inertia = float(np.sum(mass[optic] * np.sum((x[optic] - axis)[:, 1:] ** 2, axis=1)))
+    haptic_part, impulse, worst_haptic, worst_impulse = 0.0, 0.0, 0.0, 0.0
+    previous, t_previous = x, _t
+    for (t, _X, x, _g), (_tt, T) in zip(frames[1:], torque[1:]):
+        r = 0.5 * (x + previous) - axis
+        step = x - previous
+        haptic_part += float(np.sum((mass * (r[:, 1] * step[:, 2] - r[:, 2] * step[:, 1]))[~optic]))
+        impulse += T * (t - t_previous)
+        worst_haptic, worst_impulse = max(worst_haptic, abs(haptic_part)), max(worst_impulse, abs(impulse))
+        previous, t_previous = x, t
+    return {"haptic_swirl_deg": float(np.degrees(worst_haptic / inertia)),
+            "capsule_roll_deg": float(np.degrees(worst_impulse / (params.damping * inertia)))}
 
 
 def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
@@ -277,7 +317,14 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, label: str) -> None:
         top.annotate(f"n_z {row['optic_normal_z']:.3f}\ndec. {row['final_decentration_mm']:.2f} mm",
                      (row[key], row["optic_normal_z"]), textcoords="offset points", xytext=(4, -26), fontsize=7)
     rolled = [r for r in rows if "max_roll_deg" in r]
-    bottom.plot([r[key] for r in rolled], [r["max_roll_deg"] for r in rolled], "D-", color="tab:blue", ms=5)
+    bottom.plot([r[key] for r in rolled], [r["max_roll_deg"] for r in rolled], "D-", color="tab:blue", ms=5,
+                label="optic's largest roll |φ|")
+    for name, style, text in (("haptic_swirl_deg", "s--", "haptics' unwinding (reaction)"),
+                              ("capsule_roll_deg", "o:", "capsule's torque (∫T dt / c I_o)")):
+        have = [r for r in rolled if name in r]
+        if have:
+            bottom.plot([r[key] for r in have], [r[name] for r in have], style, ms=4, lw=1, label=text)
+    bottom.legend(fontsize=7, loc="center right")
     for r in rolled:
         bottom.annotate(f"{r['max_roll_deg']:.1f}°", (r[key], r["max_roll_deg"]), textcoords="offset points",
                         xytext=(4, 4), fontsize=7)
@@ -299,7 +346,7 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, label: str) -> None:
     top.set_ylabel("final optic normal z\n(▲ up, ▼ flipped)")
     top.tick_params(labelbottom=False)
     bottom.set_ylim(0.0, 100.0)
-    bottom.set_ylabel("max |φ| during injection (°)")
+    bottom.set_ylabel("roll during injection (°)")
     bottom.set_xlabel(label)
     top.margins(x=0.2)
 
