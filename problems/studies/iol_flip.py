@@ -18,7 +18,7 @@ the end) every case records the **roll angle** φ of the optic about the injecto
 time, from the normal of the optic's middle strip (|y| < 0.6 mm in the flat lens) in the
 ``.vtu`` frames (every ``frames_every`` steps): max |φ| is the margin to a flip (90°).
 
-Runs are kept in ``$EYEMECH_IOL_FLIP_RUNS`` (default ``<out>/iol_flip_runs``), one folder per
+Runs are kept in ``$EYEMECH_IOL_FLIP_RUNS`` (default ``results/iol-flip-runs``), one folder per
 case; a folder whose ``results.json`` holds the same parameters is read, not rerun — a case
 costs ≈ 8 min here. A case whose Newton gives up is recorded as failed, with the time it
 reached — not dropped.
@@ -250,7 +250,8 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
                 "2 mm roll, no injector/capsule/self-contact")
     else:
         folded = folded_state(out, comm)
-        runs = Path(os.environ.get("EYEMECH_IOL_FLIP_RUNS", out / "iol_flip_runs"))
+        # the runs' frames (≈ 2 MB a case) stay out of docs/studies: results/ is not committed
+        runs = Path(os.environ.get("EYEMECH_IOL_FLIP_RUNS", "results/iol-flip-runs"))
         rows = [run_case(case, folded, comm, runs) for case in CASES]
         note = (f"iol-injection, resolution=coarse, from {folded.name}; flipped: mean optic normal z < 0; "
                 f"roll: optic middle strip about the injector axis (flip needs > {FLIP_ANGLE:g}°)")
