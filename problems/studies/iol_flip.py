@@ -135,7 +135,8 @@ def case_row(case: dict, folder: Path) -> dict:
     if saved["status"] != "ok":
         steps = saved.get("steps", [])
         row.update(finished=False, reached_time_s=steps[-1]["time"] if steps else 0.0,
-                   steps=len(steps), wall_seconds=saved["timings"]["total"])
+                   steps=len(steps), wall_seconds=saved["timings"]["total"],
+                   last_frame_optic_normal_z=last_optic_normal_z(folder))
         return row
     row.update(finished=True, optic_flipped=q["optic_flipped"], optic_normal_z=q["optic_normal_z"],
                final_roll_deg=float(roll[-1, 1]) if len(roll) else None,
@@ -161,6 +162,23 @@ def roll_history(folder: Path, half_width: float = 0.6) -> np.ndarray:
         n = (normal * np.sign(reference[:, 2])[:, None]).sum(axis=0)
         rows.append((t, float(np.degrees(np.arctan2(n[1], n[2])))))
     return np.array(rows).reshape(-1, 2)
+
+
+def last_optic_normal_z(folder: Path) -> float | None:
+    """z of the mean optic normal (as ``optic_normal``) in the last saved frame: where a run
+    that stopped early had got to."""
+    last = None
+    for last in _frames(folder):
+        pass
+    if last is None:
+        return None
+    _t, X, x, grid = last
+    cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:4]
+    optic = cells[np.asarray(grid.cell_data["optic"]) > 0.5]
+    reference = np.cross(X[optic[:, 1]] - X[optic[:, 0]], X[optic[:, 2]] - X[optic[:, 0]])
+    normal = np.cross(x[optic[:, 1]] - x[optic[:, 0]], x[optic[:, 2]] - x[optic[:, 0]])
+    n = (normal * np.sign(reference[:, 2])[:, None]).sum(axis=0)
+    return float(n[2] / np.linalg.norm(n))
 
 
 def _frames(folder: Path):
@@ -308,9 +326,12 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, label: str) -> None:
     rows = sorted(rows, key=lambda r: r[key])
     for row in rows:
         if not row.get("finished"):
-            top.scatter(row[key], 0.0, marker="x", color="grey", s=80)
-            top.annotate(f"failed at\nt = {row.get('reached_time_s', float('nan')):.3g} s", (row[key], 0.0),
-                         textcoords="offset points", xytext=(4, 6), fontsize=7)
+            z = row.get("last_frame_optic_normal_z")
+            z = 0.0 if z is None else z
+            top.scatter(row[key], z, marker="x", color="grey", s=80, zorder=3)
+            top.annotate(f"Newton failed at\nt = {row.get('reached_time_s', float('nan')):.3g} s;\n"
+                         f"last frame n_z {z:.3f}", (row[key], z), textcoords="offset points",
+                         xytext=(-30, -36), fontsize=7)
             continue
         flipped = row["optic_flipped"]
         top.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
