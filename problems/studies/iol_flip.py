@@ -48,7 +48,7 @@ from eyemech.problems.studies._common import save_chart, write_csv
 
 BASE = {"haptic_thickness": 0.13, "friction": 0.2}
 FRICTIONS = (0.0, 0.2, 0.5, 1.0)
-THICKNESSES = (0.09, 0.13, 0.18)
+THICKNESSES = (0.09, 0.13, 0.18, 0.25, 0.35, 0.45)  # 0.45 = the haptic width: thicker is not a plate strip
 CASES = [{**BASE, "friction": mu} for mu in FRICTIONS] + \
         [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]]
 QUICK_CASES = [{"haptic_thickness": 0.09, "friction": 0.2}, {"haptic_thickness": 0.18, "friction": 0.2}]
@@ -56,6 +56,7 @@ QUICK_SETTINGS = {"contact": False, "settle_time": 0.0, "plunger_speed": 50.0}
 # frames as .vtu (the roll angle is read from them), no PNGs (25 s a run)
 FRAMES_ONLY = RunOptions(fields=True, pictures=False)
 FLIP_ANGLE = 90.0  # degrees of rigid roll beyond which the optic lands upside down
+UNROLLED = 0.9  # optic flatness above which it is open (the scene's ``optic_unrolled``)
 COMMITTED_FOLD = Path(__file__).resolve().parents[2] / "tests" / "data" / "iol_folded_coarse.npz"
 
 
@@ -124,9 +125,12 @@ def case_row(case: dict, folder: Path) -> dict:
     q = saved["quantities"]
     row = dict(case)
     roll = roll_history(folder)
+    rolled = roll[:, 2] < UNROLLED
+    if rolled.any():  # while rolled (≈ 2 mm across) the optic may turn freely in the capsule
+        worst = int(np.argmax(np.where(rolled, np.abs(roll[:, 1]), -1.0)))
+        row.update(max_roll_rolled_deg=float(abs(roll[worst, 1])), max_roll_time_s=float(roll[worst, 0]))
     if len(roll):
-        worst = int(np.argmax(np.abs(roll[:, 1])))
-        row.update(max_roll_deg=float(abs(roll[worst, 1])), max_roll_time_s=float(roll[worst, 0]))
+        row.update(max_roll_deg=float(np.max(np.abs(roll[:, 1]))))
     params = iol_injection.Parameters(**saved["parameters"])
     torque = capsule_torque(folder, params)
     if len(torque):
@@ -148,20 +152,22 @@ def case_row(case: dict, folder: Path) -> dict:
 
 
 def roll_history(folder: Path, half_width: float = 0.6) -> np.ndarray:
-    """Rows (t, φ): the roll angle φ (degrees) about the injector axis (x) of the optic's
-    middle strip (|y| < ``half_width`` in the flat lens), from the normal of its triangles in
-    each ``injection_*.vtu`` frame. φ = 0: that strip faces +z as in the flat lens; the
-    isometric roll leaves it so, a rigid turn of the lens about the axis does not."""
+    """Rows (t, φ, flatness) per ``injection_*.vtu`` frame: the roll angle φ (degrees) about
+    the injector axis (x) of the optic's middle strip (|y| < ``half_width`` in the flat lens),
+    from the normal of its triangles — φ = 0: that strip faces +z as in the flat lens; the
+    isometric roll leaves it so, a rigid turn of the lens about the axis does not — and the
+    optic's flatness |∫n dA|/∫dA (as ``optic_flatness``: 0.05 folded, 1 flat)."""
     rows = []
     for t, X, x, grid in _frames(folder):
         cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:4]  # the P2 triangles' vertices
         optic = cells[np.asarray(grid.cell_data["optic"]) > 0.5]
-        middle = optic[np.abs(X[optic].mean(axis=1)[:, 1]) < half_width]
-        reference = np.cross(X[middle[:, 1]] - X[middle[:, 0]], X[middle[:, 2]] - X[middle[:, 0]])
-        normal = np.cross(x[middle[:, 1]] - x[middle[:, 0]], x[middle[:, 2]] - x[middle[:, 0]])
-        n = (normal * np.sign(reference[:, 2])[:, None]).sum(axis=0)
-        rows.append((t, float(np.degrees(np.arctan2(n[1], n[2])))))
-    return np.array(rows).reshape(-1, 2)
+        sign = np.sign(np.cross(X[optic[:, 1]] - X[optic[:, 0]], X[optic[:, 2]] - X[optic[:, 0]])[:, 2])
+        normal = np.cross(x[optic[:, 1]] - x[optic[:, 0]], x[optic[:, 2]] - x[optic[:, 0]]) * sign[:, None]
+        middle = np.abs(X[optic].mean(axis=1)[:, 1]) < half_width
+        n = normal[middle].sum(axis=0)
+        flatness = np.linalg.norm(normal.sum(axis=0)) / np.linalg.norm(normal, axis=1).sum()
+        rows.append((t, float(np.degrees(np.arctan2(n[1], n[2]))), float(flatness)))
+    return np.array(rows).reshape(-1, 3)
 
 
 def last_optic_normal_z(folder: Path) -> float | None:
@@ -227,11 +233,18 @@ def angular_balance(folder: Path, params: iol_injection.Parameters, torque: np.n
     so Σ m_i (r_i × Δx_i)_x over the lens = ∫ T_x dt / c (lumped masses, r from the axis).
     Split into the optic's part (its roll, × its moment of inertia I_o) and the haptics' part
     (the reaction: haptics unwinding one way turn the optic the other), each is divided by
-    I_o of the folded optic: ``haptic_swirl_deg`` (largest |haptic part| / I_o) is the roll
-    the haptics can give the optic by unwinding, ``capsule_roll_deg`` (largest |∫T dt| / c I_o)
-    the roll the capsule's torque can; a flip needs 90°."""
+    I_o of the folded optic, over the frames where the optic is still rolled (flatness <
+    ``UNROLLED``): ``haptic_swirl_deg`` (largest |haptic part| / I_o) is the roll the haptics
+    can give the optic by unwinding, ``capsule_roll_deg`` (largest |∫T dt| / c I_o) the roll
+    the capsule's torque can; a flip needs 90°."""
     frames = list(_frames(folder))
     if len(frames) < 2 or len(torque) != len(frames):
+        return {}
+    rolled = roll_history(folder)[:, 2] < UNROLLED
+    # while rolled only: once open, the 6 mm optic is held by the 4.5 mm high capsule
+    frames = [f for f, keep in zip(frames, rolled) if keep]
+    torque = torque[rolled]
+    if len(frames) < 2:
         return {}
     _t, X, x, grid = frames[0]
     cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:]
@@ -338,18 +351,21 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, label: str) -> None:
                     color="tab:red" if flipped else "tab:green", zorder=3)
         top.annotate(f"n_z {row['optic_normal_z']:.3f}\ndec. {row['final_decentration_mm']:.2f} mm",
                      (row[key], row["optic_normal_z"]), textcoords="offset points", xytext=(4, -26), fontsize=7)
-    rolled = [r for r in rows if "max_roll_deg" in r]
-    bottom.plot([r[key] for r in rolled], [r["max_roll_deg"] for r in rolled], "D-", color="tab:blue", ms=5,
-                label="optic's largest roll |φ|")
-    for name, style, text in (("haptic_swirl_deg", "s--", "haptics' unwinding (reaction)"),
-                              ("capsule_roll_deg", "o:", "capsule's torque (∫T dt / c I_o)")):
+    rolled = [r for r in rows if "max_roll_rolled_deg" in r]
+    bottom.plot([r[key] for r in rolled], [r["max_roll_rolled_deg"] for r in rolled], "D-", color="tab:blue",
+                ms=5, label="optic's largest |φ| while rolled")
+    landed = [r for r in rows if "max_roll_deg" in r]
+    bottom.plot([r[key] for r in landed], [r["max_roll_deg"] for r in landed], "v-", color="tab:purple", ms=5,
+                lw=1, label="largest |φ|, whole run (open optic: ≤ 43° fits the capsule)")
+    for name, style, text in (("haptic_swirl_deg", "s--", "from the haptics' unwinding, while rolled"),
+                              ("capsule_roll_deg", "o:", "from the capsule's torque, while rolled")):
         have = [r for r in rolled if name in r]
         if have:
             bottom.plot([r[key] for r in have], [r[name] for r in have], style, ms=4, lw=1, label=text)
-    bottom.legend(fontsize=7, loc="center right")
+    bottom.legend(fontsize=6.5, loc="center", bbox_to_anchor=(0.5, 0.6))
     for r in rolled:
-        bottom.annotate(f"{r['max_roll_deg']:.1f}°", (r[key], r["max_roll_deg"]), textcoords="offset points",
-                        xytext=(4, 4), fontsize=7)
+        bottom.annotate(f"{r['max_roll_rolled_deg']:.1f}°", (r[key], r["max_roll_rolled_deg"]),
+                        textcoords="offset points", xytext=(4, 4), fontsize=7)
     bottom.axhline(FLIP_ANGLE, color="tab:red", ls=":", lw=1)
     bottom.annotate("roll needed to land upside down", xy=(0.01, FLIP_ANGLE), xycoords=("axes fraction", "data"),
                     fontsize=7, color="tab:red", va="top")
