@@ -48,9 +48,14 @@ from eyemech.problems.studies._common import save_chart, write_csv
 
 BASE = {"haptic_thickness": 0.13, "friction": 0.2}
 FRICTIONS = (0.0, 0.2, 0.5, 1.0)
-THICKNESSES = (0.09, 0.13, 0.18, 0.25, 0.35, 0.45)  # 0.45 = the haptic width: thicker is not a plate strip
+# 0.45 mm = the haptic's width: a thicker strip is no longer a plate bent through its thickness
+THICKNESSES = (0.13, 0.25, 0.35, 0.45)
+DEFAULT_DAMPING = 2.0e4  # 1/s: the scene's fluid (≈ 10 Pa·s over 2 mm)
+THIN_FLUID = 2.0e3  # 1/s: ≈ 1 Pa·s, a thinned viscoelastic (the capsule's turning effect ∝ 1/c)
+THIN_FLUID_THICKNESSES = (0.13, 0.35)
 CASES = [{**BASE, "friction": mu} for mu in FRICTIONS] + \
-        [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]]
+        [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]] + \
+        [{**BASE, "haptic_thickness": h, "damping": THIN_FLUID} for h in THIN_FLUID_THICKNESSES]
 QUICK_CASES = [{"haptic_thickness": 0.09, "friction": 0.2}, {"haptic_thickness": 0.18, "friction": 0.2}]
 QUICK_SETTINGS = {"contact": False, "settle_time": 0.0, "plunger_speed": 50.0}
 # frames as .vtu (the roll angle is read from them), no PNGs (25 s a run)
@@ -106,7 +111,8 @@ def _same_run(results: Path, params: iol_injection.Parameters) -> bool:
         Path(old.get("folded_state", "")).name == Path(wanted["folded_state"]).name
 
 
-def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None = None) -> dict:
+def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None = None) -> tuple[dict, Path]:
+    """The case's CSV row and its run folder (run now unless a saved run matches)."""
     params = iol_injection.Parameters(resolution="coarse", folded_state=str(folded), **case, **(settings or {}))
     folder = runs / case_name({**case, **(settings or {})})
     if not _same_run(folder / "results.json", params):
@@ -116,14 +122,14 @@ def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None =
         except SolveFailure:
             pass  # results.json says failed, with the steps it converged
         print(f"iol-flip: {folder.name} ran in {time.perf_counter() - start:.0f} s", flush=True)
-    return case_row(case, folder)
+    return case_row(case, folder), folder
 
 
 def case_row(case: dict, folder: Path) -> dict:
     """One CSV row from a case's results.json and its frames."""
     saved = json.loads((folder / "results.json").read_text())
     q = saved["quantities"]
-    row = dict(case)
+    row = {**case, "damping": saved["parameters"]["damping"]}
     roll = roll_history(folder)
     rolled = roll[:, 2] < UNROLLED
     if rolled.any():  # while rolled (≈ 2 mm across) the optic may turn freely in the capsule
@@ -276,50 +282,64 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
     if quick:
         start = rolled_state(out, comm)
         runs = out / "iol_flip_quick_runs"
-        rows = [run_case(case, start, comm, runs, QUICK_SETTINGS) for case in QUICK_CASES]
+        done = [run_case(case, start, comm, runs, QUICK_SETTINGS) for case in QUICK_CASES]
         note = ("QUICK (pipeline check, not the flip question): contact=false, lens released from a "
                 "2 mm roll, no injector/capsule/self-contact")
     else:
         folded = folded_state(out, comm)
         # the runs' frames (≈ 2 MB a case) stay out of docs/studies: results/ is not committed
         runs = Path(os.environ.get("EYEMECH_IOL_FLIP_RUNS", "results/iol-flip-runs"))
-        rows = [run_case(case, folded, comm, runs) for case in CASES]
+        done = [run_case(case, folded, comm, runs) for case in CASES]
         note = (f"iol-injection, resolution=coarse, from {folded.name}; flipped: mean optic normal z < 0; "
-                f"roll: optic middle strip about the injector axis (flip needs > {FLIP_ANGLE:g}°)")
+                f"roll φ: optic middle strip about the injector axis (flip needs > {FLIP_ANGLE:g}°)")
+    rows = [row for row, _folder in done]
     csv = write_csv(out / "iol_flip.csv", rows, note)
-    histories = {case_name(row_case(row)): roll_history(runs / case_name({**row_case(row),
-                                                                          **(QUICK_SETTINGS if quick else {})}))
-                 for row in rows}
+    histories = [roll_history(folder) for _row, folder in done]
     return [csv, chart(rows, histories, out / "iol_flip.png", note if quick else "")]
 
 
-def row_case(row: dict) -> dict:
-    return {k: row[k] for k in ("haptic_thickness", "friction")}
-
-
-def chart(rows: list[dict], histories: dict, path: Path, note: str = "") -> Path:
-    """Left two columns: the final optic normal z (top) and the largest roll during the
-    injection (bottom) against μ and against h_h; right: the roll over time, every case."""
+def chart(rows: list[dict], histories: list[np.ndarray], path: Path, note: str = "") -> Path:
+    """Left two columns: the final optic normal z (top) and the roll during the injection
+    (bottom) against μ and against h_h; right: the roll over time, every case."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(14, 6.4))
+    fig = plt.figure(figsize=(14, 6.6))
     grid = fig.add_gridspec(2, 3)
-    panels = (("friction", "lens–lens friction μ (h_h = 0.13 mm)", {"haptic_thickness": BASE["haptic_thickness"]}),
-              ("haptic_thickness", "haptic thickness h_h, mm (μ = 0.2; bending stiffness ∝ h_h³)",
-               {"friction": BASE["friction"]}))
+    h0, mu0 = BASE["haptic_thickness"], BASE["friction"]
+    panels = (("friction", f"lens–lens friction μ (h_h = {h0:g} mm)", {"haptic_thickness": h0}),
+              ("haptic_thickness", f"haptic thickness h_h, mm (μ = {mu0:g}; bending stiffness ∝ h_h³)",
+               {"friction": mu0}))
     for column, (key, label, fixed) in enumerate(panels):
         top = fig.add_subplot(grid[0, column])
         bottom = fig.add_subplot(grid[1, column], sharex=top)
         chosen = [r for r in rows if all(r[k] == v for k, v in fixed.items())]
-        _outcome_panel(top, bottom, chosen, key, label)
+        for damping in sorted({r["damping"] for r in chosen}, reverse=True):
+            group = [r for r in chosen if r["damping"] == damping]
+            if key == "friction" and damping != DEFAULT_DAMPING or len(group) < 1:
+                continue
+            _outcome_panel(top, bottom, group, key, damping)
+        top.axhline(0.0, color="tab:red", ls=":", lw=1)
+        top.set_ylim(-1.1, 1.1)
+        top.set_ylabel("final optic normal z\n(▲ up, ▼ flipped)")
+        top.tick_params(labelbottom=False)
+        top.margins(x=0.25)
+        bottom.axhline(FLIP_ANGLE, color="tab:red", ls=":", lw=1)
+        bottom.annotate("roll needed to land upside down", xy=(0.01, FLIP_ANGLE),
+                        xycoords=("axes fraction", "data"), fontsize=7, color="tab:red", va="top")
+        bottom.set_ylim(0.0, 100.0)
+        bottom.set_ylabel("roll during injection (°)")
+        bottom.set_xlabel(label)
+        if bottom.get_legend_handles_labels()[0]:
+            bottom.legend(fontsize=6, loc="center", bbox_to_anchor=(0.5, 0.62))
     ax = fig.add_subplot(grid[:, 2])
-    for row in rows:
-        h = histories.get(case_name(row_case(row)), np.zeros((0, 2)))
+    for row, h in zip(rows, histories):
         if len(h):
-            ax.plot(h[:, 0], h[:, 1], lw=1.2, label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness']:g}")
+            fluid = "" if row["damping"] == DEFAULT_DAMPING else f", c = {row['damping']:g}/s"
+            ax.plot(h[:, 0], h[:, 1], lw=1.2, ls="-" if not fluid else "--",
+                    label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness']:g}{fluid}")
     for sign in (1, -1):
         ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
     ax.set_xlabel("time (s)")
@@ -332,61 +352,57 @@ def chart(rows: list[dict], histories: dict, path: Path, note: str = "") -> Path
     return path
 
 
-def _outcome_panel(top, bottom, rows: list[dict], key: str, label: str) -> None:
-    """``top``: final mean optic normal z (▲ right side up, ▼ flipped, × failed) against
-    ``key``; ``bottom``: max |φ| during the injection. A red band between neighbours whose
-    outcome differs, or a note that none does."""
+def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> None:
+    """One fluid's cases: ``top`` final mean optic normal z (▲ right side up, ▼ flipped,
+    × Newton stopped: its last frame) against ``key``; ``bottom`` the largest roll while
+    rolled and over the run, and what the haptics and the capsule account for. A red band
+    between neighbours whose outcome differs, or a note that none does."""
     rows = sorted(rows, key=lambda r: r[key])
+    thin = damping != DEFAULT_DAMPING
+    fluid = f"c = {damping:g}/s" + (" (thinner fluid)" if thin else "")
     for row in rows:
         if not row.get("finished"):
             z = row.get("last_frame_optic_normal_z")
             z = 0.0 if z is None else z
             top.scatter(row[key], z, marker="x", color="grey", s=80, zorder=3)
-            top.annotate(f"Newton failed at\nt = {row.get('reached_time_s', float('nan')):.3g} s;\n"
+            top.annotate(f"Newton stopped at\nt = {row.get('reached_time_s', float('nan')):.3g} s;\n"
                          f"last frame n_z {z:.3f}", (row[key], z), textcoords="offset points",
                          xytext=(-30, -36), fontsize=7)
             continue
         flipped = row["optic_flipped"]
         top.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
-                    color="tab:red" if flipped else "tab:green", zorder=3)
-        top.annotate(f"n_z {row['optic_normal_z']:.3f}\ndec. {row['final_decentration_mm']:.2f} mm",
-                     (row[key], row["optic_normal_z"]), textcoords="offset points", xytext=(4, -26), fontsize=7)
+                    facecolors="none" if thin else ("tab:red" if flipped else "tab:green"),
+                    edgecolors="tab:red" if flipped else "tab:green", zorder=3)
+        top.annotate(f"n_z {row['optic_normal_z']:.3f}" + ("" if thin else
+                                                           f"\ndec. {row['final_decentration_mm']:.2f} mm"),
+                     (row[key], row["optic_normal_z"]), textcoords="offset points",
+                     xytext=(4, 8 if thin else -26), fontsize=7)
+    style = "--" if thin else "-"
     rolled = [r for r in rows if "max_roll_rolled_deg" in r]
-    bottom.plot([r[key] for r in rolled], [r["max_roll_rolled_deg"] for r in rolled], "D-", color="tab:blue",
-                ms=5, label="optic's largest |φ| while rolled")
-    landed = [r for r in rows if "max_roll_deg" in r]
-    bottom.plot([r[key] for r in landed], [r["max_roll_deg"] for r in landed], "v-", color="tab:purple", ms=5,
-                lw=1, label="largest |φ|, whole run (open optic: ≤ 43° fits the capsule)")
-    for name, style, text in (("haptic_swirl_deg", "s--", "from the haptics' unwinding, while rolled"),
-                              ("capsule_roll_deg", "o:", "from the capsule's torque, while rolled")):
-        have = [r for r in rolled if name in r]
-        if have:
-            bottom.plot([r[key] for r in have], [r[name] for r in have], style, ms=4, lw=1, label=text)
-    bottom.legend(fontsize=6.5, loc="center", bbox_to_anchor=(0.5, 0.6))
+    bottom.plot([r[key] for r in rolled], [r["max_roll_rolled_deg"] for r in rolled], "D" + style,
+                color="tab:blue", ms=5, label=f"largest |φ| while rolled, {fluid}")
     for r in rolled:
         bottom.annotate(f"{r['max_roll_rolled_deg']:.1f}°", (r[key], r["max_roll_rolled_deg"]),
                         textcoords="offset points", xytext=(4, 4), fontsize=7)
-    bottom.axhline(FLIP_ANGLE, color="tab:red", ls=":", lw=1)
-    bottom.annotate("roll needed to land upside down", xy=(0.01, FLIP_ANGLE), xycoords=("axes fraction", "data"),
-                    fontsize=7, color="tab:red", va="top")
+    landed = [r for r in rows if "max_roll_deg" in r]
+    bottom.plot([r[key] for r in landed], [r["max_roll_deg"] for r in landed], "v" + style, color="tab:purple",
+                ms=5, lw=1, label=f"largest |φ| over the run (open: ≤ 43° fits the capsule), {fluid}")
+    if not thin:
+        for name, marker, text in (("haptic_swirl_deg", "s:", "from the haptics' unwinding, while rolled"),
+                                   ("capsule_roll_deg", "o:", "from the capsule's torque, while rolled")):
+            have = [r for r in rolled if name in r]
+            bottom.plot([r[key] for r in have], [r[name] for r in have], marker, ms=4, lw=1, label=text)
     outcomes = [(r[key], r.get("optic_flipped") if r.get("finished") else None) for r in rows]
     changed = False
     for (a, fa), (b, fb) in zip(outcomes, outcomes[1:]):
         if fa is not None and fb is not None and fa != fb:
             for ax in (top, bottom):
                 ax.axvspan(a, b, color="tab:red", alpha=0.12)
-            top.text(0.5 * (a + b), 0.0, "outcome\nchanges", ha="center", fontsize=8, color="tab:red")
+            top.text(0.5 * (a + b), -0.5, f"outcome\nchanges\n({fluid})", ha="center", fontsize=8, color="tab:red")
             changed = True
     if not changed and len(outcomes) > 1:
-        top.text(0.02, 0.05, "no change of outcome over this range", transform=top.transAxes, fontsize=8)
-    top.axhline(0.0, color="tab:red", ls=":", lw=1)
-    top.set_ylim(-1.1, 1.1)
-    top.set_ylabel("final optic normal z\n(▲ up, ▼ flipped)")
-    top.tick_params(labelbottom=False)
-    bottom.set_ylim(0.0, 100.0)
-    bottom.set_ylabel("roll during injection (°)")
-    bottom.set_xlabel(label)
-    top.margins(x=0.2)
+        top.text(0.02, 0.05 + (0.1 if thin else 0.0), f"no change of outcome over this range, {fluid}",
+                 transform=top.transAxes, fontsize=7)
 
 
 STUDY = Study(name="iol-flip", summary="whether the optic lands flipped, against lens–lens friction and "
