@@ -6,9 +6,14 @@ triangles) from one folded state — ``tests/data/iol_folded_coarse.npz`` (``iol
 default coarse lens) when the source tree is at hand, else a fold run once here: the fold is
 the same for every case, so only the deployment differs. Varied, one at a time:
 
-- the Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion), h_h = 0.13 mm;
+- the Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion): 0, 0.2, 0.5, 1,
+  h_h = 0.13 mm;
 - the haptics' thickness h_h (their bending stiffness ∝ h_h³; the lens has one Young's
-  modulus, so thickness is the model's haptic stiffness), μ = 0.2.
+  modulus, so thickness is the model's haptic stiffness): 0.13, 0.25, 0.35, 0.45 mm (the
+  haptic's width), μ = 0.2;
+- the same at a 10× thinner fluid (damping c = 2e3 /s instead of 2e4 /s) for 0.13 and
+  0.35 mm: the capsule's torque turns the optic by ∫T dt / (c I), so the fluid sets how much
+  the haptics' stiffness can matter (see ``angular_balance``).
 
 What decides the side it lands on: the optic lands upside down only if it turns by more than
 90° as a rigid body — about the injector axis while it is still rolled (it fits the capsule's
