@@ -107,13 +107,18 @@ def _same_run(results: Path, params: iol_injection.Parameters) -> bool:
     if not results.is_file():
         return False
     saved = json.loads(results.read_text())
-    if saved.get("status") not in ("ok", "failed"):
+    if not (saved.get("status") in ("ok", "failed") or _stopped_by_hand(saved)):
         return False
     wanted = params.as_dict()
     old = saved.get("parameters", {})
     keys = set(wanted) - {"folded_state"}
     return all(old.get(k) == wanted[k] for k in keys) and \
         Path(old.get("folded_state", "")).name == Path(wanted["folded_state"]).name
+
+
+def _stopped_by_hand(saved: dict) -> bool:
+    """A run interrupted (Ctrl-C / SIGINT) for lack of time: kept as a partial case, not rerun."""
+    return saved.get("status") == "error" and "KeyboardInterrupt" in saved.get("message", "")
 
 
 def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None = None) -> tuple[dict, Path]:
@@ -149,7 +154,8 @@ def case_row(case: dict, folder: Path) -> dict:
         row.update(angular_balance(folder, params, torque))
     if saved["status"] != "ok":
         steps = saved.get("steps", [])
-        row.update(finished=False, reached_time_s=steps[-1]["time"] if steps else 0.0,
+        row.update(finished=False, stopped="by hand (time budget)" if _stopped_by_hand(saved) else "Newton failed",
+                   reached_time_s=steps[-1]["time"] if steps else 0.0,
                    steps=len(steps), wall_seconds=saved["timings"]["total"],
                    last_frame_optic_normal_z=last_optic_normal_z(folder))
         return row
@@ -370,7 +376,7 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
             z = row.get("last_frame_optic_normal_z")
             z = 0.0 if z is None else z
             top.scatter(row[key], z, marker="x", color="grey", s=80, zorder=3)
-            top.annotate(f"Newton stopped at\nt = {row.get('reached_time_s', float('nan')):.3g} s;\n"
+            top.annotate(f"{row.get('stopped', 'stopped')} at\nt = {row.get('reached_time_s', float('nan')):.3g} s;\n"
                          f"last frame n_z {z:.3f}", (row[key], z), textcoords="offset points",
                          xytext=(-30, -36), fontsize=7)
             continue
