@@ -388,14 +388,18 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
         top.annotate(f"n_z {row['optic_normal_z']:.3f}" + ("" if thin else
                                                            f"\ndec. {row['final_decentration_mm']:.2f} mm"),
                      (row[key], row["optic_normal_z"]), textcoords="offset points",
-                     xytext=(4, 8 if thin else -26), fontsize=7)
+                     xytext=(-60, -14) if thin else (4, -26), fontsize=7)
     style = "--" if thin else "-"
     rolled = [r for r in rows if "max_roll_rolled_deg" in r]
     bottom.plot([r[key] for r in rolled], [r["max_roll_rolled_deg"] for r in rolled], "D" + style,
                 color="tab:blue", ms=5, label=f"largest |φ| while rolled, {fluid}")
     for r in rolled:
-        bottom.annotate(f"{r['max_roll_rolled_deg']:.1f}°", (r[key], r["max_roll_rolled_deg"]),
-                        textcoords="offset points", xytext=(4, 4), fontsize=7)
+        text = f"{r['max_roll_rolled_deg']:.1f}°"
+        if thin and "haptic_swirl_deg" in r:
+            text += (f" (c = {damping:g}/s; haptics {r['haptic_swirl_deg']:.0f}°,\n"
+                     f"capsule {r['capsule_roll_deg']:.0f}°: they cancel)")
+        bottom.annotate(text, (r[key], r["max_roll_rolled_deg"]), textcoords="offset points",
+                        xytext=(4, 4), fontsize=7)
     landed = [r for r in rows if "max_roll_deg" in r]
     bottom.plot([r[key] for r in landed], [r["max_roll_deg"] for r in landed], "v" + style, color="tab:purple",
                 ms=5, lw=1, label=f"largest |φ| over the run (open: ≤ 43° fits the capsule), {fluid}")
