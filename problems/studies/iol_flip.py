@@ -385,10 +385,10 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
         top.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
                     facecolors="none" if thin else ("tab:red" if flipped else "tab:green"),
                     edgecolors="tab:red" if flipped else "tab:green", zorder=3)
-        top.annotate(f"n_z {row['optic_normal_z']:.3f}" + ("" if thin else
+        top.annotate(f"n_z {row['optic_normal_z']:.3f}" + (f" (c = {damping:g}/s)" if thin else
                                                            f"\ndec. {row['final_decentration_mm']:.2f} mm"),
                      (row[key], row["optic_normal_z"]), textcoords="offset points",
-                     xytext=(-60, -14) if thin else (4, -26), fontsize=7)
+                     xytext=(6, -48) if thin else (4, -26), fontsize=7)
     style = "--" if thin else "-"
     rolled = [r for r in rows if "max_roll_rolled_deg" in r]
     bottom.plot([r[key] for r in rolled], [r["max_roll_rolled_deg"] for r in rolled], "D" + style,
