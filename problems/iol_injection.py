@@ -53,7 +53,9 @@ class Parameters(iol_fold.Parameters):
                                  "iterations, across steps (1 = full Newton)")
     contact: bool = field(True, "rigid contact on; false: the folded lens unfolds in free space "
                                 "(the deformation-only speed)")
-    frames_every: int = field(4, "a PNG frame every this many steps")
+    frames_every: int = field(1, "at least this many steps between two frames (PNG + .vtu)")
+    frame_interval: float = field(0.01, "a frame (PNG + .vtu) each time the simulated time has advanced this "
+                                        "much since the last one (0: every frames_every steps)", "s")
     fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
                                       "fluid, which the plunger drives through the bore (false: relative to "
                                       "rest, the session-3 drag that crushed the trailing haptic)")
@@ -75,7 +77,7 @@ class Parameters(iol_fold.Parameters):
                                  f"than the {self.optic_diameter} mm optic")
         iol_fold.Parameters.validate(self)
         self.require_positive("plunger_speed", "frames_every", "jacobian_lag")
-        self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp")
+        self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp", "frame_interval")
         self.require_positive("jet_length")
         if self.plunger_engages not in ("optic", "lens"):
             raise ParameterError("plunger_engages", f"must be 'optic' or 'lens', got {self.plunger_engages!r}")
@@ -309,6 +311,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         if self_contact is not None:
             self_contact.begin_step()
 
+    last_frame = [0.0, 0]  # time and step of the last frame
+
     def converged(record) -> None:
         dynamics.advance()
         h["time"].append(record.load)
@@ -317,7 +321,13 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         h["dt"].append(record.increment)
         depth = {**contact.max_penetration(), **pushing.max_penetration()}
         h["penetration"].append(max(depth.values(), default=0.0))
-        frame = record.step % params.frames_every == 1 or record.load >= end - 1e-9
+        # frames evenly in simulated time (the animation's speed is the scene's), not in steps:
+        # where Δt is cut to 0.2 ms every-n-steps frames bunch up and cost their rendering
+        frame = (record.step - last_frame[1] >= params.frames_every
+                 and record.load >= last_frame[0] + params.frame_interval - 1e-9) \
+            or record.step == 1 or record.load >= end - 1e-9
+        if frame:
+            last_frame[:] = [record.load, record.step]
         with ctx.timings("measurements"):
             h["strain"].append(strain.haptic_max())
             if self_contact is not None:  # C++, cheap: every step
