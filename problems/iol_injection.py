@@ -66,7 +66,7 @@ class Parameters(iol_fold.Parameters):
     fold_cache: bool = field(True, "with folded_state='': reuse a fold made earlier with the same lens and "
                                    "fold parameters and the same code, from the user's cache folder "
                                    "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold")
-    start_ramp: float = field(0.02, "the plunger (and the fluid it drives) accelerates from rest to "
+    start_ramp: float = field(0.0, "the plunger (and the fluid it drives) accelerates from rest to "
                                     "plunger_speed over this time, linearly (0 = a jump to full speed)", "s")
 
     def validate(self) -> None:
