@@ -113,6 +113,30 @@ def test_cached_fold_is_keyed_by_the_lens_and_fold_parameters(tmp_path, monkeypa
         assert iol_injection.fold_cache_path(dataclasses.replace(params, **change)) != key
 
 
+def test_fold_first_run_reuses_the_cached_fold(tmp_path, monkeypatch):
+    """With folded_state='' a fold cached for these parameters (and this code) is loaded
+    instead of folding again: the fold is not called, the lens starts folded, and the run
+    says which file it used."""
+    import shutil
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    params = iol_injection.Parameters(resolution="coarse")
+    cached = iol_injection.fold_cache_path(params)
+    cached.parent.mkdir(parents=True)
+    shutil.copy(FOLDED, cached)
+    start = {}
+
+    def no_fold(*_args):
+        raise AssertionError("folded again although a fold of these parameters was cached")
+
+    monkeypatch.setattr(iol_injection.iol_fold, "fold", no_fold)
+    monkeypatch.setattr(iol_injection, "inject", lambda _p, _ctx, shell: start.update(u=shell.u.x.array.copy()))
+    monkeypatch.setattr(iol_injection, "report", lambda *_args: None)
+    result = iol_injection.run(params, options=RunOptions(fields=False, pictures=False, quiet=True))
+    assert result.quantities["fold_cache"] == str(cached)
+    assert np.abs(start["u"]).max() > 0.5  # the folded state (mm), not the flat lens
+
+
 @pytest.fixture(scope="module")
 def injection():
     pytest.importorskip("ipctk")
