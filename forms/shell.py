@@ -192,3 +192,201 @@ def end_rotation(u, co_normal, reference_angle, plane=(0, 2)):
     along = c * a[i] + s * a[k]
     across = -s * a[i] + c * a[k]
     return reference_angle + ufl.atan2(across, along)
+
+
+
+
+class _Variations:
+    """The nonlinear shell's quantities with their first variations in the directions v
+    (``d``) and w (``D``): everything the explicit second variation needs, in the cell's
+    covariant frame (2×2 strains: a_α = F g_α, E_αβ = g_α·E g_β = ½(a_α·a_β − g_α·g_β),
+    K_αβ = g_α·K g_β = n·∂_α∂_β x) — the same tensors as the 3×3 ones of ``ShellGeometry``
+    (E = Kᵀ E_αβ K with K the pseudo-inverse of the cell Jacobian), but with 3 independent
+    components instead of 9, which is what the size of the generated kernel scales with.
+    All of it is unrestricted UFL unless ``restrict`` (one side of a facet) is given."""
+
+    def __init__(self, u, v, w, orientation, restrict=None):
+        r = restrict or (lambda x: x)
+        mesh = ufl.domain.extract_unique_domain(u)
+        J = ufl.Jacobian(mesh)
+        g = [r(J[:, 0]), r(J[:, 1])]
+        pseudo_inverse = r(ufl.JacobianInverse(mesh))
+        self.metric_inverse = pseudo_inverse * pseudo_inverse.T  # G^αβ
+        self.pseudo_inverse = pseudo_inverse
+        self.s = r(orientation)
+        self.N = r(orientation * _unit(ufl.cross(J[:, 0], J[:, 1])))
+        self.P = ufl.Identity(3) - ufl.outer(self.N, self.N)
+        self.F = self.P + r(ufl.grad(u))
+        self.dG, self.DG = r(ufl.grad(v)), r(ufl.grad(w))
+        pairs = ((0, 0), (0, 1), (1, 1))
+
+        def second(f):  # ∂_α∂_β f for (αβ) in pairs: g_α · grad grad f · g_β
+            H = r(ufl.grad(ufl.grad(f)))
+            i, j, k = ufl.indices(3)
+            return [ufl.as_vector(H[k, i, j] * g[al][i] * g[be][j], k) for al, be in pairs]
+
+        self.U, self.dU, self.DU = second(u), second(v), second(w)
+        self.a = [self.F * gi for gi in g]
+        da = [self.dG * gi for gi in g]
+        Da = [self.DG * gi for gi in g]
+        self.da, self.Da = da, Da
+        dot = ufl.dot
+
+        def matrix(entries):  # symmetric 2×2 from the (00, 01, 11) entries
+            return ufl.as_matrix([[entries[0], entries[1]], [entries[1], entries[2]]])
+
+        a = self.a
+        self.E = matrix([0.5 * (dot(a[al], a[be]) - dot(g[al], g[be])) for al, be in pairs])
+        self.dE = matrix([0.5 * (dot(da[al], a[be]) + dot(a[al], da[be])) for al, be in pairs])
+        self.DE = matrix([0.5 * (dot(Da[al], a[be]) + dot(a[al], Da[be])) for al, be in pairs])
+        self.dDE = matrix([0.5 * (dot(da[al], Da[be]) + dot(Da[al], da[be])) for al, be in pairs])
+        self.c = ufl.cross(a[0], a[1])
+        self.length = ufl.sqrt(dot(self.c, self.c))
+        self.c_hat = self.c / self.length
+        self.n = self.s * self.c_hat
+        self.dc = ufl.cross(da[0], a[1]) + ufl.cross(a[0], da[1])
+        self.Dc = ufl.cross(Da[0], a[1]) + ufl.cross(a[0], Da[1])
+        self.dDc = ufl.cross(da[0], Da[1]) + ufl.cross(Da[0], da[1])
+        self.dn = self._unit_variation(self.dc)
+        self.Dn = self._unit_variation(self.Dc)
+        n, dn, Dn = self.n, self.dn, self.Dn
+        self.K = matrix([dot(n, x) for x in self.U])
+        self.dK = matrix([dot(dn, x) + dot(n, dx) for x, dx in zip(self.U, self.dU)])
+        self.DK = matrix([dot(Dn, x) + dot(n, Dx) for x, Dx in zip(self.U, self.DU)])
+        # the part of ΔδK that is a product of first variations (the rest is Δδn · U)
+        self.dDK_products = matrix([dot(dn, Dx) + dot(Dn, dx) for dx, Dx in zip(self.dU, self.DU)])
+
+    def _unit_variation(self, dc):
+        """δn = s (δc − ĉ (ĉ·δc)) / |c|."""
+        return self.s * (dc - self.c_hat * ufl.dot(self.c_hat, dc)) / self.length
+
+    def weighted_U(self, S):
+        """x = Σ_αβ S^αβ U_αβ (S symmetric 2×2): Δδn·x is S:(Δδn·U)."""
+        return S[0, 0] * self.U[0] + 2.0 * S[0, 1] * self.U[1] + S[1, 1] * self.U[2]
+
+    def normal_second_variation(self, x):
+        """Δδn · x for a u-only vector x (the weights back-propagated onto Δδn):
+        δcᵀ ∇²(s ĉ·x) Δc + (s P_c x/|c|) · Δδc, ∇²(s ĉ·x) = −s/|c|² (x ĉᵀ + ĉ xᵀ + (ĉ·x)(I − 3ĉĉᵀ))."""
+        return _unit_second_variation(self.c_hat, self.length, self.s, x, self.dc, self.Dc, self.dDc)
+
+
+class _CovariantLaw:
+    """Plane-stress St Venant–Kirchhoff on covariant 2×2 strains: with A = Kᵀ Ã K,
+    C(A):B = c ((1-ν) tr(Ã G⁻¹ B̃ G⁻¹) + ν tr(G⁻¹Ã) tr(G⁻¹B̃)), c = E_Y/(1-ν²)."""
+
+    def __init__(self, material: ShellMaterial, metric_inverse):
+        self.c = material.youngs_modulus / (1.0 - material.poisson_ratio ** 2)
+        self.nu = material.poisson_ratio
+        self.Gi = metric_inverse
+
+    def stress(self, A):
+        """S̃ with C(A):B = S̃:B̃ (contravariant)."""
+        Gi = self.Gi
+        return self.c * ((1.0 - self.nu) * Gi * A * Gi + self.nu * ufl.tr(Gi * A) * Gi)
+
+    def pair(self, A, B):
+        return ufl.inner(self.stress(A), B)
+
+
+def _unit_second_variation(c_hat, length, s, x, dc, Dc, dDc=None):
+    """Δδ(s ĉ) · x for ĉ = c/|c| with the variations δc, Δc, Δδc of c."""
+    dot = ufl.dot
+    hessian = -s / length ** 2 * (dot(dc, x) * dot(c_hat, Dc) + dot(dc, c_hat) * dot(x, Dc)
+                                  + dot(c_hat, x) * (dot(dc, Dc) - 3.0 * dot(dc, c_hat) * dot(c_hat, Dc)))
+    if dDc is None:
+        return hessian
+    y = s * (x - c_hat * dot(c_hat, x)) / length
+    return hessian + dot(y, dDc)
+
+
+def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int, penalty_factor,
+                   dx: ufl.Measure, dS: ufl.Measure):
+    """Π''(u)[v, w] of the nonlinear ``shell_energy`` (no clamped edges) written out by hand:
+    the same bilinear form as ``derivative(derivative(energy, u, v), u, w)`` up to
+    round-off, but every second variation of an intermediate quantity (the normal, the edge
+    tangent) is contracted at once with the u-only weight it meets in the energy, so the
+    argument-dependent factors stay first variations, and the strains are the covariant
+    2×2 ones (``_Variations``). UFL's symbolic derivative instead carries Δδn, Δδm, … as
+    full (test × trial) expressions through the whole composite energy, and FFCx emits
+    megabytes of C per kernel for it (issue 8 §4).
+
+    Bulk:   h [C(δE):ΔE + C(E):ΔδE] + h³/12 [C(δK):ΔK + C(K):ΔδK],
+            δE_αβ = ½(δa_α·a_β + a_α·δa_β), ΔδE_αβ = ½(δa_α·Δa_β + Δa_α·δa_β),
+            δK = δn·U + n·δU, ΔδK = Δδn·U + δn·ΔU + Δn·δU  (U_αβ = ∂_α∂_β u).
+    Edges:  e = −{M_νν} θ + ½ γ {D} θ²  ⇒
+            Δδe = −δ{M_νν} Δθ − Δ{M_νν} δθ + γ{D} δθ Δθ + (γ{D} θ − {M_νν}) Δδθ − θ Δδ{M_νν},
+            θ = atan2(S, C), S = n⁺·m⁻, C = n⁺·n⁻, m = t × n, t = Fτ/|Fτ|."""
+    h = material.thickness
+    Db = h ** 3 / 12.0
+    q = _Variations(u, v, w, orientation)
+    law = _CovariantLaw(material, q.metric_inverse)
+    SK = law.stress(q.K)
+    bulk = (h * (law.pair(q.dE, q.DE) + law.pair(q.E, q.dDE))
+            + Db * (law.pair(q.dK, q.DK) + ufl.inner(SK, q.dDK_products)
+                    + q.normal_second_variation(q.weighted_U(SK))))
+
+    mesh = ufl.domain.extract_unique_domain(u)
+    nu = ufl.FacetNormal(mesh)
+    size = ufl.CellDiameter(mesh)
+    D = material.bending_stiffness()
+    D_avg = 0.5 * (D("+") + D("-")) if ufl.algorithms.extract_coefficients(D) else D
+    gamma = penalty(degree, penalty_factor, 0.5 * (size("+") + size("-")))
+    p = _Variations(u, v, w, orientation, lambda x: x("+"))
+    m = _Variations(u, v, w, orientation, lambda x: x("-"))
+    dot, cross = ufl.dot, ufl.cross
+    # the deformed tangent of the "-" side and its variations (f = F τ is linear in u)
+    tau = cross(m.N, nu("-"))
+    f = m.F * tau
+    f_len = ufl.sqrt(dot(f, f))
+    t = f / f_len
+    df, Df = m.dG * tau, m.DG * tau
+    dt = (df - t * dot(t, df)) / f_len
+    Dt = (Df - t * dot(t, Df)) / f_len
+    co = cross(t, m.n)
+    dco = cross(dt, m.n) + cross(t, m.dn)
+    Dco = cross(Dt, m.n) + cross(t, m.Dn)
+    sine, cosine = dot(p.n, co), dot(p.n, m.n)
+    d_sine = dot(p.dn, co) + dot(p.n, dco)
+    D_sine = dot(p.Dn, co) + dot(p.n, Dco)
+    d_cosine = dot(p.dn, m.n) + dot(p.n, m.dn)
+    D_cosine = dot(p.Dn, m.n) + dot(p.n, m.Dn)
+    r2 = sine ** 2 + cosine ** 2
+    theta = ufl.atan2(sine, cosine) - ufl.atan2(dot(p.N, nu("-")), dot(p.N, m.N))
+    d_theta = (cosine * d_sine - sine * d_cosine) / r2
+    D_theta = (cosine * D_sine - sine * D_cosine) / r2
+    # Δδθ without the second variations of S and C (those are weighted below)
+    dD_theta_products = ((D_cosine * d_sine - D_sine * d_cosine) / r2
+                         - 2.0 * d_theta * (sine * D_sine + cosine * D_cosine) / r2
+                         + (cosine * (dot(p.dn, Dco) + dot(p.Dn, dco))
+                            - sine * (dot(p.dn, m.Dn) + dot(p.Dn, m.dn))) / r2
+                         + cosine * dot(p.n, cross(dt, m.Dn) + cross(Dt, m.dn)) / r2)
+
+    def side_weights(side_q, side):
+        """L^αβ with M_νν = L:K (covariant): h³/12 ν·C(K)ν, ν̃ = K ν (K the pseudo-inverse)."""
+        n_ = nu(side)
+        nt = side_q.pseudo_inverse * n_
+        law_ = _CovariantLaw(material, side_q.metric_inverse)
+        thick = Db(side) if _varies(Db) else Db
+        return thick * law_.c * ((1.0 - law_.nu) * ufl.outer(nt, nt)
+                                 + law_.nu * dot(n_, side_q.P * n_) * side_q.metric_inverse)
+
+    L_p, L_m = side_weights(p, "+"), side_weights(m, "-")
+    M_avg = 0.5 * (ufl.inner(L_p, p.K) + ufl.inner(L_m, m.K))
+    dM = 0.5 * (ufl.inner(L_p, p.dK) + ufl.inner(L_m, m.dK))
+    DM = 0.5 * (ufl.inner(L_p, p.DK) + ufl.inner(L_m, m.DK))
+    dDM_products = 0.5 * (ufl.inner(L_p, p.dDK_products) + ufl.inner(L_m, m.dDK_products))
+    weight = gamma * D_avg * theta - M_avg  # what Δδθ meets
+    # Δδθ's second variations: (C ΔδS − S ΔδC)/r², ΔδS ∋ Δδn⁺·m⁻ + Δδt·(n⁻×n⁺) + Δδn⁻·(n⁺×t),
+    # ΔδC ∋ Δδn⁺·n⁻ + n⁺·Δδn⁻; and −θ Δδ{M_νν} ∋ −½θ Δδn·(L:U) on each side
+    x_plus = weight * (cosine * co - sine * m.n) / r2 - 0.5 * theta * p.weighted_U(L_p)
+    x_minus = weight * (cosine * cross(p.n, t) - sine * p.n) / r2 - 0.5 * theta * m.weighted_U(L_m)
+    y_t = weight * cosine * cross(m.n, p.n) / r2
+    edges = (-dM * D_theta - DM * d_theta + gamma * D_avg * d_theta * D_theta
+             + weight * dD_theta_products - theta * dDM_products
+             + p.normal_second_variation(x_plus) + m.normal_second_variation(x_minus)
+             + _unit_second_variation(t, f_len, 1.0, y_t, df, Df))
+    return bulk * dx + edges * dS
+
+
+def _varies(value) -> bool:
+    return bool(ufl.algorithms.extract_coefficients(value))

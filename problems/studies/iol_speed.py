@@ -36,11 +36,13 @@ VARIANTS = [
     ("linearised, mesh ×1.5", {"method": "linearised", "mesh_scale": 1.5}),
     ("linearised, mesh ×2", {"method": "linearised", "mesh_scale": 2.0}),
     ("linearised, Δt/2", {"method": "linearised", "time_step": 0.005}),
+    ("Newton, fresh J, UFL tangent (before session 5)", {"tangent": "ufl"}),
+    ("linearised, fresh J, UFL tangent (before session 5)", {"method": "linearised", "tangent": "ufl"}),
     ("contact: Newton, fresh J", {"contact": True}),
     ("contact: linearised, fresh J", {"method": "linearised", "contact": True}),
     ("contact: linearised, FD J·v", {"method": "linearised", "jacobian": "matrix-free", "contact": True}),
 ]
-QUICK_VARIANTS = [VARIANTS[0], VARIANTS[3], VARIANTS[5], VARIANTS[11]]
+QUICK_VARIANTS = [VARIANTS[0], VARIANTS[3], VARIANTS[5], VARIANTS[13]]
 PHASES = iol_speed.PHASES
 
 
