@@ -53,7 +53,9 @@ class Parameters(iol_fold.Parameters):
                                  "iterations, across steps (1 = full Newton)")
     contact: bool = field(True, "rigid contact on; false: the folded lens unfolds in free space "
                                 "(the deformation-only speed)")
-    frames_every: int = field(4, "a PNG frame every this many steps")
+    frames_every: int = field(1, "at least this many steps between two frames (PNG + .vtu)")
+    frame_interval: float = field(0.01, "a frame (PNG + .vtu) each time the simulated time has advanced this "
+                                        "much since the last one (0: every frames_every steps)", "s")
     fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
                                       "fluid, which the plunger drives through the bore (false: relative to "
                                       "rest, the session-3 drag that crushed the trailing haptic)")
@@ -61,6 +63,11 @@ class Parameters(iol_fold.Parameters):
                                           "beside the plunger tip, as loading instructions ask) or 'lens' "
                                           "(every node: the trailing haptic is crushed)")
     jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm")
+    fold_cache: bool = field(True, "with folded_state='': reuse a fold made earlier with the same lens and "
+                                   "fold parameters and the same code, from the user's cache folder "
+                                   "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold")
+    start_ramp: float = field(0.0, "the plunger (and the fluid it drives) accelerates from rest to "
+                                    "plunger_speed over this time, linearly (0 = a jump to full speed)", "s")
 
     def validate(self) -> None:
         layout = InjectorLayout()
@@ -70,7 +77,7 @@ class Parameters(iol_fold.Parameters):
                                  f"than the {self.optic_diameter} mm optic")
         iol_fold.Parameters.validate(self)
         self.require_positive("plunger_speed", "frames_every", "jacobian_lag")
-        self.require_nonnegative("settle_time", "plunger_overshoot")
+        self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp", "frame_interval")
         self.require_positive("jet_length")
         if self.plunger_engages not in ("optic", "lens"):
             raise ParameterError("plunger_engages", f"must be 'optic' or 'lens', got {self.plunger_engages!r}")
@@ -105,14 +112,60 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             load_state(Path(params.folded_state), shell)
             _refuse_intersecting(params, shell)
         else:
-            with ctx.timings("folding"):
-                iol_fold.fold(params, ctx, shell, None)
+            cached = fold_cache_path(params) if params.fold_cache else None
+            if cached is not None and cached.is_file():
+                load_state(cached, shell)
+                ctx.result.quantities["fold_cache"] = str(cached)
+            else:
+                with ctx.timings("folding"):
+                    iol_fold.fold(params, ctx, shell, None)
+                if cached is not None:
+                    _store_fold(cached, shell, ctx)
             if ctx.out is not None:  # reusable: folded_state=<out>/folded_state.npz
                 save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
                 ctx.result.fields.append("folded_state.npz")
         history = inject(params, ctx, shell)
         report(params, ctx, shell, history)
     return ctx.result
+
+
+FOLD_CODE = ("problems/iol_fold.py", "problems/iol.py", "problems/iol_contact.py", "problems/iol_self_contact.py",
+             "problems/time_integration.py", "problems/driver.py", "forms", "meshes")
+
+
+def fold_cache_path(params: Parameters) -> Path:
+    """Where the fold of these lens and fold parameters is cached: a hash of every
+    ``iol_fold.Parameters`` value but ``frames``, of the source of the code the fold runs
+    (any edit makes a new key) and of the dolfinx version. Why: the default injection folds
+    first (≈ 10–20 min at the paper's resolution); a fold is only reused for the same lens."""
+    import hashlib
+    import json
+    import os
+
+    import dolfinx
+
+    values = {f.name: getattr(params, f.name) for f in dataclasses.fields(iol_fold.Parameters)
+              if f.name != "frames"}
+    digest = hashlib.sha256(json.dumps(values, sort_keys=True, default=str).encode())
+    digest.update(dolfinx.__version__.encode())
+    root = Path(__file__).resolve().parents[1]
+    for name in FOLD_CODE:
+        path = root / name
+        for source in sorted(path.rglob("*.py")) if path.is_dir() else [path]:
+            digest.update(source.read_bytes())
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "eyemech" / "iol-fold"
+    return cache / f"{params.resolution}-{digest.hexdigest()[:16]}.npz"
+
+
+def _store_fold(path: Path, shell: LensShell, ctx: RunContext) -> None:
+    """Save the fold in the cache; a cache that cannot be written only costs the next run a fold."""
+    try:
+        if ctx.rank0:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        save_state(path, shell, ctx.comm)
+        ctx.result.quantities["fold_cache"] = str(path)
+    except OSError as err:
+        print(f"iol-injection: fold not cached ({err})")
 
 
 def _refuse_intersecting(params: Parameters, shell: LensShell) -> None:
@@ -167,6 +220,40 @@ class FluidDrag:
         F.axpy(1.0, self.drag)
 
 
+@dataclasses.dataclass(frozen=True)
+class PlungerMotion:
+    """The plunger's travel: from rest, the speed grows linearly to ``speed`` over ``ramp``
+    seconds, stays there, and stops once the plunger has travelled ``distance``.
+
+    Why a ramp: a jump from rest to 40 mm/s puts the whole fluid drag c M v_f on the resting lens
+    in the first step (and the plunger 0.4 mm into it): the first step was cut 3× (coarse) and 6×
+    (paper resolution). A real push also starts from rest."""
+
+    speed: float
+    ramp: float
+    distance: float
+
+    @property
+    def push_time(self) -> float:
+        ramp_distance = 0.5 * self.speed * self.ramp
+        if ramp_distance >= self.distance:  # still accelerating when it arrives
+            return float(np.sqrt(2.0 * self.distance * self.ramp / self.speed))
+        return self.ramp + (self.distance - ramp_distance) / self.speed
+
+    def speed_at(self, t: float) -> float:
+        if t > self.push_time + 1e-12:
+            return 0.0
+        return self.speed * min(t / self.ramp, 1.0) if self.ramp > 0.0 else self.speed
+
+    def travel(self, t: float) -> float:
+        t = min(max(t, 0.0), self.push_time)
+        if self.ramp <= 0.0:
+            return self.speed * t
+        if t <= self.ramp:
+            return 0.5 * self.speed * t * t / self.ramp
+        return self.speed * (t - 0.5 * self.ramp)
+
+
 def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     layout = InjectorLayout()
     axis = params.axis_point()
@@ -190,8 +277,10 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
                                 damping=params.damping)
     fluid = FluidDrag(dynamics, shell, layout.cartridge(params), params.jet_length) \
         if params.fluid_carried else None
-    solver = NonlinearSolver(shell.residual(), shell.u, [], options=_newton(ctx, params),
-                             timings=ctx.timings,
+    # the shell's Jacobian written out (speed5: equal to UFL's derivative to 2e-16, about half
+    # its assembly time): the same Newton iterates, cheaper iterations
+    solver = NonlinearSolver(shell.residual(), shell.u, [], jacobian=shell.jacobian(),
+                             options=_newton(ctx, params), timings=ctx.timings,
                              residual_hooks=[dynamics.residual_hook, contact.residual_hook,
                                              pushing.residual_hook]
                              + ([fluid.residual_hook] if fluid is not None else []),
@@ -205,7 +294,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     if params.scheme != "backward-euler":
         dynamics.initial_acceleration(shell.residual())
     stop = layout.tip + params.plunger_overshoot
-    push_time = (stop - start) / params.plunger_speed
+    motion = PlungerMotion(params.plunger_speed, params.start_ramp, stop - start)
+    push_time = motion.push_time
     end = push_time + params.settle_time
     self_distance = self_distance_probe(shell.u) if self_contact is None else None
     strain = StrainProbe(shell)
@@ -216,12 +306,14 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     h["series"] = PyvistaSeries(ctx.out if ctx.options.fields else None, ctx.comm, stem="injection")
 
     def apply(t: float, dt: float) -> None:
-        plunger.position = start + params.plunger_speed * min(t, push_time)
+        plunger.position = start + motion.travel(t)
         dynamics.set_step(dt)
         if fluid is not None:  # u is u_n here: the step's start
-            fluid.begin_step(params.plunger_speed if t <= push_time + 1e-12 else 0.0)
+            fluid.begin_step(motion.speed_at(t))
         if self_contact is not None:
             self_contact.begin_step()
+
+    last_frame = [0.0, 0]  # time and step of the last frame
 
     def converged(record) -> None:
         dynamics.advance()
@@ -231,7 +323,13 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
         h["dt"].append(record.increment)
         depth = {**contact.max_penetration(), **pushing.max_penetration()}
         h["penetration"].append(max(depth.values(), default=0.0))
-        frame = record.step % params.frames_every == 1 or record.load >= end - 1e-9
+        # frames evenly in simulated time (the animation's speed is the scene's), not in steps:
+        # where Δt is cut to 0.2 ms every-n-steps frames bunch up and cost their rendering
+        frame = (record.step - last_frame[1] >= params.frames_every
+                 and record.load >= last_frame[0] + params.frame_interval - 1e-9) \
+            or record.step == 1 or record.load >= end - 1e-9
+        if frame:
+            last_frame[:] = [record.load, record.step]
         with ctx.timings("measurements"):
             h["strain"].append(strain.haptic_max())
             if self_contact is not None:  # C++, cheap: every step

@@ -81,6 +81,62 @@ def test_fluid_velocity_is_plug_flow_in_the_bore_and_a_jet_outside():
     assert v[3] == pytest.approx(40.0 * ratio * np.exp(-2.0 / 2.0))
 
 
+def test_plunger_starts_from_rest_and_reaches_its_stop():
+    """Linear speed ramp: travel ½ V t²/T while accelerating, continuous in travel and speed,
+    the stop reached at push_time (later by T/2 than without the ramp), then at rest."""
+    from eyemech.problems.iol_injection import PlungerMotion
+
+    motion = PlungerMotion(speed=40.0, ramp=0.02, distance=10.0)
+    assert motion.push_time == pytest.approx(10.0 / 40.0 + 0.01)
+    assert motion.travel(0.0) == 0.0 and motion.speed_at(0.0) == 0.0
+    assert motion.travel(0.01) == pytest.approx(0.5 * 40.0 * 0.01**2 / 0.02)
+    assert motion.travel(0.02 - 1e-9) == pytest.approx(motion.travel(0.02 + 1e-9), abs=1e-6)
+    assert motion.travel(motion.push_time) == pytest.approx(10.0)
+    assert motion.travel(1.0) == pytest.approx(10.0) and motion.speed_at(1.0) == 0.0
+    jump = PlungerMotion(speed=40.0, ramp=0.0, distance=10.0)
+    assert jump.push_time == pytest.approx(0.25) and jump.speed_at(0.0) == 40.0
+    short = PlungerMotion(speed=40.0, ramp=1.0, distance=1.0)  # arrives while accelerating
+    assert short.travel(short.push_time) == pytest.approx(1.0)
+
+
+def test_cached_fold_is_keyed_by_the_lens_and_fold_parameters(tmp_path, monkeypatch):
+    """A cached fold is reused only for the same lens and fold: another haptic thickness or
+    resolution is another key; injection-only parameters (plunger speed) are not."""
+    import dataclasses
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    params = iol_injection.Parameters()
+    key = iol_injection.fold_cache_path(params)
+    assert key.parent == tmp_path / "eyemech" / "iol-fold"
+    assert iol_injection.fold_cache_path(dataclasses.replace(params, plunger_speed=20.0)) == key
+    for change in ({"haptic_thickness": 0.09}, {"resolution": "coarse"}, {"fold_radius": 0.9}):
+        assert iol_injection.fold_cache_path(dataclasses.replace(params, **change)) != key
+
+
+def test_fold_first_run_reuses_the_cached_fold(tmp_path, monkeypatch):
+    """With folded_state='' a fold cached for these parameters (and this code) is loaded
+    instead of folding again: the fold is not called, the lens starts folded, and the run
+    says which file it used."""
+    import shutil
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    params = iol_injection.Parameters(resolution="coarse")
+    cached = iol_injection.fold_cache_path(params)
+    cached.parent.mkdir(parents=True)
+    shutil.copy(FOLDED, cached)
+    start = {}
+
+    def no_fold(*_args):
+        raise AssertionError("folded again although a fold of these parameters was cached")
+
+    monkeypatch.setattr(iol_injection.iol_fold, "fold", no_fold)
+    monkeypatch.setattr(iol_injection, "inject", lambda _p, _ctx, shell: start.update(u=shell.u.x.array.copy()))
+    monkeypatch.setattr(iol_injection, "report", lambda *_args: None)
+    result = iol_injection.run(params, options=RunOptions(fields=False, pictures=False, quiet=True))
+    assert result.quantities["fold_cache"] == str(cached)
+    assert np.abs(start["u"]).max() > 0.5  # the folded state (mm), not the flat lens
+
+
 @pytest.fixture(scope="module")
 def injection():
     pytest.importorskip("ipctk")
