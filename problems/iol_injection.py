@@ -390,7 +390,8 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
         haptic_max_strain=float(max(h["strain"], default=0.0)),
         min_self_distance_mm=float(min(distances)) if distances else None,
         self_intersecting=bool(any(h["intersecting"])),
-        self_contact_forces=iol_fold._self_contact_kind(params),
+        self_contact_forces=(iol_fold._self_contact_kind(params) if params.contact
+                             else "not applied (contact=false)"),
         self_contact_seconds=getattr(h["self_contact"], "seconds", 0.0),
         ccd_limited_updates=len(getattr(h["self_contact"], "step_limits", [])),
         lens_exited=bool(exited),
