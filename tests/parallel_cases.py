@@ -24,6 +24,9 @@ class Case:
     # why the case runs only with EYEMECH_PARALLEL_SLOW=1 ("" = always)
     slow: str = ""
     xfail: dict[int, str] = dataclasses.field(default_factory=dict)  # ranks -> known reason
+    # a scene that is serial by design: on more ranks it must refuse with exit code 2 (bad
+    # input, before any solve) and this text in rank 0's message ("" = runs on any count)
+    refused_on_more_ranks: str = ""
 
 
 def wall_clock(key: str) -> bool:
@@ -58,9 +61,15 @@ CASES: dict[str, Case] = {
                                    "active set, so the Newton path (10 or 12 iterations) "}),
     "cook-membrane": Case(dict(elements_per_side=4)),
     "hemisphere": Case(dict(divisions=6)),
+    # P = 40 of Sze's 400 in 2 load steps: radial displacements 0.65 and 0.71 (16 R h), well
+    # into the nonlinear range (linear theory: 1.9), 6 Newton iterations per step
+    "hemisphere-nonlinear": Case(dict(divisions=4, force=40.0, load_steps=2)),
     "hertz": Case(dict(mesh_size=0.03, far_size=0.5)),
     "iol-fold": Case(dict(fold_time=0.01, time_step=0.01, frames=1, mesh_size=1.5),
                      slow=LENS_COST, xfail={3: FOLD_PATH}),
+    # one core by design (it measures steps per second of one process): the 2/3-rank runs
+    # check that it refuses cleanly (exit 2, one message, no rank hanging)
+    "iol-speed": Case(dict(steps=2, mesh_scale=2.0), refused_on_more_ranks="measures one core"),
     "iol-injection": Case(dict(fold_time=0.01, frames=1, mesh_size=1.5, time_step=0.02,
                                plunger_speed=25.0, settle_time=0.0, plunger_overshoot=0.0),
                           slow=LENS_COST + "; at these settings the push takes 356 steps "
@@ -81,6 +90,11 @@ CASES: dict[str, Case] = {
               "finite-element pattern, jacobian_nonzeros_fe, is compared exactly"}),
     "scleral-buckling": Case(dict(resolution="coarse")),
     "scordelis-lo": Case(dict(divisions=4)),
+    # 0.0005 N/mm (Sze's path ends at 0.8): tip deflection 0.044 mm = 1.5 thicknesses, so the
+    # membrane terms act, in 2 load steps without cut-backs (at 0.002 N/mm the coarse ring
+    # cuts steps, and the step sequence would then depend on round-off)
+    "slit-annular-plate": Case(dict(divisions=12, radial_divisions=2, line_load=0.0005,
+                                    load_steps=2)),
     "sls-creep": Case(dict(t_end=10.0, dt=2.0)),
     "sphere-inflation": Case(dict(mesh_size=3.0)),
     "tonometry": Case(dict(mesh_size=1.5, azimuthal_divisions=8, layers=1)),

@@ -66,20 +66,47 @@ def _run_job(ranks: int, out: Path, names: list[str]) -> None:
                     f"{[f.name for f in unfinished]}:\n{said}{done.stderr[-2000:]}")
 
 
+def _selected(session) -> set[str] | None:
+    """Scenes of the tests pytest selected (``-k iol``: only those run), None = all."""
+    names = set()
+    for item in session.items:
+        if item.module.__name__ != __name__ or "runs" not in item.fixturenames:
+            continue
+        params = getattr(item, "callspec", None)
+        if params is None or "name" not in params.params:
+            return None  # a test of a fixed scene (contact pairs): every scene
+        names.add(params.params["name"])
+    return names or None
+
+
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def runs(tmp_path_factory, request):
     """ranks -> output folder of the job that ran its scenes (run on first use)."""
     cache: dict[int, Path] = {}
+    selected = _selected(request.session)
 
     def get(ranks: int) -> Path:
         if ranks not in cache:
             out = tmp_path_factory.mktemp(f"ranks{ranks}")
             names = [n for n in CASES if (ranks == 1 or ranks in ranks_of(n))
-                     and (SLOW or not CASES[n].slow)]
+                     and (SLOW or not CASES[n].slow) and (selected is None or n in selected)]
             _run_job(ranks, out, names)
             cache[ranks] = out
         return cache[ranks]
     return get
+
+
+def _refused(folder: Path, name: str, ranks: int) -> bool:
+    """A serial-only scene on more ranks: it must have refused as bad input (exit code 2)
+    with its reason in rank 0's message."""
+    why = CASES[name].refused_on_more_ranks
+    if not why or ranks == 1:
+        return False
+    scene = folder / name
+    code = (scene / "exit_code").read_text().strip()
+    stderr = (scene / "rank0.stderr").read_text()
+    assert code == "2" and why in stderr, f"{name} on {ranks} ranks: exit {code}, not refused:\n{stderr[-2000:]}"
+    return True
 
 
 def _result(folder: Path, name: str, ranks: int) -> dict:
@@ -141,6 +168,8 @@ COMPARED = [pytest.param(name, ranks, id=f"{name}-{ranks}", marks=_compare_marks
 def test_same_quantities_on_more_ranks(runs, name, ranks):
     case = CASES[name]
     serial = _result(runs(1), name, 1)
+    if _refused(runs(ranks), name, ranks):
+        return
     parallel = _result(runs(ranks), name, ranks)
     assert parallel["mpi_size"] == ranks
     ours, theirs = dict(_flat(serial["quantities"])), dict(_flat(parallel["quantities"]))
@@ -163,13 +192,18 @@ def test_same_quantities_on_more_ranks(runs, name, ranks):
 @pytest.mark.parametrize("name, ranks", CASES_AND_RANKS)
 def test_only_rank_0_prints(runs, name, ranks):
     folder = runs(ranks) / name
-    _result(runs(ranks), name, ranks)
+    refused = _refused(runs(ranks), name, ranks)
+    if not refused:
+        _result(runs(ranks), name, ranks)
     printed = {f"rank{r}.{s}": (folder / f"rank{r}.{s}").read_text()
                for r in range(1, ranks) for s in ("stdout", "stderr")}
     printed = {k: v for k, v in printed.items() if v.strip()}
     assert not printed, f"{name}: ranks other than 0 printed:\n" + \
         "\n".join(f"--- {k}\n{v[-1500:]}" for k, v in printed.items())
     stdout = (folder / "rank0.stdout").read_text().strip().splitlines()
+    if refused:  # one message on rank 0's stderr, nothing on its stdout
+        assert not stdout and len((folder / "rank0.stderr").read_text().strip().splitlines()) == 1
+        return
     assert len(stdout) == 1 and stdout[0].startswith("{"), stdout[:10]  # --json --quiet: one line
 
 
