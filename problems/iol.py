@@ -53,7 +53,7 @@ class LensParameters(SceneParameters):
     damping: float = field(2.0e4, "mass-proportional damping c standing in for the viscoelastic "
                                   "fluid: c = μ/(δ ρ h), μ ≈ 10 Pa·s over a δ ≈ 2 mm layer", "1/s")
     self_contact: bool = field(True, "lens self-contact by ipctk's barrier with CCD-limited Newton steps "
-                                     "(needs ipctk and one rank)")
+                                     "(needs ipctk)")
     self_contact_distance: float = field(0.05, "barrier reach d̂: mid-surfaces closer than this repel", "mm")
     self_contact_stiffness: float = field(1.0, "barrier stiffness κ (Π = κ Σ b(d², d̂²); at d = d̂/2 a pair "
                                                "pushes with ≈ 4.3 κ d̂³)", "N/mm³")
@@ -217,7 +217,8 @@ def load_state(path: Path, shell: LensShell) -> None:
 
 def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=None):
     """The lens' self-contact (:class:`~eyemech.problems.iol_self_contact.SelfContact`), or
-    None when ``self_contact`` is off. Needs ipctk (the ``iol`` extra) and one rank."""
+    None when ``self_contact`` is off. Needs ipctk (the ``iol`` extra); on N ranks rank 0
+    evaluates it on the gathered lens."""
     if not params.self_contact:
         return None
     try:
@@ -225,9 +226,6 @@ def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=No
     except ImportError as err:
         raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
                              "or set self_contact=false") from err
-    if shell.mesh.comm.size != 1:
-        raise ParameterError("self_contact", "runs on one rank only (ipctk works on the whole lens); "
-                             "run serially or set self_contact=false")
     from eyemech.problems.iol_self_contact import SelfContact
 
     return SelfContact(shell.u, params.self_contact_distance, params.self_contact_stiffness,

@@ -46,7 +46,20 @@ the start of the step (x_n) and Δx = x − x_n; f₀ is C¹, linear (viscous) b
 ``slip`` (mm per step) and |·| above it. Residual += ∇D, Jacobian += ∇²D (PSD-projected:
 unprojected, Newton wandered).
 
-Serial only (ipctk works on the whole surface; the lens is small).
+**On N ranks** (session 5). ipctk works on one whole surface, and the lens is small (≈ 1700
+collision vertices, ≈ 5000 dofs), so rank 0 holds the whole collision mesh and evaluates
+everything; the other ranks only exchange arrays with it (see :class:`_Lens`):
+- the node numbering is DOLFINx's global one: rank r owns the nodes
+  ``[start_r, start_r + n_r)`` and the ranks' ranges follow each other, so gathering the
+  owned nodes in rank order gives the nodes in global order (the collision faces of the
+  owned cells are gathered in that numbering);
+- every evaluation gathers the owned positions to rank 0; it returns the barrier (+ friction)
+  gradient rows, and the Hessian entries with their PETSc row/column indices, to the rank
+  owning each row, which adds them to its owned residual rows / Jacobian rows;
+- the CCD step fraction, the minimum distance and the intersection test are broadcast: every
+  rank scales the Newton update by the same fraction (taken as an ``allreduce(MIN)`` of it,
+  so no rank can step further than another), and an intersecting state is refused on all.
+On one rank all of this is the identity (the same code path as before).
 """
 
 from __future__ import annotations
@@ -88,31 +101,138 @@ class SelfContactError(RuntimeError):
     """The state handed to the self-contact is already intersecting (or touching)."""
 
 
+class _Lens:
+    """How the distributed P1/P2 vector field ``u`` maps onto rank 0's whole lens.
+
+    Rank r owns nodes ``local_range`` = [start_r, end_r) of DOLFINx's global node numbering,
+    stored first in its arrays, and the ranges follow each other in rank order: gathering
+    the owned rows in rank order gives the global order. A node's dofs in the PETSc system
+    (u the first, or only, block of the unknowns) are ``row_start_r + 3 (g − start_r) + c``
+    with ``row_start_r`` the owner's first row (equal to 3 g + c with u alone)."""
+
+    def __init__(self, V):
+        self.comm = V.mesh.comm
+        self.root = self.comm.rank == 0
+        index_map = V.dofmap.index_map
+        self.n_owned = index_map.size_local
+        self.start = index_map.local_range[0]
+        self.local_to_global = index_map.local_to_global
+        # every rank's first node (and, after ``set_rows``, first PETSc row)
+        self.node_starts = np.array(self.comm.allgather(self.start) + [index_map.size_global])
+        self.row_starts: np.ndarray | None = None
+
+    def gather_rows(self, owned: np.ndarray) -> np.ndarray | None:
+        """Owned rows (n_owned, ...) of every rank, stacked in global order on rank 0."""
+        if self.comm.size == 1:
+            return owned
+        parts = self.comm.gather(np.ascontiguousarray(owned), root=0)
+        return np.concatenate(parts) if self.root else None
+
+    def gather_positions(self, X_owned: np.ndarray, values: np.ndarray) -> np.ndarray | None:
+        """Positions X + u of all nodes (F-ordered, for ipctk) on rank 0, None elsewhere."""
+        x = self.gather_rows(X_owned + values[: 3 * self.n_owned].reshape(-1, 3))
+        return np.asfortranarray(x) if self.root else None
+
+    def bcast(self, value):
+        return value if self.comm.size == 1 else self.comm.bcast(value, root=0)
+
+    def scatter_gradient(self, grad: np.ndarray | None) -> np.ndarray:
+        """Each rank's owned rows (3 n_owned) of rank 0's gradient (3 N)."""
+        if self.comm.size == 1:
+            return grad
+        parts = None
+        if self.root:
+            parts = [grad[3 * a: 3 * b] for a, b in zip(self.node_starts[:-1], self.node_starts[1:])]
+        return self.comm.scatter(parts, root=0)
+
+    def set_rows(self, row_start: int) -> None:
+        """The PETSc row of this rank's first owned u dof (from the Jacobian's ownership)."""
+        if self.row_starts is None:
+            self.row_starts = np.array(self.comm.allgather(int(row_start)))
+
+    def petsc_index(self, dofs: np.ndarray) -> np.ndarray:
+        """PETSc global indices of global u dofs 3 g + c."""
+        nodes = dofs // 3
+        owner = np.searchsorted(self.node_starts, nodes, side="right") - 1
+        return self.row_starts[owner] + dofs - 3 * self.node_starts[owner]
+
+    def scatter_entries(self, rows, cols, values):
+        """Rank 0's entries (global u dofs) -> each owner's (PETSc rows, PETSc cols, values)."""
+        if self.root:
+            rows, cols = self.petsc_index(rows), self.petsc_index(cols)
+        if self.comm.size == 1:
+            return rows, cols, values
+        parts = None
+        if self.root:
+            owner = np.searchsorted(self.row_starts, rows, side="right") - 1
+            order = np.argsort(owner, kind="stable")
+            bounds = np.searchsorted(owner[order], np.arange(self.comm.size + 1))
+            parts = [(rows[order[a:b]], cols[order[a:b]], values[order[a:b]])
+                     for a, b in zip(bounds[:-1], bounds[1:])]
+        return self.comm.scatter(parts, root=0)
+
+
 class SelfContact:
     """ipctk barrier self-contact (and lagged friction) of the vector P1/P2 field ``u`` on a
     triangle mesh, as NonlinearSolver hooks plus a line-search pre-check (see module doc).
 
     ``dhat`` (mm) is the barrier's reach, ``stiffness`` κ (N/mm³: b is in mm⁴), ``friction``
     μ, ``slip`` the friction's regularisation (mm per step), ``excluded_dofs`` local dof
-    indices whose residual rows must stay DOLFINx's (Dirichlet rows)."""
+    indices whose residual rows must stay DOLFINx's (Dirichlet rows).
+
+    On N ranks every public method is collective; ipctk runs on rank 0, where ``X``,
+    ``faces``, ``n_nodes``, ``energy``/``gradient``/``hessian`` refer to the whole lens in
+    DOLFINx's global node numbering (on other ranks ``X`` and ``faces`` are None)."""
 
     def __init__(self, u: dolfinx.fem.Function, dhat: float, stiffness: float, *,
                  friction: float = 0.0, slip: float = 1e-3, exclusion: float | None = None,
                  excluded_dofs: np.ndarray | None = None):
-        import ipctk
-
         V = u.function_space
-        if V.mesh.comm.size != 1:
-            raise NotImplementedError("lens self-contact runs on one rank (ipctk works on the "
-                                      "whole surface)")
-        self._ipctk = ipctk
+        self.lens = lens = _Lens(V)
         self.u = u
         self.dhat, self.stiffness = float(dhat), float(stiffness)
         self.friction, self.slip = float(friction), float(slip)
         degree = V.ufl_element().basix_element.degree
-        self.X = np.asfortranarray(V.tabulate_dof_coordinates())
-        self.n_nodes = len(self.X)
-        faces = collision_faces(V.dofmap.list, degree)
+        self._X_owned = V.tabulate_dof_coordinates()[: lens.n_owned]
+        owned_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+        cell_nodes = V.dofmap.list[:owned_cells]
+        cell_nodes = lens.local_to_global(cell_nodes.ravel()).reshape(cell_nodes.shape)
+        faces = lens.gather_rows(collision_faces(cell_nodes, degree))
+        X = lens.gather_rows(self._X_owned)
+        # Dirichlet rows (owned or ghost here) as global dofs, on rank 0
+        excluded = np.zeros(0, np.int64) if excluded_dofs is None else np.asarray(excluded_dofs, np.int64)
+        excluded = 3 * lens.local_to_global((excluded // 3).astype(np.int32)).astype(np.int64) + excluded % 3
+        excluded = lens.comm.gather(excluded, root=0) if lens.comm.size > 1 else [excluded]
+        self.keep_owned = np.ones(3 * lens.n_owned, bool)
+        if excluded_dofs is not None:
+            local = np.asarray(excluded_dofs)
+            self.keep_owned[local[local < 3 * lens.n_owned]] = False
+        self.seconds = 0.0
+        self.step_limits: list[float] = []  # CCD fractions < 1 applied to Newton updates
+        self.X = self.faces = None
+        self.n_nodes = lens.bcast(len(X) if lens.root else None)
+        problem = None
+        if lens.root:
+            try:
+                self._build(X, faces, np.concatenate(excluded), exclusion)
+            except SelfContactError as err:
+                problem = str(err)
+        self._raise_everywhere(problem)
+        self.exclusion = lens.bcast(getattr(self, "exclusion", None))
+        self.excluded_pairs = lens.bcast(getattr(self, "excluded_pairs", None))
+
+    def _raise_everywhere(self, problem: str | None) -> None:
+        problem = self.lens.bcast(problem)
+        if problem is not None:
+            raise SelfContactError(problem)
+
+    def _build(self, X: np.ndarray, faces: np.ndarray, excluded: np.ndarray,
+               exclusion: float | None) -> None:
+        """Rank 0: the whole lens' ipctk collision mesh, exclusions, barrier and CCD."""
+        import ipctk
+
+        self._ipctk = ipctk
+        self.X = np.asfortranarray(X)
         self.faces = np.asfortranarray(faces.astype(np.int32))
         self.edges = np.asfortranarray(ipctk.edges(self.faces))
         self.mesh = ipctk.CollisionMesh(self.X, self.edges, self.faces)
@@ -131,14 +251,11 @@ class SelfContact:
         self._ccd = ipctk.AdditiveCCD(conservative_rescaling=0.9)
         self.friction_potential = ipctk.FrictionPotential(self.slip) if self.friction > 0 else None
         self.keep = np.ones(3 * self.n_nodes, bool)
-        if excluded_dofs is not None:
-            self.keep[np.asarray(excluded_dofs)] = False
+        self.keep[excluded] = False
         self._tangential = None
         self._cache = None
         self._x_start = self.X.copy()
-        self.seconds = 0.0
-        self.step_limits: list[float] = []  # CCD fractions < 1 applied to Newton updates
-        self.check(self.X, "the reference (flat) lens")
+        self._check_root(self.X, "the reference (flat) lens")
 
     def _near_along_the_surface(self, radius: float) -> np.ndarray:
         """Vertex pairs (i < j) joined by a path of collision edges shorter than ``radius``:
@@ -155,9 +272,11 @@ class SelfContact:
         return near[near[:, 0] < near[:, 1]]
 
     # -- state ------------------------------------------------------------------------------
-    def positions(self, values: np.ndarray | None = None) -> np.ndarray:
+    def positions(self, values: np.ndarray | None = None) -> np.ndarray | None:
+        """Positions of all nodes on rank 0 (None elsewhere; collective): X + ``values`` (this
+        rank's local dof array, owned first; default u's)."""
         values = self.u.x.array if values is None else values
-        return np.asfortranarray(self.X + values[: 3 * self.n_nodes].reshape(-1, 3))
+        return self.lens.gather_positions(self._X_owned, values)
 
     def _collisions(self, x: np.ndarray, reach: float | None = None):
         """The pairs closer than ``reach`` (d̂): the barrier's at the last x are kept, since
@@ -173,9 +292,20 @@ class SelfContact:
         return collisions
 
     def check(self, x: np.ndarray | None = None, what: str = "the lens") -> None:
-        """Raise :class:`SelfContactError` when ``x`` intersects itself or has pairs closer
-        than d̂ (the barrier would be infinite or active before anything moved)."""
+        """Raise :class:`SelfContactError` (on every rank) when ``x`` (rank 0's positions;
+        default the current state) intersects itself."""
         x = self.positions() if x is None else x
+        problem = None
+        if self.lens.root:
+            try:
+                self._check_root(x, what)
+            except SelfContactError as err:
+                problem = str(err)
+        self._raise_everywhere(problem)
+
+    def _check_root(self, x: np.ndarray, what: str) -> None:
+        """Rank 0: intersecting, or (the reference) non-excluded pairs closer than d̂ (the
+        barrier would be infinite or active before anything moved)."""
         if self._ipctk.has_intersections(self.mesh, x):
             raise SelfContactError(f"{what} intersects itself: the barrier cannot start from it")
         if what.startswith("the reference") and len(self._collisions(x)):
@@ -184,19 +314,27 @@ class SelfContact:
 
     def min_distance(self, reach: float = 0.25) -> float:
         """Smallest distance (mm) between non-excluded primitives within ``reach``
-        (``inf`` when none is that close)."""
-        collisions = self._collisions(self.positions(), max(reach, self.dhat))
-        if not len(collisions):
-            return float("inf")
-        return float(np.sqrt(collisions.compute_minimum_distance(self.mesh, self.positions())))
+        (``inf`` when none is that close); the same on every rank."""
+        x = self.positions()
+        distance = None
+        if self.lens.root:
+            collisions = self._collisions(x, max(reach, self.dhat))
+            distance = float(np.sqrt(collisions.compute_minimum_distance(self.mesh, x))) \
+                if len(collisions) else float("inf")
+        return self.lens.bcast(distance)
 
     def intersecting(self) -> bool:
-        return bool(self._ipctk.has_intersections(self.mesh, self.positions()))
+        x = self.positions()
+        crossing = bool(self._ipctk.has_intersections(self.mesh, x)) if self.lens.root else None
+        return self.lens.bcast(crossing)
 
     def begin_step(self, x: np.ndarray | None = None) -> None:
         """Lag the friction's normal forces and tangent bases at the current (converged)
-        state (or ``x``); call before every attempt of a time step (u is then u_n)."""
-        self._x_start = self.positions() if x is None else np.asfortranarray(x)
+        state (or rank 0's ``x``); call before every attempt of a time step (u is then u_n)."""
+        x = self.positions() if x is None else x
+        if not self.lens.root:
+            return
+        self._x_start = np.asfortranarray(x)
         if self.friction_potential is None:
             return
         normal = self._collisions(self._x_start)
@@ -227,43 +365,65 @@ class SelfContact:
                                                           x - self._x_start, psd)
         return hess
 
-    def _x_of(self, vec: PETSc.Vec) -> np.ndarray:
-        return np.asfortranarray(self.X + vec.array_r[: 3 * self.n_nodes].reshape(-1, 3))
+    def _x_of(self, vec: PETSc.Vec) -> np.ndarray | None:
+        """Rank 0: all positions at the SNES iterate ``vec`` (u its first block)."""
+        return self.lens.gather_positions(self._X_owned, vec.array_r)
 
     def residual_hook(self, x_vec: PETSc.Vec, F: PETSc.Vec) -> None:
         start = time.perf_counter()
-        grad = self.gradient(self._x_of(x_vec))
-        with F.localForm() as local:
-            local.array[: 3 * self.n_nodes][self.keep] += grad[self.keep]
+        x = self._x_of(x_vec)
+        grad = None
+        if self.lens.root:
+            grad = self.gradient(x)
+            grad[~self.keep] = 0.0
+        owned = self.lens.scatter_gradient(grad)
+        array = F.getArray()  # the owned entries (u's first)
+        array[: owned.size] += np.where(self.keep_owned, owned, 0.0)
         self.seconds += time.perf_counter() - start
 
     def jacobian_hook(self, x_vec: PETSc.Vec, J: PETSc.Mat) -> None:
         start = time.perf_counter()
-        hess = self.hessian(self._x_of(x_vec)).tocoo()
-        mask = (hess.data != 0.0) & self.keep[hess.row] & self.keep[hess.col]
-        if np.any(mask):
+        self.lens.set_rows(J.getOwnershipRange()[0])
+        x = self._x_of(x_vec)
+        entries = None
+        if self.lens.root:
+            hess = self.hessian(x).tocoo()
+            mask = (hess.data != 0.0) & self.keep[hess.row] & self.keep[hess.col]
+            entries = (hess.row[mask].astype(np.int64), hess.col[mask].astype(np.int64), hess.data[mask])
+        count = self.lens.bcast(None if entries is None else len(entries[2]))
+        if count:  # collective: J.assemble() on every rank
             import scipy.sparse
 
-            csr = scipy.sparse.csr_matrix((hess.data[mask], (hess.row[mask], hess.col[mask])),
-                                          shape=hess.shape)
+            rows, cols, values = self.lens.scatter_entries(*(entries or (None,) * 3))
             # distant nodes (a haptic on the optic) are not coupled in the FE pattern
             J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-            rows = np.flatnonzero(np.diff(csr.indptr))
-            for row in rows:
-                cols = csr.indices[csr.indptr[row]:csr.indptr[row + 1]].astype(PETSc.IntType)
-                J.setValues(row, cols, csr.data[csr.indptr[row]:csr.indptr[row + 1]],
-                            addv=PETSc.InsertMode.ADD_VALUES)
+            if len(values):
+                first = int(rows.min())
+                csr = scipy.sparse.csr_matrix((values, (rows - first, cols)),
+                                              shape=(int(rows.max()) - first + 1, J.getSize()[1]))
+                for row in np.flatnonzero(np.diff(csr.indptr)):
+                    span = slice(csr.indptr[row], csr.indptr[row + 1])
+                    J.setValues(first + int(row), csr.indices[span].astype(PETSc.IntType),
+                                csr.data[span], addv=PETSc.InsertMode.ADD_VALUES)
             J.assemble()
         self.seconds += time.perf_counter() - start
 
     def limit_step(self, x_vec: PETSc.Vec, y_vec: PETSc.Vec) -> None:
         """SNES line-search pre-check: the update is x − λ y; scale y so that the straight
-        path from x to x − y is collision free (ipctk CCD)."""
+        path from x to x − y is collision free (ipctk CCD). The fraction is rank 0's (the
+        whole lens), and the minimum over the ranks, so every rank scales alike."""
         start = time.perf_counter()
         x0 = self._x_of(x_vec)
-        x1 = np.asfortranarray(x0 - y_vec.array_r[: 3 * self.n_nodes].reshape(-1, 3))
-        fraction = float(self._ipctk.compute_collision_free_stepsize(self.mesh, x0, x1,
-                                                                     narrow_phase_ccd=self._ccd))
+        n = 3 * self.lens.n_owned
+        x1 = self.lens.gather_positions(self._X_owned, x_vec.array_r[:n] - y_vec.array_r[:n])
+        fraction = 1.0
+        if self.lens.root:
+            fraction = float(self._ipctk.compute_collision_free_stepsize(self.mesh, x0, x1,
+                                                                         narrow_phase_ccd=self._ccd))
+        if self.lens.comm.size > 1:
+            from mpi4py import MPI
+
+            fraction = self.lens.comm.allreduce(fraction, op=MPI.MIN)
         if fraction < 1.0:
             y_vec.scale(fraction)
             self.step_limits.append(fraction)
