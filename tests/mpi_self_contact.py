@@ -37,26 +37,14 @@ import ufl
 from scipy.spatial import cKDTree
 
 from eyemech.problems.iol_self_contact import SelfContact
+from sheets import GAP, two_sheets
 
-GAP, DHAT = 0.1, 0.05
+DHAT = 0.05
 
 
-def two_sheets(comm: MPI.Comm, n: int = 4):
-    """tests/test_iol_self_contact.py's sheets: the unit square at z = 0 and 0.2 … 0.8 at
-    z = GAP, n × n × 2 triangles each; rank 0 of ``comm`` holds the input."""
-    s = np.linspace(0.0, 1.0, n + 1)
-    X, Y = np.meshgrid(s, s, indexing="ij")
-    square = np.column_stack([X.ravel(), Y.ravel()])
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    tris = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
-    points = np.vstack([np.column_stack([square, np.zeros(len(square))]),
-                        np.column_stack([0.2 + 0.6 * square, np.full(len(square), GAP)])])
-    cells = np.vstack([tris, tris + len(square)]).astype(np.int64)
-    if comm.rank != 0:
-        points, cells = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    element = basix.ufl.element("Lagrange", "triangle", 1, shape=(3,))
-    mesh = dolfinx.mesh.create_mesh(comm, cells, element, points)
+def p2_sheets(comm: MPI.Comm):
+    """tests/sheets.py's two sheets on ``comm``, with the lens' P2 vector space."""
+    mesh = two_sheets(comm)
     return dolfinx.fem.functionspace(mesh, basix.ufl.element("Lagrange", "triangle", 2, shape=(3,)))
 
 
@@ -113,8 +101,8 @@ def evaluate(V) -> dict:
 
 def main() -> int:
     comm = MPI.COMM_WORLD
-    parallel = evaluate(two_sheets(comm))
-    serial = evaluate(two_sheets(MPI.COMM_SELF))
+    parallel = evaluate(p2_sheets(comm))
+    serial = evaluate(p2_sheets(MPI.COMM_SELF))
     _, match = cKDTree(serial["X"]).query(parallel["X"])
 
     def worst(key: str) -> float:

@@ -23,33 +23,16 @@ import basix.ufl
 import dolfinx.fem
 import dolfinx.mesh
 import ufl
-from mpi4py import MPI
 
 pytest.importorskip("ipctk")
 
 from eyemech.problems.driver import NewtonOptions, NonlinearSolver, Stepping, follow_path  # noqa: E402
 from eyemech.problems.iol_self_contact import SelfContact, SelfContactError  # noqa: E402
+from sheets import GAP, two_sheets  # noqa: E402
 
-GAP = 0.1  # mm between the two sheets
 STIFF, FRIC, STEPS = 10.0, 0.2, 2  # two increments: the first would cross without the CCD
 
 
-def two_sheets(n: int = 4, gap: float = GAP):
-    """A unit square (z = 0) and, ``gap`` above it, a smaller one (0.2 … 0.8, so that it
-    cannot slip past the lower one's edges), n × n × 2 triangles each, one mesh."""
-    s = np.linspace(0.0, 1.0, n + 1)
-    X, Y = np.meshgrid(s, s, indexing="ij")
-    square = np.column_stack([X.ravel(), Y.ravel()])
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    tris = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
-    points = np.vstack([np.column_stack([square, np.zeros(len(square))]),
-                        np.column_stack([0.2 + 0.6 * square, np.full(len(square), gap)])])
-    cells = np.vstack([tris, tris + len(square)]).astype(np.int64)
-    element = basix.ufl.element("Lagrange", "triangle", 1, shape=(3,))
-    if MPI.COMM_WORLD.rank != 0:
-        points, cells = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    return dolfinx.mesh.create_mesh(MPI.COMM_SELF, cells, element, points)
 
 
 @pytest.fixture(scope="module")
