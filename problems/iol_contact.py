@@ -291,10 +291,10 @@ class SelfDistance:
         cheap and always done, the distance search only when ``distances``."""
         ipctk = self._ipctk
         if not distances:
-            return float("nan"), bool(ipctk.has_intersections(self.mesh, x))
+            return float("nan"), bool(ipctk.has_intersections(self.mesh, x, broad_phase=ipctk.BVH()))
         collisions = ipctk.NormalCollisions()
         t0 = time.perf_counter()
-        collisions.build(self.mesh, x, search_radius)
+        collisions.build(self.mesh, x, search_radius, broad_phase=ipctk.BVH())
         self.timing = [time.perf_counter() - t0, len(collisions)]
         best = np.inf
         for i in range(len(collisions)):
@@ -313,6 +313,6 @@ class SelfDistance:
         collision = None
         del collision, collisions
         t0 = time.perf_counter()
-        crossing = bool(ipctk.has_intersections(self.mesh, x))
+        crossing = bool(ipctk.has_intersections(self.mesh, x, broad_phase=ipctk.BVH()))
         self.timing.append(time.perf_counter() - t0)
         return best, crossing

@@ -286,7 +286,7 @@ class SelfContact:
         if reach == self.dhat and self._cache is not None and np.array_equal(self._cache[0], x):
             return self._cache[1]
         collisions = self._ipctk.NormalCollisions()
-        collisions.build(self.mesh, x, reach)
+        collisions.build(self.mesh, x, reach, broad_phase=self._ipctk.BVH())
         if reach == self.dhat:
             self._cache = (x.copy(), collisions)
         return collisions
@@ -306,7 +306,7 @@ class SelfContact:
     def _check_root(self, x: np.ndarray, what: str) -> None:
         """Rank 0: intersecting, or (the reference) non-excluded pairs closer than d̂ (the
         barrier would be infinite or active before anything moved)."""
-        if self._ipctk.has_intersections(self.mesh, x):
+        if self._ipctk.has_intersections(self.mesh, x, broad_phase=self._ipctk.BVH()):
             raise SelfContactError(f"{what} intersects itself: the barrier cannot start from it")
         if what.startswith("the reference") and len(self._collisions(x)):
             raise SelfContactError(f"{what} has non-excluded pairs closer than d̂ = {self.dhat} mm: "
@@ -325,7 +325,8 @@ class SelfContact:
 
     def intersecting(self) -> bool:
         x = self.positions()
-        crossing = bool(self._ipctk.has_intersections(self.mesh, x)) if self.lens.root else None
+        crossing = bool(self._ipctk.has_intersections(self.mesh, x, broad_phase=self._ipctk.BVH())) \
+            if self.lens.root else None
         return self.lens.bcast(crossing)
 
     def begin_step(self, x: np.ndarray | None = None) -> None:
@@ -418,8 +419,8 @@ class SelfContact:
         x1 = self.lens.gather_positions(self._X_owned, x_vec.array_r[:n] - y_vec.array_r[:n])
         fraction = 1.0
         if self.lens.root:
-            fraction = float(self._ipctk.compute_collision_free_stepsize(self.mesh, x0, x1,
-                                                                         narrow_phase_ccd=self._ccd))
+            fraction = float(self._ipctk.compute_collision_free_stepsize(
+                self.mesh, x0, x1, broad_phase=self._ipctk.BVH(), narrow_phase_ccd=self._ccd))
         if self.lens.comm.size > 1:
             from mpi4py import MPI
 

@@ -156,3 +156,48 @@ def test_an_intersecting_start_is_refused(sheets):
     values[upper, 2] = -3 * GAP * (X[upper, 0] - 0.2) / 0.6  # tilted through the lower sheet
     with pytest.raises(SelfContactError, match="intersects"):
         contact.check()
+
+
+FLUNG_NODE = r"""
+import resource, sys
+sys.path.insert(0, sys.argv[1])
+import numpy as np
+from test_iol_self_contact import sheets_space
+from eyemech.problems.iol_self_contact import SelfContact
+import dolfinx.fem
+
+V = sheets_space()
+u = dolfinx.fem.Function(V)
+contact = SelfContact(u, dhat=0.05, stiffness=1.0, friction=0.2)
+# 2 GB more address space than now: ipctk's default hash grid needed > 10 GB for this
+with open("/proc/self/status") as status:
+    vm = next(int(line.split()[1]) for line in status if line.startswith("VmSize")) * 1024
+resource.setrlimit(resource.RLIMIT_AS, (vm + 2 * 1024**3, resource.RLIM_INFINITY))
+x = contact.positions()
+x[0] += 1e4  # one node of a diverging Newton iterate, 10 m away
+contact.gradient(x)
+contact.hessian(x)
+assert contact.min_distance() > 0
+y = u.x.petsc_vec.copy()
+y.array[:3] = -1e4  # the update x - y flings node 0
+contact.limit_step(u.x.petsc_vec, y)
+print("bounded")
+"""
+
+
+def sheets_space() -> dolfinx.fem.FunctionSpace:
+    return dolfinx.fem.functionspace(two_sheets(), basix.ufl.element("Lagrange", "triangle", 2, shape=(3,)))
+
+
+def test_a_flung_node_of_a_diverging_iterate_needs_little_memory():
+    """A diverging Newton iterate can throw a node metres away. ipctk's default broad phase
+    (a hash grid of cells the size of an edge) then fills every cell the stretched
+    triangles' boxes cover: > 10 GB in 30 s, and CI's 2-rank iol-fold was OOM-killed
+    (exit 9). The BVH used everywhere here needs memory in the number of primitives only."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    done = subprocess.run([sys.executable, "-c", FLUNG_NODE, str(Path(__file__).parent)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0 and "bounded" in done.stdout, done.stderr[-2000:]

@@ -19,7 +19,6 @@ DOLFINx start once per rank count, not once per scene.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import subprocess
@@ -65,7 +64,8 @@ def _run_job(ranks: int, out: Path, names: list[str]) -> None:
         said = "".join(f"--- {e}\n{e.read_text()[-2000:]}" for f in unfinished
                        for e in sorted(f.glob("rank*.stderr")) if e.read_text().strip())
         pytest.fail(f"{ranks}-rank job ended with {done.returncode} in "
-                    f"{[f.name for f in unfinished]}:\n{said}{done.stderr[-2000:]}")
+                    f"{[f.name for f in unfinished]}:\n{said}{done.stderr[-2000:]}"
+                    f"{done.stdout[-1000:]}")  # mpiexec's BAD TERMINATION banner (a signal)
 
 
 def _selected(session) -> set[str] | None:
