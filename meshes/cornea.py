@@ -24,7 +24,10 @@ take the copies, so the wound can gape; the crack front (the ends and the bottom
 stays connected.
 
 Tags: cell ``cornea``; facets ``anterior``, ``posterior``, ``limbus`` and, with incisions,
-``incision`` (both faces of every cut). Trilinear (faceted) cells, or with ``geometry_degree`` = 2
+``incision`` (both faces of every cut). With ``quarter`` only the quadrant x > 0, y > 0 is
+meshed, its faces on the planes x = 0 and y = 0 tagged ``symmetry_x`` and ``symmetry_y``: valid
+for an even number of incisions (the first at azimuth 0), whose pattern is mirror symmetric
+about both planes. Trilinear (faceted) cells, or with ``geometry_degree`` = 2
 27-node cells whose extra nodes lie on the curved shape.
 """
 
@@ -45,7 +48,7 @@ HEX27_EDGES = ((0, 1), (0, 3), (0, 4), (1, 2), (1, 5), (2, 3), (2, 6), (3, 7), (
                (5, 6), (6, 7))
 HEX27_FACES = ((0, 1, 2, 3), (0, 1, 5, 4), (0, 3, 7, 4), (1, 2, 6, 5), (2, 3, 7, 6), (4, 5, 6, 7))
 QUAD9_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0))
-FACET_NAMES = ("anterior", "posterior", "limbus", "incision")
+FACET_NAMES = ("anterior", "posterior", "limbus", "incision", "symmetry_x", "symmetry_y")
 
 
 def _bad(key: str, message: str) -> MeshError:
@@ -69,6 +72,7 @@ class CorneaGeometry:
     azimuthal_divisions: int = 24   # at least; rounded up to a multiple of lcm(8, incisions)
     layers: int = 2                 # element layers through the thickness (at least)
     geometry_degree: int = 1        # 1: trilinear (faceted) cells; 2: 27-node cells on the shape
+    quarter: bool = False           # only the cells in x > 0, y > 0, with symmetry planes
 
     def validate(self) -> None:
         """MeshError naming the offending value (its ``key`` attribute is the field name);
@@ -85,6 +89,9 @@ class CorneaGeometry:
             raise _bad("geometry_degree", f"geometry_degree must be 1 or 2, got {self.geometry_degree!r}")
         if self.incisions < 0:
             raise _bad("incisions", f"incisions must be >= 0, got {self.incisions}")
+        if self.quarter and self.incisions % 2:
+            raise _bad("incisions", f"a quarter cornea needs an even number of incisions (mirror "
+                       f"symmetric about the planes x = 0 and y = 0), got {self.incisions}")
         if not 0 < self.incision_depth < 1:
             raise _bad("incision_depth", f"incision_depth must lie in (0, 1) (a fraction of the "
                        f"local thickness), got {self.incision_depth}")
@@ -249,7 +256,32 @@ def _hexahedra(g: CorneaGeometry):
     outer = [[h[1], h[2], h[6], h[5]] for h, q in zip(hexes, cell_quad)
              if q >= len(quads) - n_theta]
     faces = {"anterior": top, "posterior": bottom, "limbus": outer, "incision": incision_faces}
+    if g.quarter:
+        return _quarter(g, points, hexes, faces)
     return points, hexes, faces
+
+
+def _quarter(g: CorneaGeometry, points: np.ndarray, hexes: np.ndarray, faces: dict):
+    """The cells in x > 0, y > 0 of the whole cornea, renumbered, with the faces on the
+    planes x = 0 and y = 0 tagged ``symmetry_x`` / ``symmetry_y``. The planform has grid
+    lines at azimuths 0 and 90° (its azimuths are a multiple of 8 and the O-grid core has
+    an even side), so no cell straddles a plane. A cut on a plane keeps the lip of the
+    kept side: the wound face is free, the tissue under it is on the symmetry plane."""
+    centroids = points[hexes].mean(axis=1)
+    hexes = hexes[(centroids[:, 0] > 0) & (centroids[:, 1] > 0)]
+    used = np.unique(hexes)
+    new_id = np.full(len(points), -1, dtype=int)
+    new_id[used] = np.arange(len(used))
+    kept = {name: [list(new_id[q]) for q in quads if np.all(new_id[q] >= 0)]
+            for name, quads in faces.items()}
+    points, hexes = points[used], new_id[hexes]
+    tolerance = 1e-9 * g.diameter
+    wound = {tuple(sorted(q)) for q in kept["incision"]}
+    for name, axis in (("symmetry_x", 0), ("symmetry_y", 1)):
+        kept[name] = [list(h[list(f)]) for h in hexes for f in HEX27_FACES
+                      if np.all(abs(points[h[list(f)], axis]) < tolerance)
+                      and tuple(sorted(h[list(f)])) not in wound]
+    return points, hexes, kept
 
 
 def _mean_shape_point(rows: np.ndarray, polar_from: float) -> np.ndarray:
@@ -314,7 +346,7 @@ def cornea(geometry: CorneaGeometry, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedM
         model.addPhysicalGroup(3, [1], tag=1, name="cornea")
         next_element = len(hexes) + 1
         for tag, name in enumerate(FACET_NAMES, start=1):
-            quads = np.array(faces[name], dtype=int).reshape(-1, facet_nodes)
+            quads = np.array(faces.get(name, []), dtype=int).reshape(-1, facet_nodes)
             if len(quads) == 0:
                 continue
             model.addDiscreteEntity(2, tag)

@@ -37,7 +37,7 @@ from eyemech.problems.output import displacement_grid, render_png
 from eyemech.problems.linear_solvers import SolverChoice
 from eyemech.problems.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import ELEMENTS, global_dofs, mixed_displacement_pressure
+from eyemech.problems.spaces import ELEMENTS, global_dofs, mixed_displacement_pressure, symmetry_bcs
 
 import dolfinx
 
@@ -100,6 +100,8 @@ class Parameters(SceneParameters, SolverChoice):
                                  "cells on the curved surfaces")
     fit_diameter: float = field(3.0, "central zone of the anterior sphere fit", "mm")
     element: Literal["Q2P1"] = field("Q2P1", "element family (hexahedra)")
+    symmetry: Literal["full", "quarter"] = field("full", "mesh the whole cornea, or the quadrant "
+                                                 "x, y > 0 with symmetry planes (even incisions)")
 
     def validate(self) -> None:
         self.require_positive("mu_inf", "mu_v", "tau", "t_end", "first_dt", "iop_mmHg",
@@ -109,6 +111,8 @@ class Parameters(SceneParameters, SolverChoice):
         except MeshError as err:
             raise ParameterError(getattr(err, "key", "geometry"), str(err)) from None
         validate_support(self)
+        if self.symmetry not in ("full", "quarter"):
+            raise ParameterError("symmetry", f"unknown symmetry {self.symmetry!r}; choose full or quarter")
         if not self.dt_growth >= 1.0:
             raise ParameterError("dt_growth", f"must be >= 1, got {self.dt_growth}")
         if self.first_dt > self.t_end:
@@ -120,7 +124,8 @@ class Parameters(SceneParameters, SolverChoice):
         return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,
                               self.limbal_thickness, self.diameter, incisions, self.incision_depth,
                               self.optical_zone, self.incision_end, self.mesh_size,
-                              self.azimuthal_divisions, self.layers, self.geometry_degree)
+                              self.azimuthal_divisions, self.layers, self.geometry_degree,
+                              quarter=self.symmetry == "quarter")
 
     def time_grid(self) -> tuple[float, ...]:
         times, dt, t = [], self.first_dt, 0.0
@@ -152,6 +157,9 @@ class Cornea:
         V = self.u.function_space
         fdim = mesh.topology.dim - 1
         support, self.bcs = limbus_support(params, self.u, v, self.tagged, ds)
+        self.quarter = params.symmetry == "quarter"
+        if self.quarter:
+            self.bcs += symmetry_bcs(V, self.tagged, {"symmetry_x": 0, "symmetry_y": 1})
         if support is not None:
             residual += support
         self.residual_blocks = list(ufl.extract_blocks(residual))
@@ -195,6 +203,9 @@ class Cornea:
         """337.5 / R of the least-squares sphere through the deformed central anterior nodes."""
         displaced = self._fit_x + self.u.x.array.reshape(-1, 3)[self._fit_blocks]
         points = np.vstack(self.comm.allgather(displaced))
+        if self.quarter:  # the whole central zone, so the fit is the full model's
+            points = _mirrored(points, axis=0)
+            points = _mirrored(points, axis=1)
         A = np.hstack([2 * points, np.ones((len(points), 1))])
         b = (points**2).sum(axis=1)
         (cx, cy, cz, d), *_ = np.linalg.lstsq(A, b, rcond=None)
@@ -209,6 +220,15 @@ class Cornea:
         if not self.has_cuts:
             return 0.0
         return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._gape))
+
+
+def _mirrored(points: np.ndarray, axis: int) -> np.ndarray:
+    """``points`` and their mirror images across the plane x[axis] = 0; points on the
+    plane are not doubled, as in the whole model."""
+    off_plane = points[abs(points[:, axis]) > 1e-9]
+    image = off_plane.copy()
+    image[:, axis] *= -1
+    return np.vstack([points, image])
 
 
 def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> dict[str, list]:

@@ -8,6 +8,7 @@ so 2 % is the tolerance.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -101,3 +102,25 @@ def test_cuts_on_neighbouring_grid_lines():
     finer = CorneaGeometry(incisions=8, azimuthal_divisions=16, mesh_size=1.5)
     assert measure(cornea(coarse), "incision") == pytest.approx(measure(cornea(finer), "incision"),
                                                                 rel=1e-9)
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_quarter_cornea_is_a_quadrant_of_the_whole(degree):
+    """The quadrant x, y > 0 of the same planform: exactly a quarter of the whole mesh's
+    cells, volume and wound area (8 cuts: 16 lips, 4 of them in the quadrant — both lips
+    of the 45° cut, one of the cuts on each plane). Its symmetry faces are the meridional
+    sections under the cuts: each the area of the whole mesh's section at azimuth 0 minus
+    the cut, i.e. equal for the two planes."""
+    g = CorneaGeometry(incisions=8, azimuthal_divisions=16, mesh_size=1.5, geometry_degree=degree)
+    whole, quarter = cornea(g), cornea(dataclasses.replace(g, quarter=True))
+    cells = lambda tagged: tagged.mesh.topology.index_map(3).size_global
+    assert cells(quarter) * 4 == cells(whole)
+    assert measure(quarter) == pytest.approx(measure(whole) / 4, rel=1e-12)
+    assert measure(quarter, "incision") == pytest.approx(measure(whole, "incision") / 4, rel=1e-12)
+    assert measure(quarter, "symmetry_x") == pytest.approx(measure(quarter, "symmetry_y"), rel=1e-12)
+    assert measure(quarter, "symmetry_x") > 0
+
+
+def test_a_quarter_cornea_needs_an_even_number_of_incisions():
+    with pytest.raises(MeshError, match="even number of incisions"):
+        CorneaGeometry(incisions=3, quarter=True).validate()
