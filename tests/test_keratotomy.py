@@ -83,6 +83,23 @@ def test_quarter_cornea_gives_the_whole_corneas_numbers(eight_at_3mm):
     assert 4 * quarter["dofs"] < 1.25 * eight_at_3mm["dofs"]  # the quadrant's planes are shared
 
 
+def test_long_creep_ends_at_the_elastic_cornea_of_the_long_time_modulus():
+    """At t ≫ τ the viscous branch has relaxed (Cv → C̄, its stress → 0): the viscoelastic
+    cornea must end where an elastic one of modulus μ∞ is (μv → 1e-6 MPa, one step). The
+    slowest mode (retardation τ (μ∞+μv)/μ∞ = 1.75 τ) decays by 1/(1 + Δt/1.75τ) per backward-
+    Euler step: over these 20 steps (×1.2 each, 30 τ) to 2e-5 of the creep, which is up to
+    70 % of the value (the apex's instantaneous displacement is 0.58 of its long-time one):
+    ≤ 1.4e-5, so 5e-5 (measured: power < 1e-5, apex 1.2e-5; a branch that kept any stress
+    would be off by percent)."""
+    coarse = dict(incisions=8, optical_zone=3.0, symmetry="quarter")
+    creep = solve(**coarse, t_end=30 * 3600.0, first_dt=600.0, dt_growth=1.2)
+    elastic = solve(**coarse, mu_v=1e-6, t_end=300.0, first_dt=300.0)
+    assert creep["power_change_final_D"] == pytest.approx(elastic["power_change_final_D"], rel=5e-5)
+    assert creep["apex_displacement_mm"][-1] == pytest.approx(elastic["apex_displacement_mm"][-1], rel=5e-5)
+    # and the creep is not monotone: the flattening passes its long-time value on the way
+    assert min(creep["power_change_D"]) < elastic["power_change_final_D"] - 0.1
+
+
 def test_quarter_cornea_with_odd_incisions_is_refused():
     with pytest.raises(ParameterError, match="even number") as info:
         build(keratotomy.Parameters, {"incisions": "3", "symmetry": "quarter"})
