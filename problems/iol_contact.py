@@ -17,6 +17,20 @@ with ⟨·⟩ smoothed over ±ε (``smoothing``, 2 µm by default) so that the f
 
 (the curvature term k g ∂n/∂x is left out of the Jacobian: a quasi-Newton tangent).
 k is a nodal stiffness (N/mm); the penetration under a nodal force f is f/k.
+
+**Wall friction** (``friction``: μ for every obstacle, or per obstacle name; only for
+obstacles at rest): the
+lagged, smoothed Coulomb dissipation of IPC (Li et al. 2020) that the lens' self-contact
+uses too. At the start of each time step (:meth:`NodalContact.begin_step`) every pressed
+node keeps its normal force λ = k⟨d⟩ and normal n; within the step its slip is
+s = P (x − xₙ), P = I − n⊗n, and it adds the potential
+
+    D = μ λ f₀(|s|),  f₀(r) = −r³/(3ε²) + r²/ε + ε/3 (r < ε),  r (r ≥ ε),
+
+whose force −∂D/∂x = −μ λ f₁(r) s/r (f₁ = f₀′, 1 beyond ε) opposes the slip with at most
+μλ, and whose Hessian μλ P[(f₁/r) I + (f₁′ − f₁/r) ŝ⊗ŝ]P is positive semidefinite. Lagging λ
+and n makes D a potential within a step (a symmetric tangent); ε = ``slip`` (mm per step)
+is the slip below which the law is viscous instead of sticking.
 """
 
 from __future__ import annotations
@@ -124,13 +138,19 @@ class NodalContact:
     as NonlinearSolver hooks; nodes in ``excluded`` (e.g. prescribed ones) are skipped."""
 
     def __init__(self, u: dolfinx.fem.Function, obstacles: dict, stiffness: float,
-                 excluded: np.ndarray | None = None, smoothing: float = 2e-3):
+                 excluded: np.ndarray | None = None, smoothing: float = 2e-3,
+                 friction: float | dict[str, float] = 0.0, slip: float = 1e-3):
         V = u.function_space
         self.owned = V.dofmap.index_map.size_local
         self.X = V.tabulate_dof_coordinates()[: self.owned]
         self.u, self.obstacles, self.stiffness = u, obstacles, float(stiffness)
         self.comm = V.mesh.comm
         self.smoothing = float(smoothing)
+        # Coulomb μ per obstacle (a number: the same for all; a missing name: frictionless)
+        self.friction = {name: float(friction.get(name, 0.0) if isinstance(friction, dict) else friction)
+                         for name in obstacles}
+        self.slip = float(slip)
+        self._lagged = None  # (nodes, μλ, normals, start positions) of the step's sliders
         self.active = np.ones(self.owned, bool)
         if excluded is not None:
             self.active[excluded[excluded < self.owned]] = False
@@ -160,6 +180,43 @@ class NodalContact:
         slope = np.where(inside, 1.0, (depth + eps) / (2.0 * eps))
         return value, slope
 
+    def begin_step(self) -> None:
+        """Lag the wall friction at the step's start (the current ``u``): each pressed
+        node's normal force, normal and position. A no-op without friction."""
+        if not any(mu > 0.0 for mu in self.friction.values()):
+            return
+        x = self.positions()
+        found = [(nodes, self.friction[name] * self.stiffness * self._smoothed(depth)[0], normal)
+                 for nodes, depth, normal, name in self._pressed(x, self.smoothing)
+                 if self.friction[name] > 0.0]
+        if not found:
+            self._lagged = None
+            return
+        nodes, weight, normal = (np.concatenate(parts) for parts in zip(*found))
+        self._lagged = nodes, weight, normal, x[nodes]
+
+    def _slip(self, x: np.ndarray):
+        """(nodes, μλ, tangential projectors P, slips s, |s|) of the lagged sliders at x."""
+        nodes, weight, normal, start = self._lagged
+        projector = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
+        slip = np.einsum("nij,nj->ni", projector, x[nodes] - start)
+        return nodes, weight, projector, slip, np.linalg.norm(slip, axis=1)
+
+    def _f1(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """f₁(r)/r and f₁′(r) of the smoothed Coulomb law (finite at r = 0)."""
+        eps = self.slip
+        inside = r < eps
+        over_r = np.where(inside, 2.0 / eps - r / eps ** 2, 1.0 / np.maximum(r, eps))
+        slope = np.where(inside, 2.0 / eps - 2.0 * r / eps ** 2, 0.0)
+        return over_r, slope
+
+    def friction_forces(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(nodes, ∂D/∂x per node) at positions x: the residual's friction part."""
+        if self._lagged is None:
+            return np.zeros(0, int), np.zeros((0, 3))
+        nodes, weight, _, slip, r = self._slip(x)
+        return nodes, (weight * self._f1(r)[0])[:, None] * slip
+
     def residual_hook(self, x_vec: PETSc.Vec, F: PETSc.Vec) -> None:
         start = PETSc.Log.getTime()
         x = self.X + x_vec.array_r[: 3 * self.owned].reshape(-1, 3)
@@ -168,7 +225,20 @@ class NodalContact:
             for nodes, depth, normal, _ in self._pressed(x, self.smoothing):
                 force = -self.stiffness * self._smoothed(depth)[0][:, None] * normal
                 np.add.at(values.reshape(-1, 3), nodes, force)
+            nodes, gradient = self.friction_forces(x)
+            np.add.at(values.reshape(-1, 3), nodes, gradient)
         self.seconds += PETSc.Log.getTime() - start
+
+    def friction_hessians(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(nodes, ∂²D/∂x² per node, 3×3) at positions x."""
+        if self._lagged is None:
+            return np.zeros(0, int), np.zeros((0, 3, 3))
+        nodes, weight, projector, slip, r = self._slip(x)
+        over_r, slope = self._f1(r)
+        direction = slip / np.maximum(r, 1e-300)[:, None]
+        inner = (over_r[:, None, None] * np.eye(3)[None]
+                 + (slope - over_r)[:, None, None] * np.einsum("ni,nj->nij", direction, direction))
+        return nodes, weight[:, None, None] * projector @ inner @ projector
 
     def jacobian_hook(self, x_vec: PETSc.Vec, J: PETSc.Mat) -> None:
         start = PETSc.Log.getTime()
@@ -180,6 +250,11 @@ class NodalContact:
             for node, block in zip(nodes, blocks):
                 dofs = np.arange(3 * node, 3 * node + 3, dtype=np.int32)
                 J.setValuesLocal(dofs, dofs, block.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
+            added = True
+        nodes, blocks = self.friction_hessians(x)
+        for node, block in zip(nodes, blocks):
+            dofs = np.arange(3 * node, 3 * node + 3, dtype=np.int32)
+            J.setValuesLocal(dofs, dofs, block.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
             added = True
         if added:
             J.assemble()

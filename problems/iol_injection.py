@@ -66,6 +66,10 @@ class Parameters(iol_fold.Parameters):
     fold_cache: bool = field(True, "with folded_state='': reuse a fold made earlier with the same lens and "
                                    "fold parameters and the same code, from the user's cache folder "
                                    "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold")
+    capsule_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the capsular bag (lagged, "
+                                         "smoothed over friction_slip; 0 = frictionless)")
+    cartridge_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the cartridge bore and nozzle "
+                                           "(0: a coated cartridge lubricated by viscoelastic)")
     start_ramp: float = field(0.0, "the plunger (and the fluid it drives) accelerates from rest to "
                                     "plunger_speed over this time, linearly (0 = a jump to full speed)", "s")
 
@@ -77,7 +81,8 @@ class Parameters(iol_fold.Parameters):
                                  f"than the {self.optic_diameter} mm optic")
         iol_fold.Parameters.validate(self)
         self.require_positive("plunger_speed", "frames_every", "jacobian_lag")
-        self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp", "frame_interval")
+        self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp", "frame_interval",
+                                 "capsule_friction", "cartridge_friction")
         self.require_positive("jet_length")
         if self.plunger_engages not in ("optic", "lens"):
             raise ParameterError("plunger_engages", f"must be 'optic' or 'lens', got {self.plunger_engages!r}")
@@ -264,7 +269,9 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     obstacles = {"cartridge": layout.cartridge(params, lip=layout.nozzle_lip), "plunger": plunger,
                  "capsule": layout.capsule(params)} if params.contact else {}
     walls = {k: v for k, v in obstacles.items() if k != "plunger"}
-    contact = NodalContact(shell.u, walls, params.contact_stiffness)
+    contact = NodalContact(shell.u, walls, params.contact_stiffness, slip=params.friction_slip,
+                           friction={"capsule": params.capsule_friction,
+                                     "cartridge": params.cartridge_friction})
     # the plunger on the optic only: a flat head pressed on the tip of a 0.13 mm haptic strip
     # (Euler load ~1e-5 N against the ~1e-2 N the lens needs to leave the nozzle) crumples
     # it against the optic; Newton then crawls at Δt ≈ 0.1 ms and failed (t = 0.243 s, coarse)
@@ -312,6 +319,7 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
             fluid.begin_step(motion.speed_at(t))
         if self_contact is not None:
             self_contact.begin_step()
+        contact.begin_step()
 
     last_frame = [0.0, 0]  # time and step of the last frame
 

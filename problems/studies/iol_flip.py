@@ -14,7 +14,12 @@ the same for every case, so only the deployment differs. Varied, one at a time:
 - the same at a 10× thinner fluid (damping c = 2e3 /s instead of 2e4 /s) for 0.35 mm
   (0.13 mm there is the next case to add): the capsule's torque turns the optic by
   ∫T dt / (c I), so the fluid sets how much the haptics' stiffness can matter (see
-  ``angular_balance``).
+  ``angular_balance``);
+- friction on the walls, the external moments the frictionless model lacks: Coulomb μ = 1 of
+  the lens on the capsular bag (the leading haptic may stick there while the plunger pushes
+  the optic on) for thin and thick haptics, and μ = 0.3 in the cartridge (an uncoated bore
+  twists the rolled lens about the injector axis) — ``capsule_friction`` /
+  ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/iol_contact.py).
 
 What decides the side it lands on: the optic lands upside down only if it turns by more than
 90° as a rigid body — about the injector axis while it is still rolled (it fits the capsule's
@@ -59,9 +64,15 @@ THICKNESSES = (0.13, 0.25, 0.35, 0.45)
 DEFAULT_DAMPING = 2.0e4  # 1/s: the scene's fluid (≈ 10 Pa·s over 2 mm)
 THIN_FLUID = 2.0e3  # 1/s: ≈ 1 Pa·s, a thinned viscoelastic (the capsule's turning effect ∝ 1/c)
 THIN_FLUID_THICKNESSES = (0.35,)  # 0.13 mm in the thin fluid: not run yet (≈ 30 min here)
+# external moments: friction on the capsular bag (the leading haptic may stick there while the
+# plunger pushes on) and in the cartridge (an uncoated bore twists the rolled lens), thin and
+# thick haptics
+WALL_FRICTION_CASES = [{**BASE, "capsule_friction": 1.0}, {**BASE, "haptic_thickness": 0.35, "capsule_friction": 1.0},
+                       {**BASE, "cartridge_friction": 0.3}]
 CASES = [{**BASE, "friction": mu} for mu in FRICTIONS] + \
         [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]] + \
-        [{**BASE, "haptic_thickness": h, "damping": THIN_FLUID} for h in THIN_FLUID_THICKNESSES]
+        [{**BASE, "haptic_thickness": h, "damping": THIN_FLUID} for h in THIN_FLUID_THICKNESSES] + \
+        WALL_FRICTION_CASES
 QUICK_CASES = [{"haptic_thickness": 0.09, "friction": 0.2}, {"haptic_thickness": 0.18, "friction": 0.2}]
 QUICK_SETTINGS = {"contact": False, "settle_time": 0.0, "plunger_speed": 50.0}
 # frames as .vtu (the roll angle is read from them), no PNGs (25 s a run)
@@ -327,7 +338,8 @@ def chart(rows: list[dict], histories: list[np.ndarray], path: Path, note: str =
     for column, (key, label, fixed) in enumerate(panels):
         top = fig.add_subplot(grid[0, column])
         bottom = fig.add_subplot(grid[1, column], sharex=top)
-        chosen = [r for r in rows if all(r[k] == v for k, v in fixed.items())]
+        chosen = [r for r in rows if all(r[k] == v for k, v in fixed.items())
+                  and not (r.get("capsule_friction") or r.get("cartridge_friction"))]
         for damping in sorted({r["damping"] for r in chosen}, reverse=True):
             group = [r for r in chosen if r["damping"] == damping]
             if key == "friction" and damping != DEFAULT_DAMPING or len(group) < 1:
@@ -350,8 +362,11 @@ def chart(rows: list[dict], histories: list[np.ndarray], path: Path, note: str =
     for row, h in zip(rows, histories):
         if len(h):
             fluid = "" if row["damping"] == DEFAULT_DAMPING else f", c = {row['damping']:g}/s"
-            ax.plot(h[:, 0], h[:, 1], lw=1.2, ls="-" if not fluid else "--",
-                    label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness']:g}{fluid}")
+            walls = "".join(f", μ_{name} = {row[key]:g}" for name, key in (("capsule", "capsule_friction"),
+                                                                          ("cartridge", "cartridge_friction"))
+                            if row.get(key))
+            ax.plot(h[:, 0], h[:, 1], lw=1.2, ls="-" if not (fluid or walls) else ("--" if fluid else "-."),
+                    label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness']:g}{fluid}{walls}")
     for sign in (1, -1):
         ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
     ax.set_xlabel("time (s)")
