@@ -442,7 +442,7 @@ def _fingerprint(mesh) -> list[float]:
     index: equal for the same mesh input on any number of ranks (up to round-off)."""
     tdim = mesh.topology.dim
     owned = mesh.topology.index_map(tdim).size_local
-    x = mesh.geometry.x[mesh.geometry.dofmap[:owned]].mean(axis=1)
+    x = mesh.geometry.x[mesh.geometry.dofmaps[0][:owned]].mean(axis=1)
     weight = (np.asarray(mesh.topology.original_cell_index[:owned]) % 997 + 1.0)[:, None]
     local = np.concatenate([[float(owned)], (weight * x).sum(axis=0)])
     return mesh.comm.allreduce(local, op=MPI.SUM).tolist()

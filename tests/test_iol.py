@@ -49,7 +49,7 @@ def test_lens_mesh_is_the_papers_size_and_graded(lens):
     assert np.allclose(x[:, 2], 0.0)
     # graded: triangles at the junctions are smaller than in the optic's middle
     geo = LensGeometry()
-    nodes_of = mesh.geometry.dofmap
+    nodes_of = mesh.geometry.dofmaps[0]
     centres = x[nodes_of].mean(axis=1)
     sizes = np.linalg.norm(x[nodes_of[:, 1]] - x[nodes_of[:, 0]], axis=1)
     junction = np.min(np.linalg.norm(centres[:, None, :2] - geo.junction_points()[None], axis=2), axis=1)

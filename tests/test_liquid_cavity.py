@@ -51,10 +51,10 @@ def test_formulations_agree_and_real_is_sparse(results, element):
     assert substituted["jacobian_nonzeros"] > 2 * real["jacobian_nonzeros"]
 
 
-def test_two_ranks_same_numbers(results):
+def test_two_ranks_same_numbers(results, tmp_path):
     bindir = Path(sys.executable).parent
     command = [str(bindir / "mpiexec"), "-n", "2", str(bindir / "eyemech"), "run", "liquid-sphere",
-               "--set", "cavity_formulation=substituted", "--json", "--quiet"]
+               "--set", "cavity_formulation=substituted", "--json", "--quiet", "--out", str(tmp_path)]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     done = subprocess.run(command, capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr[-2000:]

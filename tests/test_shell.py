@@ -125,18 +125,19 @@ def test_a_mesh_that_is_not_a_surface_is_refused():
         require_surface(solid)
 
 
-def test_cli_bad_input_exit_code():
+def test_cli_bad_input_exit_code(tmp_path):
     eyemech = Path(sys.executable).parent / "eyemech"
-    run = subprocess.run([str(eyemech), "run", "plate-clamped", "--set", "thickness=0"],
+    run = subprocess.run([str(eyemech), "run", "plate-clamped", "--set", "thickness=0",
+                          "--out", str(tmp_path)],
                          capture_output=True, text=True)
     assert run.returncode == 2
     assert "thickness" in run.stderr
 
 
 @pytest.mark.mpi
-def test_two_ranks_give_the_serial_numbers():
+def test_two_ranks_give_the_serial_numbers(tmp_path):
     bin_dir = Path(sys.executable).parent
-    args = ["run", "plate-clamped", "--set", "divisions=16", "--json"]
+    args = ["run", "plate-clamped", "--set", "divisions=16", "--json", "--out", str(tmp_path)]
     serial = _run(plate_clamped, divisions=16)
     run = subprocess.run([str(bin_dir / "mpiexec"), "-n", "2", str(bin_dir / "eyemech"), *args],
                          capture_output=True, text=True, timeout=600)

@@ -107,11 +107,11 @@ def _row_at(rows: dict[float, dict], force: float) -> dict:
     return rows[min(rows, key=lambda f: abs(f - force))]
 
 
-def test_nonlinear_hemisphere_two_ranks_give_the_serial_numbers():
+def test_nonlinear_hemisphere_two_ranks_give_the_serial_numbers(tmp_path):
     bin_dir = Path(sys.executable).parent
     settings = dict(divisions=4, force=40.0, load_steps=2)
     serial = _run(hemisphere_nonlinear, **settings).quantities
-    args = ["run", "hemisphere-nonlinear", "--json"]
+    args = ["run", "hemisphere-nonlinear", "--json", "--out", str(tmp_path)]
     for key, value in settings.items():
         args += ["--set", f"{key}={value}"]
     run = subprocess.run([str(bin_dir / "mpiexec"), "-n", "2", str(bin_dir / "eyemech"), *args],
