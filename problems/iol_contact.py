@@ -18,12 +18,13 @@ with ⟨·⟩ smoothed over ±ε (``smoothing``, 2 µm by default) so that the f
 (the curvature term k g ∂n/∂x is left out of the Jacobian: a quasi-Newton tangent).
 k is a nodal stiffness (N/mm); the penetration under a nodal force f is f/k.
 
-**Wall friction** (``friction``: μ for every obstacle, or per obstacle name; only for
-obstacles at rest): the
+**Wall friction** (``friction``: μ for every obstacle, or per obstacle name): the
 lagged, smoothed Coulomb dissipation of IPC (Li et al. 2020) that the lens' self-contact
 uses too. At the start of each time step (:meth:`NodalContact.begin_step`) every pressed
-node keeps its normal force λ = k⟨d⟩ and normal n; within the step its slip is
-s = P (x − xₙ), P = I − n⊗n, and it adds the potential
+node keeps its normal force λ = k⟨d⟩, normal n and anchor a — the wall's material point
+under it at the step's end: its position xₙ for a wall at rest, turned with the wall for a
+twisted injector. Within the step its slip is s = P (x − a), P = I − n⊗n, and it adds the
+potential
 
     D = μ λ f₀(|s|),  f₀(r) = −r³/(3ε²) + r²/ε + ε/3 (r < ε),  r (r ≥ ε),
 
@@ -37,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 from mpi4py import MPI
@@ -97,6 +99,17 @@ class TaperedBore:
                               + (drho / D)[:, None] * e, normal)
             acts = np.where(dx > 0.0, on_lip, acts)
         return gap, normal, acts
+
+
+def turn_about_x(axis_point: np.ndarray, angle: float) -> Callable[[np.ndarray], np.ndarray]:
+    """The rigid turn by ``angle`` (rad, right-handed about +x) about the x-directed line
+    through ``axis_point``: the motion of a twisted injector's wall over one step."""
+    cos, sin = np.cos(angle), np.sin(angle)
+
+    def turned(x: np.ndarray) -> np.ndarray:
+        y, z = x[:, 1] - axis_point[1], x[:, 2] - axis_point[2]
+        return np.column_stack([x[:, 0], axis_point[1] + cos * y - sin * z, axis_point[2] + sin * y + cos * z])
+    return turned
 
 
 @dataclasses.dataclass
@@ -180,26 +193,33 @@ class NodalContact:
         slope = np.where(inside, 1.0, (depth + eps) / (2.0 * eps))
         return value, slope
 
-    def begin_step(self) -> None:
+    def begin_step(self, wall_motion: dict[str, Callable[[np.ndarray], np.ndarray]] | None = None) -> None:
         """Lag the wall friction at the step's start (the current ``u``): each pressed
-        node's normal force, normal and position. A no-op without friction."""
+        node's normal force, normal and anchor — the wall's material point under it, where
+        the wall will be at the step's end. ``wall_motion`` maps an obstacle's name to that
+        motion (points at the step's start → at its end; e.g. :func:`turn_about_x` for a
+        twisted injector), so a node stuck to a moving wall is dragged along; walls not named
+        stand still. The motion must not change the obstacle's shape as the body sees it
+        (a surface of revolution turned about its axis): it enters the friction only. A
+        no-op without friction."""
         if not any(mu > 0.0 for mu in self.friction.values()):
             return
+        wall_motion = wall_motion or {}
         x = self.positions()
-        found = [(nodes, self.friction[name] * self.stiffness * self._smoothed(depth)[0], normal)
+        found = [(nodes, self.friction[name] * self.stiffness * self._smoothed(depth)[0], normal,
+                  wall_motion[name](x[nodes]) if name in wall_motion else x[nodes])
                  for nodes, depth, normal, name in self._pressed(x, self.smoothing)
                  if self.friction[name] > 0.0]
         if not found:
             self._lagged = None
             return
-        nodes, weight, normal = (np.concatenate(parts) for parts in zip(*found))
-        self._lagged = nodes, weight, normal, x[nodes]
+        self._lagged = tuple(np.concatenate(parts) for parts in zip(*found))
 
     def _slip(self, x: np.ndarray):
         """(nodes, μλ, tangential projectors P, slips s, |s|) of the lagged sliders at x."""
-        nodes, weight, normal, start = self._lagged
+        nodes, weight, normal, anchor = self._lagged
         projector = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
-        slip = np.einsum("nij,nj->ni", projector, x[nodes] - start)
+        slip = np.einsum("nij,nj->ni", projector, x[nodes] - anchor)
         return nodes, weight, projector, slip, np.linalg.norm(slip, axis=1)
 
     def _f1(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -34,7 +34,7 @@ from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
                                   load_state, optic_center, optic_flatness, optic_normal, render_frame,
                                   save_state, write_animation, write_frame_grid)
-from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe
+from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe, turn_about_x
 from eyemech.problems.output import PyvistaSeries
 from eyemech.problems.parameters import ParameterError, field
 from eyemech.problems.scene import Scene
@@ -70,6 +70,10 @@ class Parameters(iol_fold.Parameters):
                                          "smoothed over friction_slip; 0 = frictionless)")
     cartridge_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the cartridge bore and nozzle "
                                            "(0: a coated cartridge lubricated by viscoelastic)")
+    injector_twist: float = field(0.0, "the surgeon turns the injector about its axis by this angle during the "
+                                       "push, in step with the plunger's travel (right-handed about the push "
+                                       "direction); the round bore drags the lens round only through "
+                                       "cartridge_friction", "deg")
     start_ramp: float = field(0.0, "the plunger (and the fluid it drives) accelerates from rest to "
                                     "plunger_speed over this time, linearly (0 = a jump to full speed)", "s")
 
@@ -304,6 +308,15 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     motion = PlungerMotion(params.plunger_speed, params.start_ramp, stop - start)
     push_time = motion.push_time
     end = push_time + params.settle_time
+    twist = np.radians(params.injector_twist) / motion.travel(push_time)  # rad per mm of travel
+
+    def twisted(t: float, dt: float) -> dict:
+        """The cartridge wall's turn over the step (t − dt, t]: the anchor of its friction."""
+        if twist == 0.0:
+            return {}
+        angle = twist * (motion.travel(t) - motion.travel(t - dt))
+        return {"cartridge": turn_about_x(axis, angle)}
+
     self_distance = self_distance_probe(shell.u) if self_contact is None else None
     strain = StrainProbe(shell)
     frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
@@ -319,7 +332,7 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
             fluid.begin_step(motion.speed_at(t))
         if self_contact is not None:
             self_contact.begin_step()
-        contact.begin_step()
+        contact.begin_step(twisted(t, dt))
 
     last_frame = [0.0, 0]  # time and step of the last frame
 

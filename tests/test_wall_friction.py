@@ -16,7 +16,7 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from eyemech.problems.iol_contact import NodalContact
+from eyemech.problems.iol_contact import NodalContact, turn_about_x
 
 import dolfinx
 import dolfinx.fem
@@ -113,3 +113,25 @@ def test_only_the_frictional_obstacles_hold_back(pressed):
     values.reshape(-1, 3)[:, 0] = 5 * SLIP
     assert np.all(residual(frictionless, values).reshape(-1, 3)[:, 0] == 0.0)
     assert np.any(residual(contact, values).reshape(-1, 3)[:, 0] != 0.0)
+
+
+def test_a_moving_wall_drags_the_nodes_pressed_on_it(pressed):
+    """The anchor moves with the wall (a twisted injector): a pressed node at rest on a wall
+    that slides by more than ε is pulled along the wall's motion with μλ; one that moves
+    with the wall feels no friction."""
+    u, contact = pressed
+    shift = np.array([4 * SLIP, 0.0, 0.0])
+    contact.begin_step({"floor": lambda x: x + shift})
+    bottom = np.flatnonzero(contact.X[:, 2] < 1e-12)
+    at_rest = np.zeros(u.x.array.size)
+    tangential = -residual(contact, at_rest).reshape(-1, 3)[bottom, :2]  # z: the normal push
+    assert tangential == pytest.approx(np.tile([MU * STIFFNESS * 0.01, 0.0], (4, 1)), rel=1e-12)
+    along = np.tile(shift, len(contact.X)).ravel()
+    assert np.abs(residual(contact, along).reshape(-1, 3)[:, :2]).max() == 0.0
+
+
+def test_turn_about_x_is_the_right_handed_rigid_turn_about_the_injector_axis():
+    axis_point = np.array([0.0, 0.5, 1.0])
+    points = axis_point + np.array([[2.0, 1.0, 0.0], [-1.0, 0.0, 0.3]])
+    turned = turn_about_x(axis_point, np.pi / 2)(points)
+    assert turned == pytest.approx(axis_point + np.array([[2.0, 0.0, 1.0], [-1.0, -0.3, 0.0]]), abs=1e-15)
