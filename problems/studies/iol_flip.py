@@ -19,7 +19,11 @@ the same for every case, so only the deployment differs. Varied, one at a time:
   the lens on the capsular bag (the leading haptic may stick there while the plunger pushes
   the optic on) for thin and thick haptics, and μ = 0.3 in the cartridge (an uncoated bore
   twists the rolled lens about the injector axis) — ``capsule_friction`` /
-  ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/iol_contact.py).
+  ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/iol_contact.py);
+- the surgeon's twist of the injector while pushing (``injector_twist`` 180° or 360°, in step
+  with the plunger): the round bore drags the rolled lens round through its friction only, so
+  it is run at μ_cartridge = 0.3 and 1 (μ = 0 is the default case), and at 0.35 mm haptics.
+  These cases get their own chart, ``iol_flip_walls.png``.
 
 What decides the side it lands on: the optic lands upside down only if it turns by more than
 90° as a rigid body — about the injector axis while it is still rolled (it fits the capsule's
@@ -69,10 +73,18 @@ THIN_FLUID_THICKNESSES = (0.35,)  # 0.13 mm in the thin fluid: not run yet (≈ 
 # thick haptics
 WALL_FRICTION_CASES = [{**BASE, "capsule_friction": 1.0}, {**BASE, "haptic_thickness": 0.35, "capsule_friction": 1.0},
                        {**BASE, "cartridge_friction": 0.3}]
+# the surgeon's twist of the injector (turned in step with the plunger): the round bore can
+# only drag the lens round by friction (μ_cartridge = 0: the twist does nothing). The plunger
+# starts over 20 ms: from a jump to full speed with the bore's friction Newton gave up within
+# the first 6 ms (μ_cartridge 0.3 at 360°, 1 at 180°)
+TWISTED = {**BASE, "start_ramp": 0.02}
+TWIST_CASES = [{**TWISTED, "cartridge_friction": mu, "injector_twist": 180.0} for mu in (0.0, 0.3, 1.0)] + \
+              [{**TWISTED, "cartridge_friction": 0.3, "injector_twist": 360.0},
+               {**TWISTED, "haptic_thickness": 0.35, "cartridge_friction": 0.3, "injector_twist": 180.0}]
 CASES = [{**BASE, "friction": mu} for mu in FRICTIONS] + \
         [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]] + \
         [{**BASE, "haptic_thickness": h, "damping": THIN_FLUID} for h in THIN_FLUID_THICKNESSES] + \
-        WALL_FRICTION_CASES
+        WALL_FRICTION_CASES + TWIST_CASES
 QUICK_CASES = [{"haptic_thickness": 0.09, "friction": 0.2}, {"haptic_thickness": 0.18, "friction": 0.2}]
 QUICK_SETTINGS = {"contact": False, "settle_time": 0.0, "plunger_speed": 50.0}
 # frames as .vtu (the roll angle is read from them), no PNGs (25 s a run)
@@ -318,7 +330,71 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
     rows = [row for row, _folder in done]
     csv = write_csv(out / "iol_flip.csv", rows, note)
     histories = [roll_history(folder) for _row, folder in done]
-    return [csv, chart(rows, histories, out / "iol_flip.png", note if quick else "")]
+    inside = [not _on_the_walls(row) for row in rows]
+    charts = [chart([r for r, keep in zip(rows, inside) if keep],
+                    [h for h, keep in zip(histories, inside) if keep], out / "iol_flip.png", note if quick else "")]
+    if not quick:
+        charts.append(walls_chart(rows, histories, out / "iol_flip_walls.png"))
+    return [csv, *charts]
+
+
+def _on_the_walls(row: dict) -> bool:
+    """A case with friction on the capsule or the cartridge, or a twisted injector."""
+    return any(float(row.get(key) or 0.0) for key in ("capsule_friction", "cartridge_friction", "injector_twist"))
+
+
+def _wall_label(row: dict) -> str:
+    twisted = bool(float(row.get("injector_twist") or 0.0))
+    parts = [f"h_h = {float(row['haptic_thickness']):g}"]
+    parts += [f"{name} = {float(row.get(key) or 0.0):g}{unit}" for name, key, unit in
+              (("μ_capsule", "capsule_friction", ""), ("μ_cartridge", "cartridge_friction", ""),
+               ("twist", "injector_twist", "°"))
+              if float(row.get(key) or 0.0) or (twisted and key == "cartridge_friction")]
+    return ", ".join(parts)
+
+
+def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Path:
+    """The external moments: friction on the capsule and the cartridge, and the injector
+    turned while pushing. Left: the roll φ over time of those cases; right: the final optic
+    normal z against μ_cartridge for each twist (h_h = 0.13 mm)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    walls = [(r, h) for r, h in zip(rows, histories) if _on_the_walls(r)]
+    fig, (ax, outcome) = plt.subplots(1, 2, figsize=(13, 5.4), gridspec_kw={"width_ratios": [1.6, 1]})
+    for row, h in walls:
+        if len(h):
+            twisted = float(row.get("injector_twist") or 0.0)
+            ax.plot(h[:, 0], h[:, 1], lw=1.4 if twisted else 1.0, ls="-" if twisted else "--", label=_wall_label(row))
+    for sign in (1, -1):
+        ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
+    ax.annotate("beyond ±90° while rolled: lands upside down", xy=(0.01, -FLIP_ANGLE), xycoords=("axes fraction", "data"),
+                fontsize=7, color="tab:red", va="bottom")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("roll φ of the optic about the injector axis (°)")
+    ax.set_title("roll over time (μ = 0.2 lens–lens; coarse lens)", fontsize=10)
+    ax.legend(fontsize=7)
+    for twist, marker in ((180.0, "o"), (360.0, "s")):
+        group = [r for r, _h in walls if float(r.get("injector_twist") or 0.0) == twist
+                 and float(r["haptic_thickness"]) == BASE["haptic_thickness"]
+                 and float(r.get("start_ramp") or 0.0) == TWISTED["start_ramp"]]
+        group = sorted(group, key=lambda r: float(r.get("cartridge_friction") or 0.0))
+        if not group:
+            continue
+        mu = [float(r.get("cartridge_friction") or 0.0) for r in group]
+        z = [float(r["optic_normal_z"]) if r.get("optic_normal_z") not in (None, "") else
+             float(r.get("last_frame_optic_normal_z") or "nan") for r in group]
+        outcome.plot(mu, z, marker + "-", label=f"injector turned {twist:g}° while pushing")
+    outcome.axhline(0.0, color="tab:red", ls=":", lw=1)
+    outcome.set_ylim(-1.1, 1.1)
+    outcome.set_xlabel("cartridge friction μ_cartridge (μ = 0: the twist does nothing)")
+    outcome.set_ylabel("final optic normal z (< 0: upside down)")
+    outcome.legend(fontsize=7)
+    fig.suptitle("External moments about the injector axis: wall friction and a twisted injector", fontsize=11)
+    save_chart(fig, path)
+    return path
 
 
 def chart(rows: list[dict], histories: list[np.ndarray], path: Path, note: str = "") -> Path:

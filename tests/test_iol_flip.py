@@ -1,0 +1,53 @@
+"""The iol-flip study's measurement (problems/studies/iol_flip.py): the roll φ of the optic
+about the injector axis and the final optic normal, read back from the ``.vtu`` frames a run
+writes. Checked on frames of the flat coarse lens turned rigidly about the injector axis by
+known angles — the turn a twisted injector gives the lens. The frames are written in double
+precision, so the angles come back to round-off (1e-9° is far above it, far below any roll
+that matters)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from eyemech.problems import iol_injection
+from eyemech.problems.iol import LensShell, write_frame_grid
+from eyemech.problems.iol_contact import turn_about_x
+from eyemech.problems.output import PyvistaSeries
+from eyemech.problems.studies import iol_flip
+
+
+def test_roll_and_final_normal_of_a_rigidly_turned_lens(tmp_path):
+    params = iol_injection.Parameters(resolution="coarse")
+    shell = LensShell(params, MPI.COMM_SELF)
+    X = shell.node_coordinates()
+    series = PyvistaSeries(tmp_path, MPI.COMM_SELF, stem="injection")
+    turns = (0.0, 50.0, 120.0)
+    for time, degrees in enumerate(turns):
+        shell.u.x.array[:] = (turn_about_x(params.axis_point(), np.radians(degrees))(X) - X).ravel()
+        write_frame_grid(series, shell, 0.1 * time)
+    roll = iol_flip.roll_history(tmp_path)
+    # a right-handed turn θ about +x takes the optic's normal +z to (0, −sin θ, cos θ): φ = −θ
+    assert roll[:, 1] == pytest.approx([-t for t in turns], abs=1e-9)
+    assert roll[:, 2] == pytest.approx(1.0, abs=1e-12)  # a rigid turn leaves the optic flat
+    assert iol_flip.last_optic_normal_z(tmp_path) == pytest.approx(np.cos(np.radians(120.0)), abs=1e-12)
+
+
+def test_walls_chart_takes_rows_read_back_from_the_csv(tmp_path):
+    """The walls chart is redrawn from iol_flip.csv (values as strings, empty where a case
+    lacks a column) as well as from fresh runs (numbers)."""
+    from PIL import Image
+
+    from eyemech.problems.studies._common import read_csv, stamp, write_csv
+
+    base = {"haptic_thickness": 0.13, "friction": 0.2, "damping": 2e4, "start_ramp": 0.02}
+    rows = [{**base, "cartridge_friction": mu, "injector_twist": 180.0, "optic_normal_z": z}
+            for mu, z in ((0.0, 0.99), (0.3, 0.77), (1.0, -0.9))]
+    rows.append({**base, "capsule_friction": 1.0, "optic_normal_z": 0.98})
+    back = read_csv(write_csv(tmp_path / "walls.csv", rows, "test"))
+    history = np.array([[0.0, 0.0, 0.3], [0.5, -100.0, 1.0]])
+    path = iol_flip.walls_chart(back, [history] * len(back), tmp_path / "walls.png")
+    assert stamp().split(" · ", 1)[1] in Image.open(path).text["Comment"]
+    assert [iol_flip._on_the_walls(r) for r in back] == [True] * 4
+    assert iol_flip._wall_label(back[0]) == "h_h = 0.13, μ_cartridge = 0, twist = 180°"
