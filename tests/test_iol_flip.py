@@ -45,9 +45,14 @@ def test_walls_chart_takes_rows_read_back_from_the_csv(tmp_path):
     rows = [{**base, "cartridge_friction": mu, "injector_twist": 180.0, "optic_normal_z": z}
             for mu, z in ((0.0, 0.99), (0.3, 0.77), (1.0, -0.9))]
     rows.append({**base, "capsule_friction": 1.0, "optic_normal_z": 0.98})
+    rows.append({**base, "haptic_thickness": 0.35, "cartridge_friction": 0.3, "injector_twist": 180.0,
+                 "friction_slip": 0.003, "finished": False, "last_frame_optic_normal_z": 0.7})
     back = read_csv(write_csv(tmp_path / "walls.csv", rows, "test"))
     history = np.array([[0.0, 0.0, 0.3], [0.5, -100.0, 1.0]])
     path = iol_flip.walls_chart(back, [history] * len(back), tmp_path / "walls.png")
     assert stamp().split(" · ", 1)[1] in Image.open(path).text["Comment"]
-    assert [iol_flip._on_the_walls(r) for r in back] == [True] * 4
+    assert [iol_flip._on_the_walls(r) for r in back] == [True] * 5
     assert iol_flip._wall_label(back[0]) == "h_h = 0.13, μ_cartridge = 0, twist = 180°"
+    assert iol_flip._wall_label(back[-1]) == "h_h = 0.35, μ_cartridge = 0.3, twist = 180°, slip 3 µm"
+    # a run that stopped is charted by its last frame
+    assert iol_flip._final_normal_z(back[-1]) == pytest.approx(0.7)

@@ -79,8 +79,13 @@ WALL_FRICTION_CASES = [{**BASE, "capsule_friction": 1.0}, {**BASE, "haptic_thick
 # the first 6 ms (μ_cartridge 0.3 at 360°, 1 at 180°)
 TWISTED = {**BASE, "start_ramp": 0.02}
 TWIST_CASES = [{**TWISTED, "cartridge_friction": mu, "injector_twist": 180.0} for mu in (0.0, 0.3, 1.0)] + \
-              [{**TWISTED, "cartridge_friction": 0.3, "injector_twist": 360.0},
-               {**TWISTED, "haptic_thickness": 0.35, "cartridge_friction": 0.3, "injector_twist": 180.0}]
+              [{**TWISTED, "cartridge_friction": 0.3, "injector_twist": 360.0}]
+# thick against thin haptics under the same twist: at 0.35 mm and the default friction_slip
+# (1 µm per step) Newton cycled in the stick–slip of the bore at t = 4.8 ms (residual 1e-4 →
+# 1e-2 and back, 25 iterations), so both run with 3 µm, the 0.13 mm case as the control
+SLIP = 3e-3
+TWIST_CASES += [{**TWISTED, "haptic_thickness": h, "cartridge_friction": 0.3, "injector_twist": 180.0,
+                 "friction_slip": SLIP} for h in (0.13, 0.35)]
 CASES = [{**BASE, "friction": mu} for mu in FRICTIONS] + \
         [{**BASE, "haptic_thickness": h} for h in THICKNESSES if h != BASE["haptic_thickness"]] + \
         [{**BASE, "haptic_thickness": h, "damping": THIN_FLUID} for h in THIN_FLUID_THICKNESSES] + \
@@ -245,9 +250,12 @@ def _frames(folder: Path):
 
 def capsule_torque(folder: Path, params: iol_injection.Parameters, smoothing: float = 2e-3) -> np.ndarray:
     """Rows (t, T_x): the moment (N mm) about the injector axis of the rigid capsule's nodal
-    penalty forces on the lens in each frame — the one external torque about that axis (the
-    bore, lip and taper are surfaces of revolution about it and frictionless, the plunger
-    face and the fluid push along it). Same force law as ``NodalContact``."""
+    penalty forces on the lens in each frame — with frictionless walls the one external torque
+    about that axis (the bore, lip and taper are surfaces of revolution about it, the plunger
+    face and the fluid push along it). Same force law as ``NodalContact``. The friction of the
+    capsule or the cartridge (``capsule_friction``, ``cartridge_friction``) is not in it: it is
+    lagged per step, from the previous step's positions and normal forces, which the frames
+    (every few steps) do not hold."""
     if not params.contact:
         return np.zeros((0, 2))
     from eyemech.problems.iol import InjectorLayout
@@ -277,7 +285,9 @@ def angular_balance(folder: Path, params: iol_injection.Parameters, torque: np.n
     I_o of the folded optic, over the frames where the optic is still rolled (flatness <
     ``UNROLLED``): ``haptic_swirl_deg`` (largest |haptic part| / I_o) is the roll the haptics
     can give the optic by unwinding, ``capsule_roll_deg`` (largest |∫T dt| / c I_o) the roll
-    the capsule's torque can; a flip needs 90°."""
+    the capsule's torque can; a flip needs 90°. With wall friction the balance is incomplete:
+    the friction moments of the capsule and the cartridge (a twisted injector's drive) are
+    the remainder (see ``capsule_torque``)."""
     frames = list(_frames(folder))
     if len(frames) < 2 or len(torque) != len(frames):
         return {}
@@ -350,7 +360,16 @@ def _wall_label(row: dict) -> str:
               (("μ_capsule", "capsule_friction", ""), ("μ_cartridge", "cartridge_friction", ""),
                ("twist", "injector_twist", "°"))
               if float(row.get(key) or 0.0) or (twisted and key == "cartridge_friction")]
+    if row.get("friction_slip") not in (None, ""):
+        parts.append(f"slip {1e3 * float(row['friction_slip']):g} µm")
     return ", ".join(parts)
+
+
+def _final_normal_z(row: dict) -> float:
+    """The optic normal z at the end, or in the last frame of a run that stopped."""
+    if row.get("optic_normal_z") not in (None, ""):
+        return float(row["optic_normal_z"])
+    return float(row.get("last_frame_optic_normal_z") or "nan")
 
 
 def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Path:
@@ -379,14 +398,19 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     for twist, marker in ((180.0, "o"), (360.0, "s")):
         group = [r for r, _h in walls if float(r.get("injector_twist") or 0.0) == twist
                  and float(r["haptic_thickness"]) == BASE["haptic_thickness"]
-                 and float(r.get("start_ramp") or 0.0) == TWISTED["start_ramp"]]
+                 and float(r.get("start_ramp") or 0.0) == TWISTED["start_ramp"]
+                 and r.get("friction_slip") in (None, "")]
         group = sorted(group, key=lambda r: float(r.get("cartridge_friction") or 0.0))
         if not group:
             continue
         mu = [float(r.get("cartridge_friction") or 0.0) for r in group]
-        z = [float(r["optic_normal_z"]) if r.get("optic_normal_z") not in (None, "") else
-             float(r.get("last_frame_optic_normal_z") or "nan") for r in group]
+        z = [_final_normal_z(r) for r in group]
         outcome.plot(mu, z, marker + "-", label=f"injector turned {twist:g}° while pushing")
+    for row, _h in walls:  # the haptic-thickness pair (another friction_slip): points of their own
+        if row.get("friction_slip") not in (None, "") and float(row.get("injector_twist") or 0.0):
+            outcome.plot([float(row.get("cartridge_friction") or 0.0)], [_final_normal_z(row)],
+                         "^" if float(row["haptic_thickness"]) > BASE["haptic_thickness"] else "v",
+                         label=_wall_label(row))
     outcome.axhline(0.0, color="tab:red", ls=":", lw=1)
     outcome.set_ylim(-1.1, 1.1)
     outcome.set_xlabel("cartridge friction μ_cartridge (μ = 0: the twist does nothing)")
