@@ -22,8 +22,9 @@ the same for every case, so only the deployment differs. Varied, one at a time:
   ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/iol_contact.py);
 - the surgeon's twist of the injector while pushing (``injector_twist`` 180° or 360°, in step
   with the plunger): the round bore drags the rolled lens round through its friction only, so
-  it is run at μ_cartridge = 0.3 and 1 (μ = 0 is the default case), and at 0.35 mm haptics.
-  These cases get their own chart, ``iol_flip_walls.png``.
+  it is run at μ_cartridge = 0, 0.3 and 1, and 360° at 0.3; thin against thick (0.35 mm)
+  haptics at 180°, 0.3 (both with a wider friction regularisation, ``SLIP``). The plunger
+  starts over 20 ms in these cases. They get their own chart, ``iol_flip_walls.png``.
 
 What decides the side it lands on: the optic lands upside down only if it turns by more than
 90° as a rigid body — about the injector axis while it is still rolled (it fits the capsule's
