@@ -22,7 +22,7 @@ the same for every case, so only the deployment differs. Varied, one at a time:
   ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/iol_contact.py);
 - the surgeon's twist of the injector while pushing (``injector_twist`` 180° or 360°, in step
   with the plunger): the round bore drags the rolled lens round through its friction only, so
-  it is run at μ_cartridge = 0, 0.3 and 1, and 360° at 0.3; thin against thick (0.35 mm)
+  it is run at μ_cartridge = 0, 0.3 and 1, and 360° at 0 and 0.3; thin against thick (0.35 mm)
   haptics at 180°, 0.3 (both with a wider friction regularisation, ``SLIP``). The plunger
   starts over 20 ms in these cases. They get their own chart, ``iol_flip_walls.png``.
 
@@ -80,7 +80,7 @@ WALL_FRICTION_CASES = [{**BASE, "capsule_friction": 1.0}, {**BASE, "haptic_thick
 # the first 6 ms (μ_cartridge 0.3 at 360°, 1 at 180°)
 TWISTED = {**BASE, "start_ramp": 0.02}
 TWIST_CASES = [{**TWISTED, "cartridge_friction": mu, "injector_twist": 180.0} for mu in (0.0, 0.3, 1.0)] + \
-              [{**TWISTED, "cartridge_friction": 0.3, "injector_twist": 360.0}]
+              [{**TWISTED, "cartridge_friction": mu, "injector_twist": 360.0} for mu in (0.0, 0.3)]
 # thick against thin haptics under the same twist: at 0.35 mm and the default friction_slip
 # (1 µm per step) Newton cycled in the stick–slip of the bore at t = 4.8 ms (residual 1e-4 →
 # 1e-2 and back, 25 iterations), so both run with 3 µm, the 0.13 mm case as the control
