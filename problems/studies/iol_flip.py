@@ -383,7 +383,7 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     import matplotlib.pyplot as plt
 
     walls = [(r, h) for r, h in zip(rows, histories) if _on_the_walls(r)]
-    fig, (ax, outcome) = plt.subplots(1, 2, figsize=(13, 5.4), gridspec_kw={"width_ratios": [1.6, 1]})
+    fig, (ax, outcome) = plt.subplots(1, 2, figsize=(13, 6.6), gridspec_kw={"width_ratios": [1.6, 1]})
     for row, h in walls:
         if len(h):
             twisted = float(row.get("injector_twist") or 0.0)
@@ -395,7 +395,7 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     ax.set_xlabel("time (s)")
     ax.set_ylabel("roll φ of the optic about the injector axis (°)")
     ax.set_title("roll over time (μ = 0.2 lens–lens; coarse lens)", fontsize=10)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
     for twist, marker in ((180.0, "o"), (360.0, "s")):
         group = [r for r, _h in walls if float(r.get("injector_twist") or 0.0) == twist
                  and float(r["haptic_thickness"]) == BASE["haptic_thickness"]
@@ -406,7 +406,12 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
             continue
         mu = [float(r.get("cartridge_friction") or 0.0) for r in group]
         z = [_final_normal_z(r) for r in group]
-        outcome.plot(mu, z, marker + "-", label=f"injector turned {twist:g}° while pushing")
+        # dotted: nothing was run between the points
+        line, = outcome.plot(mu, z, marker + ":", label=f"injector turned {twist:g}° while pushing")
+        stopped = [(m, v) for m, v, r in zip(mu, z, group) if str(r.get("finished")) != "True"]
+        if stopped:  # a run that did not reach the end: its last frame, hollow
+            outcome.plot(*zip(*stopped), marker, ms=11, mfc="white", color=line.get_color(),
+                         label=f"{twist:g}°: run stopped before the end (last frame)")
     for row, _h in walls:  # the haptic-thickness pair (another friction_slip): points of their own
         if row.get("friction_slip") not in (None, "") and float(row.get("injector_twist") or 0.0):
             outcome.plot([float(row.get("cartridge_friction") or 0.0)], [_final_normal_z(row)],
