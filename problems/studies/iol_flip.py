@@ -68,7 +68,7 @@ FRICTIONS = (0.0, 0.2, 0.5, 1.0)
 THICKNESSES = (0.13, 0.25, 0.35, 0.45)
 DEFAULT_DAMPING = 2.0e4  # 1/s: the scene's fluid (≈ 10 Pa·s over 2 mm)
 THIN_FLUID = 2.0e3  # 1/s: ≈ 1 Pa·s, a thinned viscoelastic (the capsule's turning effect ∝ 1/c)
-THIN_FLUID_THICKNESSES = (0.35,)  # 0.13 mm in the thin fluid: not run yet (≈ 30 min here)
+THIN_FLUID_THICKNESSES = (0.13, 0.35)  # does stiffness matter where the fluid lets the optic turn?
 # external moments: friction on the capsular bag (the leading haptic may stick there while the
 # plunger pushes on) and in the cartridge (an uncoated bore twists the rolled lens), thin and
 # thick haptics
