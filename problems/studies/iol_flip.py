@@ -421,7 +421,7 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     outcome.set_ylim(-1.1, 1.1)
     outcome.set_xlabel("cartridge friction μ_cartridge (μ = 0: the twist does nothing)")
     outcome.set_ylabel("final optic normal z (< 0: upside down)")
-    outcome.legend(fontsize=7)
+    outcome.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13))  # off the points
     fig.suptitle("External moments about the injector axis: wall friction and a twisted injector", fontsize=11)
     save_chart(fig, path)
     return path
