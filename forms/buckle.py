@@ -69,7 +69,7 @@ def smoothed_penalty_energy(obstacle, u, penalty, smoothing: float, measure):
         φ = 0                      g ≥ ε
 
     so p = −φ' is α⟨−g⟩ outside the band and joins it with matching slope
-    (the pressure law of :func:`eyemech.problems.contact_search.penalty_pressure`).
+    (the pressure law of :func:`eyemech.problems.contact.node_to_surface.penalty_pressure`).
     ε = 0 is the plain ½ α ⟨−g⟩². A C² energy keeps Newton from cycling on
     quadrature points that sit at g ≈ 0 (measured on the buckle: a 2-cycle at
     residual 1e-4 without it)."""

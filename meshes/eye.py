@@ -31,7 +31,7 @@ Construction
   ``lens_depth`` behind the corneal apex. It shares no node with the eye wall: it hangs
   on the zonules, which are not cells but node pairs (:func:`zonule_pairs`, bars
   between the lens's equatorial belt and the ciliary body's inner surface, added to the
-  residual by :class:`eyemech.problems.zonules.ZonuleBars`). Its whole surface is wetted
+  residual by :class:`eyemech.problems.solid.zonules.ZonuleBars`). Its whole surface is wetted
   (``lens_surface`` is part of ``cavity_wall``): with the solid's outward normal on every
   wetted face, V = −⅓∮ x·n da over the eye's inner wall *and* the lens surface is the
   liquid's volume, the lens's own volume excluded, exactly (both are closed, with the

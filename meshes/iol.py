@@ -21,10 +21,6 @@ import gmsh
 import numpy as np
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.mesh
 from dolfinx.io import gmsh as gmshio
 

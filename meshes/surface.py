@@ -18,10 +18,6 @@ import basix.ufl
 import numpy as np
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh

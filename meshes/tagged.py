@@ -14,10 +14,6 @@ from typing import Callable, Iterator
 import numpy as np
 from mpi4py import MPI
 
-try:  # the wheel's MPI ordering module, when it is the DOLFINx in use
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import gmsh
 import ufl

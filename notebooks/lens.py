@@ -40,11 +40,10 @@ import pyvista as pv
 
 run_dir = Path(os.environ.get("EYEMECH_RUN_DIR", "results/iol-injection"))
 if not (run_dir / "results.json").exists():
-    from mpi4py import MPI
-
     from eyemech.problems import iol_injection
-    from eyemech.problems.iol import LensShell, save_state
     from eyemech.problems.iol_speed import initial_roll
+    from eyemech.problems.lens.model import LensShell, save_state
+    from mpi4py import MPI
 
     run_dir.mkdir(parents=True, exist_ok=True)
     small = {"mesh_size": 1.2, "contact": False, "plunger_speed": 52.0, "settle_time": 0.0,
@@ -113,7 +112,7 @@ fig.tight_layout()
 # The `.pvd` index lists the frames with their times; each `.vtu` is read as it is.
 
 # %%
-from eyemech.problems.output import quiet_vtk
+from eyemech.problems.run.output import quiet_vtk
 
 pv.OFF_SCREEN = True
 quiet_vtk()  # no X display: VTK says so before rendering off-screen
@@ -204,7 +203,7 @@ strain_range = (0.0, max(float(g.cell_data["surface strain"].max()) for g in (fi
 k_first = 1 if has_start else 0
 plotter = pv.Plotter(off_screen=True, shape=(1, 3), window_size=(1500, 480))
 plotter.subplot(0, 0)
-lens_view(plotter, start, "proximity (mm)", f"start (t = 0): other parts within", cmap="viridis",
+lens_view(plotter, start, "proximity (mm)", "start (t = 0): other parts within", cmap="viridis",
           clim=(0.0, 2.0))
 plotter.subplot(0, 1)
 lens_view(plotter, first, "surface strain", f"t = {entries[k_first][0]:.3f} s", clim=strain_range,

@@ -26,8 +26,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pyvista as pv
-
-from eyemech.problems import analytic
+from eyemech.problems.reference import analytic
 
 run_dir = Path(os.environ.get("EYEMECH_RUN_DIR", "results/sphere-inflation"))
 if not (run_dir / "results.json").exists():

@@ -55,7 +55,8 @@ print(f"applanation force {q['applanation_force_g']:.3f} g at depth {q['applanat
 # jagged; the scene's default mesh is four times finer in the planform.)
 
 # %%
-MMHG = 133.322e-6  # MPa
+from eyemech.problems.run.parameters import MMHG
+
 steps = [s for s in results["steps"] if s.get("stage") == "applanation"]
 depth = np.array([s["depth_mm"] for s in steps])
 radius = np.array([s["contact_radius_mm"] for s in steps])

@@ -8,8 +8,18 @@ module.
 
 from __future__ import annotations
 
+# The PyPI DOLFINx wheel must import dolfinx_solver (it orders MPI ahead of the compiled
+# bindings) before dolfinx or petsc4py; a conda-forge or Docker DOLFINx has no such module.
+# Every module of this package is imported after this file, so none repeats it.
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+
+
 import importlib
 import pkgutil
+
 
 def scenes() -> dict:
     """Name -> Scene for every scene module in this package."""

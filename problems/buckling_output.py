@@ -7,8 +7,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, render_png
+from eyemech.problems.run.output import (
+    FieldWriter,
+    PyvistaSeries,
+    gather_grid,
+    render_png,
+)
 
 STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing"}
 
@@ -63,8 +67,7 @@ class Writer:
         """The symmetry plane x = 0 seen from −x, zoomed on the buckle, with the
         buckle's outline drawn at its current position."""
         import pyvista
-
-        from eyemech.problems.output import quiet_vtk
+        from eyemech.problems.run.output import quiet_vtk
 
         quiet_vtk()
         model = self.model

@@ -27,20 +27,20 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
-
 from eyemech.forms.shell import Kinematics, end_rotation
 from eyemech.meshes.surface import Diagonal, mapped_surface, tag_boundary
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.shells import Shell, check_shell_parameters, newton_options, picture
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import FieldWriter
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.shell.model import (
+    Shell,
+    check_shell_parameters,
+    newton_options,
+    picture,
+)
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 
 
 @dataclasses.dataclass(frozen=True)

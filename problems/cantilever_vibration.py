@@ -10,7 +10,7 @@ clamped, released at rest from w(x) = A φ₁(x), the first cantilever mode
 
 With mass-proportional damping c the mode obeys q̈ + c q̇ + ω₁² q = 0. The tip history
 is compared with that single-mode equation integrated by the *same* scheme and Δt
-(:func:`~eyemech.problems.time_integration.oscillator_response`), so what is left is
+(:func:`~eyemech.problems.solve.time_integration.oscillator_response`), so what is left is
 the spatial error of the shell and its mass; ``period_exact`` is the continuous one,
 2π/√(ω₁² − c²/4).
 """
@@ -24,21 +24,20 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
-import dolfinx.fem
 
 from eyemech.forms.dynamics import mass_form
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import Diagonal, mapped_surface, tag_boundary
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.shells import Shell, check_shell_parameters, newton_options
-from eyemech.problems.time_integration import SCHEMES, ImplicitDynamics, oscillator_response
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.shell.model import Shell, check_shell_parameters, newton_options
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.time_integration import (
+    SCHEMES,
+    ImplicitDynamics,
+    oscillator_response,
+)
 
 BETA_L = 1.8751040687  # first root of cos βL cosh βL = −1
 

@@ -1,5 +1,5 @@
 """``contact-patch``: the contact patch test (Taylor & Papadopoulos, 1991) for the
-node-to-surface penalty contact of :mod:`eyemech.problems.contact_search`.
+node-to-surface penalty contact of :mod:`eyemech.problems.contact.node_to_surface`.
 
 Two elastic blocks, one on the other, meshed separately with different element
 sizes so the contact faces do not match. The lower block sits on a frictionless
@@ -19,22 +19,20 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from eyemech.forms import compressible_neo_hooke, follower_pressure
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.contact_bodies import stacked_blocks
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.contact_search import NodeToSurfaceContact
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.parameters import SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import global_dofs, symmetry_bcs
-
-import dolfinx
-import dolfinx.fem
+from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from mpi4py import MPI
 
 QUADRATURE = {"quadrature_degree": 2}
 
@@ -55,11 +53,11 @@ class Parameters(SceneParameters):
         self.require_positive("width", "youngs_modulus", "pressure", "penalty", "master_size",
                               "slave_size")
         if not -1.0 < self.poisson_ratio < 0.5:
-            from eyemech.problems.parameters import ParameterError
+            from eyemech.problems.run.parameters import ParameterError
 
             raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio}")
         if self.passes not in (1, 2):
-            from eyemech.problems.parameters import ParameterError
+            from eyemech.problems.run.parameters import ParameterError
 
             raise ParameterError("passes", f"must be 1 or 2, got {self.passes}")
 

@@ -15,23 +15,27 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-import ufl
-from mpi4py import MPI
-
-from eyemech.forms import NeoHooke
-from eyemech.meshes.cook import TIP, cook_membrane
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import gather_grid, render_png
-from eyemech.problems.parameters import SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, point_value,
-                                     solid_fields)
-
 import dolfinx
 import dolfinx.fem
+import numpy as np
+import ufl
+from eyemech.forms import NeoHooke
+from eyemech.meshes.cook import TIP, cook_membrane
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import gather_grid, render_png
+from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.residual import solid_residual
+from eyemech.problems.solid.spaces import (
+    ELEMENTS,
+    ElementName,
+    check_element,
+    global_dofs,
+    point_value,
+    solid_fields,
+)
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from mpi4py import MPI
 
 REFERENCE_TIP_DISPLACEMENT = 6.9  # mm, converged value of the references above
 

@@ -21,13 +21,12 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-from mpi4py import MPI
-
 from eyemech.forms.shell import Kinematics
-from eyemech.problems import hemisphere
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import field
-from eyemech.problems.scene import Scene
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.shell.hemisphere import HemisphereParameters, run_hemisphere
+from mpi4py import MPI
 
 # Sze, Liu & Lo (2004), problem 3.4, the table of the hemisphere's load–deflection
 # curve. Columns: P/P_max, radial displacement of the point loaded outward, radial
@@ -45,7 +44,7 @@ SZE_MAX_FORCE = 400.0
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(hemisphere.Parameters):
+class Parameters(HemisphereParameters):
     force: float = field(SZE_MAX_FORCE, "each point load at the end of the path (whole shell)", "N")
     divisions: int = field(16, "divisions from the equator to the hole (5× as many around)")
     kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
@@ -71,7 +70,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     # land on the table's load levels that the path passes
     stops = tuple(f * SZE_MAX_FORCE / params.force for f in SZE_LOAD_FRACTION
                   if 0.0 < f * SZE_MAX_FORCE / params.force <= 1.0)
-    result = hemisphere.run_hemisphere(SCENE.name, params, comm, out, options, stops=stops,
+    result = run_hemisphere(SCENE.name, params, comm, out, options, stops=stops,
                                        on_step=compare)
     quantities = result.quantities
     outward, inward = sze_reference(params.force)

@@ -23,23 +23,25 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-import ufl
-from mpi4py import MPI
-
-from eyemech.forms import compressible_neo_hooke, contact
-from eyemech.meshes.contact_bodies import quarter_hemisphere
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.rigid_contact import (NodalPenetration, refuse_initial_penetration,
-                                            resultant_force, surface_integral)
-from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import global_dofs, symmetry_bcs
-
 import dolfinx
 import dolfinx.fem
+import numpy as np
+import ufl
+from eyemech.forms import compressible_neo_hooke, contact
+from eyemech.meshes.contact_bodies import quarter_hemisphere
+from eyemech.problems.contact.rigid import (
+    NodalPenetration,
+    refuse_initial_penetration,
+    resultant_force,
+    surface_integral,
+)
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import FieldWriter
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from mpi4py import MPI
 
 QUADRATURE = {"quadrature_degree": 4}
 # the penalty integrand ⟨−g⟩² has a kink at the contact edge: more points there
@@ -167,7 +169,6 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from eyemech.problems.studies._common import stamp
 
     r = np.concatenate([g[0] for g in gathered])

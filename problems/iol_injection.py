@@ -10,7 +10,7 @@ is left to settle for ``settle_time``. The folded state comes from ``iol-fold`` 
 when ``folded_state`` is empty).
 
 Self-contact: ipctk's barrier with CCD-limited Newton updates and lagged friction
-(:mod:`eyemech.problems.iol_self_contact`); a folded state that already intersects itself
+(:mod:`eyemech.problems.contact.ipc`); a folded state that already intersects itself
 is refused before any solve. Not modelled: a soft capsule.
 """
 
@@ -23,26 +23,41 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 
-from eyemech.problems import iol_fold
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.iol import (InjectorLayout, LensShell, StrainProbe, lens_newton, lens_self_contact,
-                                  load_state, optic_center, optic_flatness, optic_normal, render_frame,
-                                  save_state, write_animation, write_frame_grid)
-from eyemech.problems.iol_contact import NodalContact, Plunger, self_distance_probe, turn_about_x
-from eyemech.problems.output import PyvistaSeries
-from eyemech.problems.parameters import ParameterError, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.time_integration import SCHEMES, ImplicitDynamics
+from eyemech.problems.contact.rigid_wall import NodalContact
+from eyemech.problems.contact.self_distance import self_distance_probe
+from eyemech.problems.lens.fold import (
+    EASY_ITERATIONS,
+    FoldParameters,
+    fold,
+    self_contact_kind,
+)
+from eyemech.problems.lens.injector import Plunger, turn_about_x
+from eyemech.problems.lens.model import (
+    InjectorLayout,
+    LensShell,
+    StrainProbe,
+    lens_newton,
+    lens_self_contact,
+    load_state,
+    optic_center,
+    optic_flatness,
+    optic_normal,
+    render_frame,
+    save_state,
+    write_animation,
+    write_frame_grid,
+)
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import PyvistaSeries
+from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(iol_fold.Parameters):
+class Parameters(FoldParameters):
     folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)")
     plunger_speed: float = field(40.0, "plunger speed", "mm/s")
     plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
@@ -83,7 +98,7 @@ class Parameters(iol_fold.Parameters):
         if min(semi[:2]) < 0.5 * self.optic_diameter:
             raise ParameterError("optic_diameter", f"the capsule (semi-axes {tuple(semi)}) is smaller "
                                  f"than the {self.optic_diameter} mm optic")
-        iol_fold.Parameters.validate(self)
+        FoldParameters.validate(self)
         self.require_positive("plunger_speed", "frames_every", "jacobian_lag")
         self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp", "frame_interval",
                                  "capsule_friction", "cartridge_friction")
@@ -127,7 +142,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                 ctx.result.quantities["fold_cache"] = str(cached)
             else:
                 with ctx.timings("folding"):
-                    iol_fold.fold(params, ctx, shell, None)
+                    fold(params, ctx, shell, None)
                 if cached is not None:
                     _store_fold(cached, shell, ctx)
             if ctx.out is not None:  # reusable: folded_state=<out>/folded_state.npz
@@ -138,13 +153,14 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     return ctx.result
 
 
-FOLD_CODE = ("problems/iol_fold.py", "problems/iol.py", "problems/iol_contact.py", "problems/iol_self_contact.py",
-             "problems/time_integration.py", "problems/driver.py", "forms", "meshes")
+FOLD_CODE = ("problems/lens/fold.py", "problems/lens/model.py", "problems/lens/injector.py",
+             "problems/contact/rigid_wall.py", "problems/contact/ipc.py",
+             "problems/solve/time_integration.py", "problems/solve/driver.py", "forms", "meshes")
 
 
 def fold_cache_path(params: Parameters) -> Path:
     """Where the fold of these lens and fold parameters is cached: a hash of every
-    ``iol_fold.Parameters`` value but ``frames``, of the source of the code the fold runs
+    ``FoldParameters`` value but ``frames``, of the source of the code the fold runs
     (any edit makes a new key) and of the dolfinx version. Why: the default injection folds
     first (≈ 10–20 min at the paper's resolution); a fold is only reused for the same lens."""
     import hashlib
@@ -153,7 +169,7 @@ def fold_cache_path(params: Parameters) -> Path:
 
     import dolfinx
 
-    values = {f.name: getattr(params, f.name) for f in dataclasses.fields(iol_fold.Parameters)
+    values = {f.name: getattr(params, f.name) for f in dataclasses.fields(FoldParameters)
               if f.name != "frames"}
     digest = hashlib.sha256(json.dumps(values, sort_keys=True, default=str).encode())
     digest.update(dolfinx.__version__.encode())
@@ -181,7 +197,7 @@ def _refuse_intersecting(params: Parameters, shell: LensShell) -> None:
     """A saved fold that passes through itself cannot start a barrier (infinite energy)."""
     if not (params.self_contact and params.contact):
         return
-    from eyemech.problems.iol_self_contact import SelfContactError
+    from eyemech.problems.contact.ipc import SelfContactError
 
     try:
         lens_self_contact(shell, params).check(what=f"the folded state {params.folded_state}")
@@ -379,7 +395,7 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
     with ctx.timings("time_stepping"):
         follow_path(solver, apply, Stepping(0.0, steps * dt, initial_step=1.0 / steps, max_step=1.0 / steps,
                                             grow=2.0, min_step=1e-3 / steps, stops=(push_time,),
-                                            easy_iterations=iol_fold.EASY_ITERATIONS),
+                                            easy_iterations=EASY_ITERATIONS),
                     on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
     h["wall"] = time.perf_counter() - begin
     h["end"] = steps * dt
@@ -411,7 +427,7 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
         haptic_max_strain=float(max(h["strain"], default=0.0)),
         min_self_distance_mm=float(min(distances)) if distances else None,
         self_intersecting=bool(any(h["intersecting"])),
-        self_contact_forces=(iol_fold._self_contact_kind(params) if params.contact
+        self_contact_forces=(self_contact_kind(params) if params.contact
                              else "not applied (contact=false)"),
         self_contact_seconds=getattr(h["self_contact"], "seconds", 0.0),
         ccd_limited_updates=len(getattr(h["self_contact"], "step_limits", [])),

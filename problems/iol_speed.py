@@ -46,21 +46,17 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
 import dolfinx.fem.petsc
-from petsc4py import PETSc
-
 from eyemech.meshes.iol import LensGeometry
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.iol import LensParameters, LensShell, rolled
-from eyemech.problems.iol_contact import Capsule, NodalContact
-from eyemech.problems.parameters import ParameterError, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.time_integration import SCHEMES, ImplicitDynamics
+from eyemech.problems.contact.rigid_wall import NodalContact
+from eyemech.problems.lens.injector import Capsule
+from eyemech.problems.lens.model import LensParameters, LensShell, rolled
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics
+from petsc4py import PETSc
 
 METHODS = ("newton", "linearised")
 JACOBIANS = ("fresh", "lagged", "matrix-free")
@@ -412,7 +408,7 @@ def _timed_run(params, shell, dynamics, solver: StepSolver, contact, u0, ctx) ->
     clock.cpu["other"] = cpu - sum(clock.cpu[p] for p in PHASES[:-1])
     for phase in PHASES:
         ctx.timings.add(f"step_{phase}", clock.wall[phase])
-    # the columns of `eyemech bench` (problems/bench.py)
+    # the columns of `eyemech bench` (problems/run/bench.py)
     ctx.timings.add("assembly", clock.wall["residual"] + clock.wall["jacobian"])
     ctx.timings.add("solve", clock.wall["factorisation"] + clock.wall["solve"])
     ctx.timings.add("contact_search", clock.wall["contact"])

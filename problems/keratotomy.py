@@ -21,54 +21,28 @@ import dataclasses
 from pathlib import Path
 from typing import Literal
 
+import dolfinx
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from eyemech.forms import follower_pressure
 from eyemech.forms import viscoelastic as ve
-from eyemech.forms.elastic import spring_support_energy
 from eyemech.meshes import MeshError
 from eyemech.meshes.cornea import CorneaGeometry, cornea
-from eyemech.problems._viscous_bar import ViscousHistory
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import displacement_grid, render_png
-from eyemech.problems.linear_solvers import SolverChoice
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import ELEMENTS, global_dofs, mixed_displacement_pressure, symmetry_bcs
-
-import dolfinx
-
-MMHG = 1.33322e-4  # MPa
-SUPPORTS = ("clamped", "elastic")
-
-
-def validate_support(params) -> None:
-    """ParameterError for an unknown ``support`` or a non-positive ``limbus_stiffness``."""
-    if params.support not in SUPPORTS:
-        raise ParameterError("support", f"unknown limbus support {params.support!r}; choose one of "
-                             f"{', '.join(SUPPORTS)}")
-    if params.support == "elastic":
-        params.require_positive("limbus_stiffness")
-        if not np.isfinite(params.limbus_stiffness):
-            raise ParameterError("limbus_stiffness", "must be finite")
-
-
-def limbus_support(params, u, v, tagged, ds):
-    """The limbus held by ``params.support``: (residual term or None, Dirichlet conditions).
-    ``clamped``: u = 0 on the limbus face. ``elastic``: distributed springs of stiffness
-    ``limbus_stiffness`` per area in all directions (forms/elastic.py), the sclera's
-    compliance in place of a rigid wall."""
-    V = u.function_space
-    if params.support == "elastic":
-        energy = spring_support_energy(u, params.limbus_stiffness, ds(tagged.tag("limbus")))
-        return ufl.derivative(energy, u, v), []
-    fdim = tagged.mesh.topology.dim - 1
-    clamp = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(
-        V, fdim, tagged.facets("limbus")), V)
-    return None, [clamp]
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import displacement_grid, render_png
+from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.limbus import limbus_support, validate_support
+from eyemech.problems.solid.spaces import (
+    ELEMENTS,
+    global_dofs,
+    mixed_displacement_pressure,
+    symmetry_bcs,
+)
+from eyemech.problems.solid.viscous_bar import ViscousHistory
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.linear_solvers import SolverChoice
+from mpi4py import MPI
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,11 +1,11 @@
 """``liquid-sphere``: the thick incompressible neo-Hookean sphere filled with a static
 liquid and squeezed by an external follower pressure — the cavity model of seed 002
-§2.1 on a problem with an exact answer (:func:`eyemech.problems.analytic.liquid_sphere`).
+§2.1 on a problem with an exact answer (:func:`eyemech.problems.reference.analytic.liquid_sphere`).
 
 The liquid pressure is either a Real-space unknown with the liquid law as its row
 (``cavity_formulation = real``) or substituted into the wall load (``substituted``,
 the paper's previous formulation, a dense wall×wall Jacobian block); see
-:mod:`eyemech.problems.cavity`. The reference cavity volume V_ini is the stress-free
+:mod:`eyemech.problems.solid.cavity`. The reference cavity volume V_ini is the stress-free
 one; the initial and external pressures are ramped together from zero.
 """
 
@@ -16,25 +16,39 @@ import time
 from pathlib import Path
 from typing import Literal
 
-import numpy as np
-import ufl
-from mpi4py import MPI
-
-from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
-from eyemech.meshes import spherical_shell
-from eyemech.problems import analytic
-from eyemech.problems.cavity import SubstitutedCavity, check_closed, real_pressure_space
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.linear_solvers import SolverChoice
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, solid_fields,
-                                     symmetry_bcs, surface_mean)
-
 import dolfinx
 import dolfinx.fem
+import numpy as np
+import ufl
+from eyemech.forms import (
+    NeoHooke,
+    enclosed_volume,
+    follower_pressure,
+    liquid_law_residual,
+)
+from eyemech.meshes import spherical_shell
+from eyemech.problems.reference import analytic
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.cavity import (
+    SubstitutedCavity,
+    check_closed,
+    real_pressure_space,
+)
+from eyemech.problems.solid.residual import solid_residual
+from eyemech.problems.solid.spaces import (
+    ELEMENTS,
+    ElementName,
+    check_element,
+    global_dofs,
+    solid_fields,
+    surface_mean,
+    symmetry_bcs,
+)
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.linear_solvers import SolverChoice
+from mpi4py import MPI
 
 SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 

@@ -7,11 +7,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.shell.model import PlateParameters, run_plate
 from mpi4py import MPI
-
-from eyemech.problems.context import RunOptions
-from eyemech.problems.scene import Scene
-from eyemech.problems.shells import PlateParameters, run_plate
 
 Parameters = PlateParameters
 

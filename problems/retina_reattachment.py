@@ -8,7 +8,7 @@ held at its rim (where it is still attached) and a pressure on its inner face
 (the vitreous or a gas tamponade) pushes it outwards until it lies on the stiff
 layer. Contact: slave = the soft layer's outer face (nodes), master = the stiff
 layer's inner face (triangles), penalty node to surface
-(:mod:`eyemech.problems.contact_search`), searched at every Newton iteration.
+(:mod:`eyemech.problems.contact.node_to_surface`), searched at every Newton iteration.
 
 Both layers are compressible neo-Hookean (E, ν). Quantities: ``min_gap`` (the
 smallest slave gap, negative = penetration), ``max_penetration``, the expected
@@ -21,23 +21,21 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from eyemech.forms import compressible_neo_hooke, follower_pressure
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.contact_bodies import layered_caps
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.contact_search import NodeToSurfaceContact
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter, gather_grid, render_png
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import global_dofs
-
-import dolfinx
-import dolfinx.fem
+from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.spaces import global_dofs
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from mpi4py import MPI
 
 QUADRATURE = {"quadrature_degree": 4}
 

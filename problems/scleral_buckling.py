@@ -21,7 +21,7 @@ the paper, or Q2P1). The eye is held at the end of the optic-nerve stub; the
 symmetry plane x = 0 passes through the tear.
 
 Retina–choroid contact (steps 2 and 3): penalty node to surface
-(:class:`~eyemech.problems.contact_search.NodeToSurfaceContact`), slave = the detached
+(:class:`~eyemech.problems.contact.node_to_surface.NodeToSurfaceContact`), slave = the detached
 retina's outer face (its nodes), master = the choroid's inner face (its quadrilaterals
 split into triangles), α = ``retina_penalty_factor`` · 6 c_retina / h (6c = E of an
 incompressible neo-Hooke solid, h the element size along the wall), searched at every
@@ -31,7 +31,7 @@ The lens (neo-Hooke, c = ``c_lens``) floats in the liquid, wetted on all sides (
 surface is part of the cavity wall, so the liquid volume excludes it exactly), and
 hangs on the zonules: linear-elastic bars (E = ``zonule_modulus``, cross-section
 ``zonule_area``) from its equatorial belt to the ciliary body's inner surface
-(:class:`~eyemech.problems.zonules.ZonuleBars`; why bars: see that module).
+(:class:`~eyemech.problems.solid.zonules.ZonuleBars`; why bars: see that module).
 """
 
 from __future__ import annotations
@@ -41,32 +41,49 @@ import math
 from pathlib import Path
 from typing import Literal
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
-from mpi4py import MPI
-
-from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure, liquid_law_residual
+from eyemech.forms import (
+    NeoHooke,
+    enclosed_volume,
+    follower_pressure,
+    liquid_law_residual,
+)
 from eyemech.forms.buckle import Buckle, BuckleShape, smoothed_penalty_energy
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
-from eyemech.problems.cavity import check_closed, real_pressure_space
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.contact_search import NodeToSurfaceContact
-from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
-from eyemech.problems.linear_solvers import SolverChoice
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.probes import CellField, NodeProbe, SurfacePairing, facet_nodes
-from eyemech.problems.scene import Scene
-from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
-from eyemech.problems.sutures import SutureForces, SuturePoint
-from eyemech.problems.zonules import ZonuleBars
 from eyemech.problems import buckling_output
+from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.cavity import check_closed, real_pressure_space
+from eyemech.problems.solid.probes import (
+    CellField,
+    NodeProbe,
+    SurfacePairing,
+    facet_nodes,
+)
+from eyemech.problems.solid.residual import solid_residual
+from eyemech.problems.solid.spaces import (
+    ELEMENTS,
+    global_dofs,
+    solid_fields,
+    symmetry_bcs,
+)
+from eyemech.problems.solid.sutures import SutureForces, SuturePoint
+from eyemech.problems.solid.zonules import ZonuleBars
+from eyemech.problems.solve.driver import (
+    NonlinearSolver,
+    SolveFailure,
+    Stepping,
+    follow_path,
+)
+from eyemech.problems.solve.linear_solvers import SolverChoice
+from mpi4py import MPI
 
-import dolfinx
-import dolfinx.fem
-
-MMHG = 1.33322e-4  # MPa
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
 BENCHMARK = {"resolution": "paper"}
 

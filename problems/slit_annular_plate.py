@@ -30,23 +30,23 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
 import dolfinx.la
 import dolfinx.mesh
-
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import Diagonal, mapped_surface
 from eyemech.meshes.tagged import TaggedMesh
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.shells import Shell, check_shell_parameters, newton_options, picture
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import FieldWriter
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.shell.model import (
+    Shell,
+    check_shell_parameters,
+    newton_options,
+    picture,
+)
+from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 
 # Sze, Liu & Lo (2004) table 4: load fraction, W_A (inner point), W_B (outer point)
 # of the loaded slit edge (the levels copied in Project Chrono's demo; see the docstring)

@@ -13,18 +13,22 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import dolfinx
 import numpy as np
 import ufl
+from eyemech.problems.reference import viscoelastic as reference
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.viscous_bar import (
+    BarParameters,
+    ViscousBar,
+    load_instantly,
+    march,
+    plot_history,
+)
+from eyemech.problems.solve.driver import NonlinearSolver
 from mpi4py import MPI
-
-from eyemech.problems import viscoelastic_reference as reference
-from eyemech.problems._viscous_bar import BarParameters, ViscousBar, load_instantly, march, plot_history
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver
-from eyemech.problems.parameters import ParameterError, field
-from eyemech.problems.scene import Scene
-
-import dolfinx
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """``sphere-inflation``: a thick incompressible neo-Hookean sphere inflated by an
 internal follower pressure — the foundation benchmark, with an exact solution
-(:mod:`eyemech.problems.analytic`).
+(:mod:`eyemech.problems.reference.analytic`).
 
 One octant is modelled (three symmetry planes). The pressure is ramped by the path
 follower; each converged step records the deformed radii and the cavity volume.
@@ -11,25 +11,41 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-import ufl
-from mpi4py import MPI
-
-from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure
-from eyemech.meshes import spherical_shell
-from eyemech.problems import analytic
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
-from eyemech.problems.output import FieldWriter, PyvistaSeries, gather_grid, render_png
-from eyemech.problems.linear_solvers import SolverChoice
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.scene import Scene
-from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import (ELEMENTS, ElementName, check_element, global_dofs, lagrange_view,
-                                     solid_fields, symmetry_bcs, surface_mean)
-
 import dolfinx
 import dolfinx.fem
+import numpy as np
+import ufl
+from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure
+from eyemech.meshes import spherical_shell
+from eyemech.problems.reference import analytic
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import (
+    FieldWriter,
+    PyvistaSeries,
+    gather_grid,
+    render_png,
+)
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.residual import solid_residual
+from eyemech.problems.solid.spaces import (
+    ELEMENTS,
+    ElementName,
+    check_element,
+    global_dofs,
+    lagrange_view,
+    solid_fields,
+    surface_mean,
+    symmetry_bcs,
+)
+from eyemech.problems.solve.driver import (
+    NonlinearSolver,
+    SolveFailure,
+    Stepping,
+    follow_path,
+)
+from eyemech.problems.solve.linear_solvers import SolverChoice
+from mpi4py import MPI
 
 
 @dataclasses.dataclass(frozen=True)

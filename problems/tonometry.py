@@ -42,25 +42,32 @@ import math
 from pathlib import Path
 from typing import Literal
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from eyemech.forms import contact, follower_pressure
 from eyemech.forms import viscoelastic as ve
 from eyemech.meshes import MeshError
 from eyemech.meshes.cornea import CorneaGeometry, cornea
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
-from eyemech.problems.keratotomy import MMHG, SUPPORTS, limbus_support, validate_support
-from eyemech.problems.output import PyvistaSeries, displacement_grid, render_png
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.rigid_contact import resultant_force
-from eyemech.problems.scene import Scene
-from eyemech.problems.spaces import ELEMENTS, global_dofs, mixed_displacement_pressure
-
-import dolfinx
-import dolfinx.fem
+from eyemech.problems.contact.rigid import resultant_force
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import PyvistaSeries, displacement_grid, render_png
+from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
+from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.limbus import SUPPORTS, limbus_support, validate_support
+from eyemech.problems.solid.spaces import (
+    ELEMENTS,
+    global_dofs,
+    mixed_displacement_pressure,
+)
+from eyemech.problems.solve.driver import (
+    NonlinearSolver,
+    SolveFailure,
+    Stepping,
+    follow_path,
+)
+from mpi4py import MPI
 
 GOLDMANN_DIAMETER = 3.06  # mm
 CONTACT_QUADRATURE = 6    # the penalty integrand has a kink at the contact edge

@@ -105,10 +105,11 @@ def probe(cells: int, element: str, until: float, petsc: dict[str, str]) -> dict
     the load path up to ``until`` (1: IOP step)."""
     import dataclasses
 
-    from eyemech.problems import buckling_output, scleral_buckling as sb
-    from eyemech.problems.context import RunContext, RunOptions
-    from eyemech.problems.driver import NewtonOptions, Stepping, follow_path
-    from eyemech.problems.parameters import build
+    from eyemech.problems import buckling_output
+    from eyemech.problems import scleral_buckling as sb
+    from eyemech.problems.run.context import RunContext, RunOptions
+    from eyemech.problems.run.parameters import build
+    from eyemech.problems.solve.driver import NewtonOptions, Stepping, follow_path
 
     @dataclasses.dataclass(frozen=True)
     class Refined(sb.Parameters):
@@ -163,7 +164,6 @@ def chart(rows: list[dict], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from eyemech.problems.studies._common import stamp
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))

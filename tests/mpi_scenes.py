@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from parallel_cases import CASES, cli_arguments  # noqa: E402
+from parallel_cases import cli_arguments  # noqa: E402
 
 
 @contextlib.contextmanager
@@ -43,9 +43,8 @@ def redirected(stdout: Path, stderr: Path):
 
 
 def main() -> int:
-    from mpi4py import MPI
-
     from eyemech.scripts.cli import main as eyemech
+    from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
     out = Path(sys.argv[1])

@@ -34,9 +34,8 @@ except ImportError:
 import dolfinx
 import dolfinx.fem.petsc
 import ufl
+from eyemech.problems.contact.ipc import SelfContact
 from scipy.spatial import cKDTree
-
-from eyemech.problems.iol_self_contact import SelfContact
 from sheets import GAP, two_sheets
 
 DHAT = 0.05

@@ -6,7 +6,6 @@ import csv
 import json
 
 import pytest
-
 from conftest import last_json, run_cli
 
 

@@ -11,21 +11,20 @@ References
 
 from __future__ import annotations
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import pytest
 import ufl
-from mpi4py import MPI
-
 from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
 from eyemech.forms import contact
 from eyemech.meshes import MeshError
-from eyemech.problems import hertz, retina_reattachment as retina
-from eyemech.problems.context import RunOptions
-from eyemech.problems.contact_search import closest_points, penalty_pressure
-from eyemech.problems.parameters import ParameterError
-
-import dolfinx
-import dolfinx.fem
+from eyemech.problems import hertz
+from eyemech.problems import retina_reattachment as retina
+from eyemech.problems.contact.node_to_surface import closest_points, penalty_pressure
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError
+from mpi4py import MPI
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -231,7 +230,7 @@ def test_missing_contact_region_is_refused(key):
 def test_empty_contact_region_is_refused():
     # the 'soft_rim' region exists; 'symmetry_x' of a region... an empty one: build it
     from eyemech.meshes.contact_bodies import layered_caps
-    from eyemech.problems.contact_search import NodeToSurfaceContact
+    from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 
     caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
     caps.names["empty"] = (2, 99)
@@ -244,7 +243,7 @@ def test_empty_contact_region_is_refused():
 
 def test_bodies_starting_inside_each_other_are_refused():
     from eyemech.meshes.contact_bodies import layered_caps
-    from eyemech.problems.contact_search import NodeToSurfaceContact
+    from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 
     caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
     V = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 1, (3,)))
@@ -312,7 +311,7 @@ import numpy as np
 import dolfinx, dolfinx.fem.petsc
 from mpi4py import MPI
 from eyemech.meshes.contact_bodies import layered_caps
-from eyemech.problems.contact_search import NodeToSurfaceContact
+from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 
 caps = layered_caps(10.0, 0.2, 0.1, 0.3, 12.0, 0.5)
 V = dolfinx.fem.functionspace(caps.mesh, ("Lagrange", 2, (3,)))

@@ -11,14 +11,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import dolfinx
 import numpy as np
 import pytest
 import ufl
-
 from eyemech.meshes import MeshError  # imports dolfinx_solver before dolfinx
 from eyemech.meshes.cornea import CorneaGeometry, cornea
-
-import dolfinx
 
 
 def measure(tagged, name=None):

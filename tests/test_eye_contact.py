@@ -27,11 +27,10 @@ import basix.ufl
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
-
 from eyemech.forms import compressible_neo_hooke
 from eyemech.meshes.tagged import TaggedMesh
-from eyemech.problems.contact_search import NodeToSurfaceContact
-from eyemech.problems.driver import NonlinearSolver, NewtonOptions
+from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
+from eyemech.problems.solve.driver import NewtonOptions, NonlinearSolver
 
 GAP = 0.1
 NAMES = {"lower": (3, 1), "upper": (3, 2), "master": (2, 1), "slave": (2, 2), "bottom": (2, 3),

@@ -1,4 +1,4 @@
-"""Generalised-α (Chung & Hulbert, J. Appl. Mech. 60:371, 1993) in problems/time_integration.py.
+"""Generalised-α (Chung & Hulbert, J. Appl. Mech. 60:371, 1993) in problems/solve/time_integration.py.
 
 - The one-mode recurrence against closed forms: ρ∞ = 1 is the trapezoidal rule (its phase
   ω_h Δt = 2 atan(ωΔt/2), exact to round-off); the amplification matrix' spectral radius
@@ -15,10 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from eyemech.problems import cantilever_vibration
-from eyemech.problems.context import RunOptions
-from eyemech.problems.time_integration import generalized_alpha, oscillator_response, oscillator_step
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.solve.time_integration import (
+    generalized_alpha,
+    oscillator_response,
+    oscillator_step,
+)
 
 
 def _amplification(scheme, omega_dt: float, damping: float = 0.0) -> np.ndarray:

@@ -2,7 +2,7 @@
 thick incompressible neo-Hookean sphere at the rate its order allows; P1 with a bulk
 penalty locks.
 
-Reference: the exact radial solution (problems/analytic.py; Ogden, *Non-linear elastic
+Reference: the exact radial solution (problems/reference/analytic.py; Ogden, *Non-linear elastic
 deformations*, 1984, §5.3.2 — p = ∫_a^b 2μ/r (λ² − λ⁻⁴) dr). Error measure: the relative
 L² error of the displacement against the exact field u = (r(R)/R − 1) X,
 r³ = R³ − A³ + a³. Rates are measured per h_eff = N^(-1/3) (N = unknowns), since gmsh
@@ -18,10 +18,9 @@ from __future__ import annotations
 import math
 
 import pytest
-
 from eyemech.problems import sphere_inflation as si
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
 
 OPTIONS = RunOptions(fields=False, pictures=False)
 SEQUENCES = {"P2P1": (2.0, 1.0), "Q2P1": (2.0, 1.0), "Q1P0": (2.0, 1.0, 0.5),
@@ -64,7 +63,6 @@ def test_hexahedral_octant_is_valid_and_curved():
     import dolfinx
     import numpy as np
     import ufl
-
     from eyemech.meshes import spherical_shell
 
     shell = spherical_shell(10.0, 12.0, 2.0, order=2, hexahedra=True)
@@ -97,11 +95,10 @@ def test_materials_by_cell_tag_sum_to_the_single_law():
     import dolfinx
     import numpy as np
     import ufl
-
     from eyemech.forms import NeoHooke
     from eyemech.meshes import spherical_shell
-    from eyemech.problems.solid import solid_residual
-    from eyemech.problems.spaces import ELEMENTS, solid_fields
+    from eyemech.problems.solid.residual import solid_residual
+    from eyemech.problems.solid.spaces import ELEMENTS, solid_fields
 
     shell = spherical_shell(10.0, 12.0, 4.0, order=1, hexahedra=True)
     family = ELEMENTS["Q1P0"]

@@ -20,14 +20,13 @@ except ImportError:
     pass
 import basix.ufl
 import dolfinx.fem
-
 from eyemech.meshes import MeshError
 from eyemech.meshes.iol import LensGeometry, intraocular_lens
 from eyemech.problems import iol_fold, iol_injection
-from eyemech.problems.context import RunOptions
-from eyemech.problems.iol import LensParameters, rolled
-from eyemech.problems.iol_contact import Capsule, Plunger, TaperedBore
-from eyemech.problems.parameters import ParameterError
+from eyemech.problems.lens.injector import Capsule, Plunger, TaperedBore
+from eyemech.problems.lens.model import LensParameters, rolled
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -78,7 +77,7 @@ def test_rigid_bodies_gap_and_normals():
 
 def test_self_distance_sees_the_rolled_optic_close(lens):
     pytest.importorskip("ipctk")
-    from eyemech.problems.iol_contact import SelfDistance
+    from eyemech.problems.contact.self_distance import SelfDistance
 
     V = dolfinx.fem.functionspace(lens.mesh, basix.ufl.element("Lagrange", "triangle", 2, shape=(3,)))
     u = dolfinx.fem.Function(V)
@@ -105,9 +104,8 @@ def test_bad_input_is_refused_before_any_solve():
 def test_a_folded_state_that_passes_through_itself_is_refused(tmp_path):
     """The barrier cannot start from an intersecting state: refused before any solve."""
     pytest.importorskip("ipctk")
+    from eyemech.problems.lens.model import LensShell, save_state
     from mpi4py import MPI
-
-    from eyemech.problems.iol import LensShell, save_state
 
     params = iol_injection.Parameters()
     shell = LensShell(params, MPI.COMM_WORLD)

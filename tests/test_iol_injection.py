@@ -25,9 +25,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from eyemech.problems import iol_injection
-from eyemech.problems.context import RunOptions
+from eyemech.problems.run.context import RunOptions
 
 FOLDED = Path(__file__).parent / "data" / "iol_folded_coarse.npz"
 PENETRATION_TOLERANCE_MM = 0.02
@@ -38,7 +37,7 @@ LONG = pytest.mark.skipif(not os.environ.get("EYEMECH_IOL_INJECTION"),
 def test_rounded_nozzle_lip_is_continuous_and_pushes_out():
     """The wall's gap is continuous across the lip and the tip (no jump of the penalty
     force as a node leaves the nozzle); on the lip the normal turns from radial to axial."""
-    from eyemech.problems.iol import InjectorLayout, LensParameters
+    from eyemech.problems.lens.model import InjectorLayout, LensParameters
 
     params = LensParameters()
     layout = InjectorLayout()
@@ -58,8 +57,8 @@ def test_rounded_nozzle_lip_is_continuous_and_pushes_out():
 
 def test_fluid_velocity_is_plug_flow_in_the_bore_and_a_jet_outside():
     """Incompressible plug flow: u(x) R(x)² = V R_bore² inside; exp decay beyond the tip."""
-    from eyemech.problems.iol import InjectorLayout, LensParameters
     from eyemech.problems.iol_injection import FluidDrag
+    from eyemech.problems.lens.model import InjectorLayout, LensParameters
 
     params = LensParameters()
     layout = InjectorLayout()

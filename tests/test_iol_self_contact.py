@@ -26,8 +26,13 @@ import ufl
 
 pytest.importorskip("ipctk")
 
-from eyemech.problems.driver import NewtonOptions, NonlinearSolver, Stepping, follow_path  # noqa: E402
-from eyemech.problems.iol_self_contact import SelfContact, SelfContactError  # noqa: E402
+from eyemech.problems.contact.ipc import SelfContact, SelfContactError  # noqa: E402
+from eyemech.problems.solve.driver import (  # noqa: E402
+    NewtonOptions,
+    NonlinearSolver,
+    Stepping,
+    follow_path,
+)
 from sheets import GAP, two_sheets  # noqa: E402
 
 STIFF, FRIC, STEPS = 10.0, 0.2, 2  # two increments: the first would cross without the CCD
@@ -163,7 +168,7 @@ import resource, sys
 sys.path.insert(0, sys.argv[1])
 import numpy as np
 from test_iol_self_contact import sheets_space
-from eyemech.problems.iol_self_contact import SelfContact
+from eyemech.problems.contact.ipc import SelfContact
 import dolfinx.fem
 
 V = sheets_space()

@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mpi4py import MPI
-
 from eyemech.problems import iol_speed
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError
+from mpi4py import MPI
 
 QUIET = RunOptions(fields=False, pictures=False)
 TINY = {"mesh_scale": 3.0, "steps": 3, "rtol": 1e-8}
@@ -93,9 +92,9 @@ def test_explicit_jacobian_equals_ufls_derivative():
     """``shell_jacobian`` (forms/shell.py, written out by hand for a smaller kernel) is the
     exact second variation of the shell energy: on the rolled lens its matrix equals UFL's
     derivative of the residual up to round-off (3e-16 measured; 1e-12 asserted)."""
-    import ufl
     import dolfinx.fem
     import dolfinx.fem.petsc
+    import ufl
 
     params = iol_speed.Parameters(**TINY)
     shell = iol_speed._lens(params)

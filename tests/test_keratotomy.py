@@ -9,10 +9,9 @@ depend on the moduli and the mesh and are reported in docs/viscoelastic.md.
 from __future__ import annotations
 
 import pytest
-
 from eyemech.problems import keratotomy
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
 
 QUIET = RunOptions(fields=False, pictures=False)
 COARSE = dict(mesh_size=1.5, azimuthal_divisions=8, t_end=3600.0, first_dt=1800.0, dt_growth=1.0)

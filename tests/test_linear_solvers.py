@@ -9,12 +9,10 @@ so converged quantities agree to ~1e-8 relative; 1e-6 leaves room for another CP
 from __future__ import annotations
 
 import pytest
-
-from eyemech.problems import liquid_sphere, scleral_buckling
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError, build
-
 from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
+from eyemech.problems import liquid_sphere
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -28,7 +26,7 @@ def liquid_runs():
 
 def test_liquid_sphere_iterative_matches_the_exact_solution(liquid_runs):
     """Thick neo-Hookean sphere around a compressible liquid, squeezed: the exact inner
-    radius and pressure (eyemech.problems.analytic.liquid_sphere, Lamé-type solution
+    radius and pressure (eyemech.problems.reference.analytic.liquid_sphere, Lamé-type solution
     of the incompressible sphere; seed 002's liquid law). The P2P1 discretisation error
     at the default mesh is ~2e-6 (radius) and ~7e-5 (pressure), the solver's share
     far below."""
@@ -56,7 +54,7 @@ def test_iterative_keeps_newton_and_counts_krylov(liquid_runs):
 def test_petsc_options_still_override(liquid_runs):
     """--petsc overrides the iterative solver's choices (here: an exact LU on the
     displacement block and PETSc's own selfp Schur approximation)."""
-    from eyemech.problems.driver import NewtonOptions
+    from eyemech.problems.solve.driver import NewtonOptions
 
     options = RunOptions(fields=False, pictures=False, newton=NewtonOptions(petsc={
         "fieldsplit_u_pc_type": "lu", "pc_fieldsplit_schur_precondition": "selfp"}))

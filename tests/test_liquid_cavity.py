@@ -1,5 +1,5 @@
 """``liquid-sphere``: cavity pressure as a Real-space unknown and substituted, against
-the exact answer (problems/analytic.py ``liquid_sphere``: the thick-sphere wall relation
+the exact answer (problems/reference/analytic.py ``liquid_sphere``: the thick-sphere wall relation
 P − p_ext = ∫_a^b 2μ/r (λ² − λ⁻⁴) dr closed by the liquid law of seed 002 eq. 5,
 P = P_ini − K ((a/A)³ − 1)). Tolerance 0.5 % (the issue's), met by ~1e-4 in practice.
 """
@@ -14,11 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from eyemech.meshes.tagged import MeshError
 from eyemech.problems import liquid_sphere as ls
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
 
 OPTIONS = RunOptions(fields=False, pictures=False)
 CASES = [(e, f) for e in ("P2P1", "Q2P1") for f in ("real", "substituted")]
@@ -73,9 +72,8 @@ def test_open_wall_is_refused_before_solving():
 def test_axis_volumes_detect_an_open_box():
     import dolfinx
     import ufl
+    from eyemech.problems.solid.cavity import check_closed
     from mpi4py import MPI
-
-    from eyemech.problems.cavity import check_closed
 
     mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2)
     fdim = mesh.topology.dim - 1

@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import CONTACT_RANKS_RTOL, last_json
 from parallel_cases import CASES, WITH_FIELDS, wall_clock
 
@@ -212,7 +211,7 @@ def test_only_rank_0_prints(runs, name, ranks):
 @pytest.mark.mpi
 @pytest.mark.parametrize("rank", [0, 1])
 def test_an_exception_on_one_rank_ends_the_job(rank, tmp_path):
-    """EYEMECH_TEST_RAISE_ON_RANK (problems/driver.py) raises inside the residual on one
+    """EYEMECH_TEST_RAISE_ON_RANK (problems/solve/driver.py) raises inside the residual on one
     rank while the other waits in a collective call: the command line prints the
     traceback and calls MPI Abort, so mpiexec ends both with a non-zero code."""
     command = [str(BIN / "mpiexec"), "-n", "2", str(BIN / "eyemech"), "run", "plate-clamped",
@@ -237,7 +236,7 @@ def test_parallel_output_opens_in_pyvista(runs, name):
     """The VTX .bp folders are for ParaView (VTK's PyPI wheel has no ADIOS2 reader);
     notebooks read the .pvd/.vtu series that rank 0 writes from the gathered mesh. On
     2 and 3 ranks it must be the serial mesh: the same points, each once, and the same
-    values (before the fix in problems/output.py gather_grid, points on the partition
+    values (before the fix in problems/run/output.py gather_grid, points on the partition
     boundary came once per rank: 957 instead of 900 on 2 ranks, the mesh cut apart)."""
     import pyvista
 
@@ -280,7 +279,7 @@ def test_contact_pairs_cross_the_partition(runs):
 @pytest.mark.parametrize("ranks", [2, 3])
 def test_lens_self_contact_hooks_equal_serial(ranks):
     """The lens self-contact on N ranks (ipctk on rank 0 of the gathered surface, forces and
-    Hessian rows sent to their owners; problems/iol_self_contact.py) against its serial self,
+    Hessian rows sent to their owners; problems/contact/ipc.py) against its serial self,
     with barrier and friction pairs active (tests/mpi_self_contact.py: two P2 sheets 0.021 mm
     apart, 107 nodes pushed). The fold case above has the barrier inactive (its layers stay
     0.23 mm > d̂ apart), so this is where the scattered gradient and Hessian are checked.

@@ -25,12 +25,11 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
 from conftest import BIN, CONTACT_RANKS_RTOL, run_cli
 from eyemech.problems import keratotomy, scleral_buckling
-from eyemech.problems.checkpoint import latest
-from eyemech.problems.context import RunOptions
-from eyemech.problems.results import to_jsonable
+from eyemech.problems.run.checkpoint import latest
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.results import to_jsonable
 
 # 6 converged steps: intact IOP (1), intact creep (2, 3), incised IOP (4), incised creep (5, 6)
 CORNEA = dict(mesh_size=1.5, azimuthal_divisions=8, t_end=1800.0, first_dt=900.0,
@@ -203,7 +202,7 @@ def test_sweep_resume_skips_finished_cases_and_reruns_failed_ones(tmp_path):
 @pytest.mark.parametrize("text, every", [("5", (5, 0.0)), ("0", (0, 0.0)), ("10m", (0, 10.0)),
                                          ("0.5min", (0, 0.5))])
 def test_checkpoint_every_reads_steps_or_minutes(text, every):
-    from eyemech.problems.checkpoint import CheckpointOptions
+    from eyemech.problems.run.checkpoint import CheckpointOptions
 
     assert CheckpointOptions.parse_every(text) == every
 
@@ -221,10 +220,9 @@ def test_latest_skips_uncommitted_and_incomplete_checkpoints(tmp_path):
 
 
 def test_time_based_checkpoints_are_due_after_the_interval(monkeypatch):
+    from eyemech.problems.run import checkpoint
+    from eyemech.problems.run.results import Result
     from mpi4py import MPI
-
-    from eyemech.problems import checkpoint
-    from eyemech.problems.results import Result
 
     clock = [100.0]
     monkeypatch.setattr(checkpoint.time, "monotonic", lambda: clock[0])

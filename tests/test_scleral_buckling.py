@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
 from eyemech.problems import scleral_buckling as sb
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
 
 COARSE = dict(resolution="coarse")
 

@@ -1,4 +1,4 @@
-"""Shell mass + implicit time integration (forms/dynamics.py, problems/time_integration.py).
+"""Shell mass + implicit time integration (forms/dynamics.py, problems/solve/time_integration.py).
 
 Reference: free vibration of a clamped strip (ν = 0, so a beam) released from its first
 Euler–Bernoulli mode, ω₁ = (1.8751)² √(EI/(ρA))/L² (Blevins, *Formulas for Natural
@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from eyemech.problems import cantilever_vibration
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError
-from eyemech.problems.time_integration import oscillator_response
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError
+from eyemech.problems.solve.time_integration import oscillator_response
 
 QUIET = RunOptions(fields=False, pictures=False)
 

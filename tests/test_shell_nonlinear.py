@@ -44,9 +44,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from eyemech.problems import hemisphere_nonlinear, plate_clamped, shells
-from eyemech.problems.context import RunOptions
+from eyemech.problems import hemisphere_nonlinear, plate_clamped
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.shell import model as shells
 from eyemech.problems.studies._common import read_csv
 
 QUIET = RunOptions(fields=False, pictures=False)

@@ -1,7 +1,7 @@
 """The foundation benchmark: a thick incompressible neo-Hookean sphere inflated by a
 follower pressure, against the exact solution.
 
-Exact solution (derived in eyemech.problems.analytic and restated here): for
+Exact solution (derived in eyemech.problems.reference.analytic and restated here): for
 A ≤ R ≤ B deforming to a ≤ r ≤ b, incompressibility gives r³ − R³ = a³ − A³; the hoop
 stretch is λ = r/R, the radial one λ⁻². For W = c10 (I1 − 3), μ = 2 c10, the stress
 difference is σθθ − σrr = μ(λ² − λ⁻⁴) and radial equilibrium dσrr/dr = 2(σθθ − σrr)/r
@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import last_json, run_cli
-from eyemech.problems import analytic
 from eyemech.problems import sphere_inflation as si
-from eyemech.problems.context import RunOptions
-from eyemech.problems.driver import NewtonOptions, SolveFailure
+from eyemech.problems.reference import analytic
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.solve.driver import NewtonOptions, SolveFailure
 
 QUIET = RunOptions(fields=False, pictures=False)
 

@@ -15,10 +15,9 @@ mesh of the convergence study (docs/cornea.md, docs/studies/tonometry_convergenc
 from __future__ import annotations
 
 import pytest
-
 from eyemech.problems import tonometry
-from eyemech.problems.context import RunOptions
-from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
 
 QUIET = RunOptions(fields=False, pictures=False, quiet=True)
 COARSE = dict(mesh_size=1.5, azimuthal_divisions=8)

@@ -32,14 +32,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
-
 from conftest import last_json, run_cli
 from eyemech.problems import sls_creep, uniaxial_relaxation
-from eyemech.problems._viscous_bar import UnstableIntegration
-from eyemech.problems.context import RunOptions
-from eyemech.problems.driver import NonlinearSolver, SolveFailure
-from eyemech.problems.parameters import ParameterError, build
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
+from eyemech.problems.solid.viscous_bar import UnstableIntegration
+from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure
+from scipy.integrate import solve_ivp
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -85,11 +84,10 @@ def test_ufl_updates_are_the_law():
     """forms/viscoelastic.py evaluated by DOLFINx on constant tensors equals (E) in numpy:
     the rate, forward Euler, and the backward-Euler closed form X/det(X)^⅓, which solves
     Cv − Cv_n = Δt (C̄ − λ Cv)/τ with det Cv = 1 for a scalar multiplier λ."""
-    import ufl
-    from mpi4py import MPI
-
     import dolfinx
+    import ufl
     from eyemech.forms import viscoelastic as ve
+    from mpi4py import MPI
 
     mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1, dolfinx.mesh.CellType.hexahedron)
     rng = np.random.default_rng(6)
@@ -289,9 +287,8 @@ def test_bad_input_on_the_command_line(tmp_path):
 def test_stability_study_quick(tmp_path):
     import csv
 
-    from mpi4py import MPI
-
     from eyemech.problems.studies import studies
+    from mpi4py import MPI
 
     files = studies()["viscoelastic-stability"].run(out=tmp_path, quick=True, comm=MPI.COMM_WORLD)
     assert {f.suffix for f in files} == {".csv", ".png"}

@@ -1,4 +1,4 @@
-"""Wall friction of the lens' node-to-rigid-wall contact (problems/iol_contact.py): the
+"""Wall friction of the lens' node-to-rigid-wall contact (problems/contact/rigid_wall.py): the
 lagged smoothed Coulomb law of IPC on the nodes of a small vector P1 field.
 
 References: Coulomb's law itself — a node that slides more than ε per step is held back by
@@ -11,16 +11,15 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
-import pytest
-from mpi4py import MPI
-from petsc4py import PETSc
-
-from eyemech.problems.iol_contact import NodalContact, turn_about_x
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
+import pytest
+from eyemech.problems.contact.rigid_wall import NodalContact
+from eyemech.problems.lens.injector import turn_about_x
+from mpi4py import MPI
+from petsc4py import PETSc
 
 STIFFNESS, MU, SLIP = 50.0, 0.4, 1e-3
 

@@ -1,4 +1,4 @@
-"""The zonules' bars (problems/zonules.py): forces and tangent of a two-node truss with
+"""The zonules' bars (problems/solid/zonules.py): forces and tangent of a two-node truss with
 a linear material and exact kinematics, against the closed form and finite differences."""
 
 from __future__ import annotations
@@ -11,11 +11,10 @@ try:
 except ImportError:
     pass
 import dolfinx
+from eyemech.meshes import MeshError
+from eyemech.problems.solid.zonules import ZonuleBars
 from mpi4py import MPI
 from petsc4py import PETSc
-
-from eyemech.meshes import MeshError
-from eyemech.problems.zonules import ZonuleBars
 
 E, AREA = 100.0, 0.008
 

@@ -9,8 +9,8 @@ import os
 import platform
 from pathlib import Path
 
-from eyemech.problems.context import RunOptions
-from eyemech.problems.results import versions
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.results import versions
 
 # studies measure quantities, not pictures: no fields, no PNGs from the scenes
 QUIET = RunOptions(fields=False, pictures=False)

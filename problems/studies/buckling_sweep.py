@@ -2,7 +2,7 @@
 buckling (issue 5, item 5): axial length change after buckling and after suturing,
 the remaining retina–choroid gap and whether the tear closed.
 
-The cases run through :func:`eyemech.problems.sweep.run_sweep`, so under
+The cases run through :func:`eyemech.problems.run.sweep.run_sweep`, so under
 ``mpiexec -n N`` they run side by side (one rank each) and a failed case is recorded,
 not fatal. The full study uses the coarse eye (it is a trend chart, not a converged
 number); ``quick`` runs two cases.
@@ -12,13 +12,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mpi4py import MPI
-
 from eyemech.problems import scleral_buckling
-from eyemech.problems.context import RunOptions
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.sweep import run_sweep
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from eyemech.problems.sweep import run_sweep
+from mpi4py import MPI
 
 # an encircling band alone (no tire), so that its width is what touches the sclera:
 # the clinical comparison (myopic shift for band widths 1–2.5 mm) is for bands

@@ -27,12 +27,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mpi4py import MPI
-
 from eyemech.problems import keratotomy
-from eyemech.problems.driver import SolveFailure
+from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, reduction_chart, relative_deviations, write_csv
+from eyemech.problems.studies._common import (
+    QUIET,
+    reduction_chart,
+    relative_deviations,
+    write_csv,
+)
+from mpi4py import MPI
 
 REFERENCE = "whole cornea"
 QUARTER = {"symmetry": "quarter"}

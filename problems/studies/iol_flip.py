@@ -19,7 +19,7 @@ the same for every case, so only the deployment differs. Varied, one at a time:
   the lens on the capsular bag (the leading haptic may stick there while the plunger pushes
   the optic on) for thin and thick haptics, and μ = 0.3 in the cartridge (an uncoated bore
   twists the rolled lens about the injector axis) — ``capsule_friction`` /
-  ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/iol_contact.py);
+  ``cartridge_friction`` of ``iol-injection`` (lagged smoothed Coulomb, problems/contact/rigid_wall.py);
 - the surgeon's twist of the injector while pushing (``injector_twist`` 180° or 360°, in step
   with the plunger): the round bore drags the rolled lens round through its friction only, so
   it is run at μ_cartridge = 0, 0.3 and 1, and 360° at 0 and 0.3; thin against thick (0.35 mm)
@@ -54,13 +54,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from mpi4py import MPI
-
 from eyemech.problems import iol_fold, iol_injection
-from eyemech.problems.context import RunOptions
-from eyemech.problems.driver import SolveFailure
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
+from mpi4py import MPI
 
 BASE = {"haptic_thickness": 0.13, "friction": 0.2}
 FRICTIONS = (0.0, 0.2, 0.5, 1.0)
@@ -103,7 +102,7 @@ COMMITTED_FOLD = Path(__file__).resolve().parents[2] / "tests" / "data" / "iol_f
 def rolled_state(out: Path, comm) -> Path:
     """The quick variant's start: the flat coarse lens rolled isometrically about the
     injector axis to radius 2 mm (haptics included: 6.5 mm of arc < 2π · 2 mm, no overlap)."""
-    from eyemech.problems.iol import LensShell, rolled, save_state
+    from eyemech.problems.lens.model import LensShell, rolled, save_state
 
     path = out / "iol_flip_rolled_coarse.npz"
     params = iol_injection.Parameters(resolution="coarse")
@@ -259,7 +258,7 @@ def capsule_torque(folder: Path, params: iol_injection.Parameters, smoothing: fl
     (every few steps) do not hold."""
     if not params.contact:
         return np.zeros((0, 2))
-    from eyemech.problems.iol import InjectorLayout
+    from eyemech.problems.lens.model import InjectorLayout
 
     capsule = InjectorLayout().capsule(params)
     axis = params.axis_point()

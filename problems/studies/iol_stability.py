@@ -31,14 +31,9 @@ import scipy.sparse
 import scipy.sparse.linalg
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
 import dolfinx.fem.petsc
 import ufl
-
 from eyemech.problems import iol_speed
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv

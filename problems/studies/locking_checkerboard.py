@@ -22,19 +22,19 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
-
 from eyemech.forms import NeoHooke
 from eyemech.meshes.cook import cook_membrane as cook_mesh
 from eyemech.problems import cook_membrane
-from eyemech.problems.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
-from eyemech.problems.solid import solid_residual
-from eyemech.problems.spaces import ELEMENTS, solid_fields
+from eyemech.problems.solid.residual import solid_residual
+from eyemech.problems.solid.spaces import ELEMENTS, solid_fields
+from eyemech.problems.solve.driver import (
+    NonlinearSolver,
+    SolveFailure,
+    Stepping,
+    follow_path,
+)
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
 

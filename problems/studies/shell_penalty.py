@@ -22,17 +22,12 @@ import scipy.sparse.linalg
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
 import dolfinx.fem.petsc
-
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems import plate_clamped
-from eyemech.problems.context import RunOptions
-from eyemech.problems.shells import Shell
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.shell.model import Shell
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, stamp
 

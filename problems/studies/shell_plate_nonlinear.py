@@ -15,12 +15,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mpi4py import MPI
-
 from eyemech.problems import plate_clamped
-from eyemech.problems.shells import LEVY_CENTER_DEFLECTION, LEVY_LOAD_PARAMETER, LEVY_POISSON_RATIO
+from eyemech.problems.shell.model import (
+    LEVY_CENTER_DEFLECTION,
+    LEVY_LOAD_PARAMETER,
+    LEVY_POISSON_RATIO,
+)
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from mpi4py import MPI
 
 
 def _curve(case: str, **overrides) -> list[dict]:

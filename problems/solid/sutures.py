@@ -12,14 +12,9 @@ import dataclasses
 
 import numpy as np
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
-
 from eyemech.forms.sutures import suture_residual
-from eyemech.problems.probes import NodeProbe
+from eyemech.problems.solid.probes import NodeProbe
 
 
 @dataclasses.dataclass(frozen=True)

@@ -11,10 +11,6 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
 
@@ -68,7 +64,7 @@ assert set(get_args(ElementName)) == set(ELEMENTS)
 
 def check_element(name: str, key: str = "element") -> None:
     """ParameterError (before anything is built) for a family not in :data:`ELEMENTS`."""
-    from eyemech.problems.parameters import ParameterError
+    from eyemech.problems.run.parameters import ParameterError
 
     if name not in ELEMENTS:
         raise ParameterError(key, f"unknown element family {name!r}; valid: {', '.join(ELEMENTS)}")

@@ -22,18 +22,13 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem.petsc
+from eyemech.problems.run.results import Timings
 from petsc4py import PETSc
 
-from eyemech.problems.results import Timings
-
 if TYPE_CHECKING:
-    from eyemech.problems.checkpoint import Checkpoints
+    from eyemech.problems.run.checkpoint import Checkpoints
 
 log = logging.getLogger("eyemech")
 
@@ -71,7 +66,7 @@ class NewtonOptions:
 
     def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
         """SNES options, then the KSP/PC options: MUMPS LU, or ``linear`` (an iterative
-        solver's, see :mod:`~eyemech.problems.linear_solvers`); ``petsc`` overrides all."""
+        solver's, see :mod:`~eyemech.problems.solve.linear_solvers`); ``petsc`` overrides all."""
         options = {
             "snes_type": "newtonls",
             "snes_linesearch_type": self.line_search,
@@ -105,7 +100,7 @@ class NonlinearSolver:
     Hooks run after DOLFINx has assembled the residual or the Jacobian, on the
     same vector or matrix, e.g. to add node-to-surface contact.
     ``iterative``: a Krylov solver with a block preconditioner instead of MUMPS LU
-    (:class:`~eyemech.problems.linear_solvers.IterativeSolver`: its ``options``,
+    (:class:`~eyemech.problems.solve.linear_solvers.IterativeSolver`: its ``options``,
     ``install(solver)`` after the options are set, ``update(x, A)`` after every
     Jacobian and its hooks).
     """

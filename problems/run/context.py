@@ -9,12 +9,16 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
+from eyemech.problems.run.parameters import SceneParameters
+from eyemech.problems.run.results import (
+    Result,
+    Timings,
+    peak_memory_mb,
+    write_json_atomic,
+)
+from eyemech.problems.solve.driver import NewtonOptions, SolveFailure
 from mpi4py import MPI
-
-from eyemech.problems.checkpoint import CheckpointOptions, Checkpoints, Interrupted
-from eyemech.problems.driver import NewtonOptions, SolveFailure
-from eyemech.problems.parameters import SceneParameters
-from eyemech.problems.results import Result, Timings, peak_memory_mb, write_json_atomic
 
 log = logging.getLogger("eyemech")
 
@@ -39,7 +43,7 @@ class RunContext:
     when SIGINT/SIGTERM stopped the run after a checkpoint (:class:`Interrupted`).
 
     ``ctx.checkpoints`` is where a stepped scene registers its state for checkpoints
-    (see :mod:`eyemech.problems.checkpoint`); pass it to ``follow_path``.
+    (see :mod:`eyemech.problems.run.checkpoint`); pass it to ``follow_path``.
     """
 
     def __init__(self, scene: str, params: SceneParameters, comm: MPI.Comm | None,
@@ -88,7 +92,7 @@ class RunContext:
         self.result.peak_memory_mb = self.comm.allreduce(memory, op=MPI.MAX) if collective else memory
         self.write()
         if self.result.status == "error" and error is None:
-            from eyemech.problems.checkpoint import CheckpointError
+            from eyemech.problems.run.checkpoint import CheckpointError
 
             raise CheckpointError(self.result.message)
         return False

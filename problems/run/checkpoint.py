@@ -3,7 +3,7 @@
 A scene registers the state that the path follower cannot see -- DOLFINx Functions
 (unknowns, quadrature-space internal variables such as ``Cv_n``), Constants (the cavity's
 ``P_ini``/``V_ini``) and plain values (a dict of time series, contact memory) -- with
-``ctx.checkpoints``; :func:`eyemech.problems.driver.follow_path` adds its own (the path,
+``ctx.checkpoints``; :func:`eyemech.problems.solve.driver.follow_path` adds its own (the path,
 the load or time, the step size, the step records) and the run's results so far, and
 writes a checkpoint every N steps or T minutes, and when SIGINT/SIGTERM asks the run to
 stop.

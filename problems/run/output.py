@@ -11,10 +11,6 @@ from typing import Sequence
 import numpy as np
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.plot
 
@@ -184,6 +180,6 @@ class PyvistaSeries:
                              for t, n in self.entries)
         index = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
                  f'  <Collection>\n{datasets}\n  </Collection>\n</VTKFile>\n')
-        from eyemech.problems.results import write_text_atomic
+        from eyemech.problems.run.results import write_text_atomic
 
         write_text_atomic(self.out / f"{self.stem}.pvd", index)

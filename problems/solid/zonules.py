@@ -26,22 +26,17 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
-from petsc4py import PETSc
-
 from eyemech.meshes.tagged import MeshError
-from eyemech.problems.spaces import PetscNodeLayout
+from eyemech.problems.solid.spaces import PetscNodeLayout
+from petsc4py import PETSc
 
 
 class ZonuleBars:
     """Bars between reference points ``pairs`` (n, 2, 3) of ``u``'s nodes; ``area`` is
     each bar's cross-section (mm²), ``youngs_modulus`` E (MPa); ``block_spaces``
     the spaces of a blocked system with ``u``'s first (as for
-    :class:`eyemech.problems.contact_search.NodeToSurfaceContact`)."""
+    :class:`eyemech.problems.contact.node_to_surface.NodeToSurfaceContact`)."""
 
     def __init__(self, u: dolfinx.fem.Function, pairs: np.ndarray, youngs_modulus: float,
                  area: float, bcs=(), block_spaces=None, tolerance: float = 1e-8):

@@ -21,18 +21,18 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
 import ufl
-from petsc4py import PETSc
-
-from eyemech.forms import axis_volumes, enclosed_volume, follower_pressure, liquid_pressure
+from eyemech.forms import (
+    axis_volumes,
+    enclosed_volume,
+    follower_pressure,
+    liquid_pressure,
+)
 from eyemech.meshes.tagged import MeshError
+from petsc4py import PETSc
 
 
 def _assemble(form) -> float:

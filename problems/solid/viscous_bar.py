@@ -17,19 +17,23 @@ from pathlib import Path
 from typing import Callable, Literal
 
 import basix.ufl
-import numpy as np
-import ufl
-from mpi4py import MPI
-
-from eyemech.forms import viscoelastic as ve
-from eyemech.problems.context import RunContext
-from eyemech.problems.driver import NonlinearSolver, SolveFailure, StepRecord, Stepping, follow_path
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-from eyemech.problems.spaces import ELEMENTS, mixed_displacement_pressure
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
+import ufl
+from eyemech.forms import viscoelastic as ve
+from eyemech.problems.run.context import RunContext
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.solid.spaces import ELEMENTS, mixed_displacement_pressure
+from eyemech.problems.solve.driver import (
+    NonlinearSolver,
+    SolveFailure,
+    Stepping,
+    StepRecord,
+    follow_path,
+)
+from mpi4py import MPI
 
 LOADED_FACE = 1  # facet tag of x = L
 

@@ -8,16 +8,11 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
-
 from eyemech.forms import contact
 from eyemech.meshes.tagged import TaggedMesh
-from eyemech.problems.parameters import ParameterError
+from eyemech.problems.run.parameters import ParameterError
 
 
 def slave_nodes(u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str) -> np.ndarray:

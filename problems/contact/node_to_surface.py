@@ -48,18 +48,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
-
 from eyemech.meshes.tagged import MeshError, TaggedMesh
-from eyemech.problems.parameters import ParameterError
-from eyemech.problems.results import Timings
-from eyemech.problems.spaces import PetscNodeLayout
+from eyemech.problems.run.parameters import ParameterError
+from eyemech.problems.run.results import Timings
+from eyemech.problems.solid.spaces import PetscNodeLayout
 
 
 @dataclasses.dataclass

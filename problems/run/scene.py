@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable, Literal
 
-from eyemech.problems.parameters import SceneParameters
+from eyemech.problems.run.parameters import SceneParameters
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,6 +15,9 @@ import typing
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
 
+MMHG = 1.33322e-4  # MPa per mmHg
+
+
 
 class ParameterError(ValueError):
     """Bad input: names the offending key and what is wrong with it."""

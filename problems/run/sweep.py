@@ -12,13 +12,12 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from eyemech.problems.run.checkpoint import Interrupted, latest
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
+from eyemech.problems.run.results import write_text_atomic
+from eyemech.problems.solve.driver import SolveFailure
 from mpi4py import MPI
-
-from eyemech.problems.checkpoint import Interrupted, latest
-from eyemech.problems.context import RunOptions
-from eyemech.problems.driver import SolveFailure
-from eyemech.problems.parameters import ParameterError, build
-from eyemech.problems.results import write_text_atomic
 
 
 def parse_grid(entries: list[str]) -> dict[str, list[str]]:

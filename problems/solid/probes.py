@@ -7,10 +7,6 @@ import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
 

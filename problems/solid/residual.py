@@ -7,9 +7,12 @@ from __future__ import annotations
 from typing import Mapping
 
 import ufl
-
-from eyemech.forms import Material, incompressible_energy_density, nearly_incompressible_energy_density
-from eyemech.problems.spaces import ElementFamily
+from eyemech.forms import (
+    Material,
+    incompressible_energy_density,
+    nearly_incompressible_energy_density,
+)
+from eyemech.problems.solid.spaces import ElementFamily
 
 
 def solid_residual(material: Material | Mapping[int, Material], family: ElementFamily, fields,

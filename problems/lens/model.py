@@ -12,21 +12,17 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
-
 from eyemech.forms.dynamics import mass_form
 from eyemech.forms.shell import ShellMaterial, shell_energy, shell_jacobian
 from eyemech.meshes.iol import LensGeometry, intraocular_lens
 from eyemech.meshes.surface import orientation
 from eyemech.meshes.tagged import TaggedMesh
-from eyemech.problems.iol_contact import Capsule, Plunger, TaperedBore
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
-
+from eyemech.problems.lens.injector import Capsule, Plunger, TaperedBore
+from eyemech.problems.run.context import RunContext
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.solve.driver import NewtonOptions
 
 # every mesh size of the lens (optic, haptics, junctions) times this factor
 RESOLUTIONS = {"paper": 1.0, "coarse": 2.0}
@@ -216,7 +212,7 @@ def load_state(path: Path, shell: LensShell) -> None:
 
 
 def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=None):
-    """The lens' self-contact (:class:`~eyemech.problems.iol_self_contact.SelfContact`), or
+    """The lens' self-contact (:class:`~eyemech.problems.contact.ipc.SelfContact`), or
     None when ``self_contact`` is off. Needs ipctk (the ``iol`` extra); on N ranks rank 0
     evaluates it on the gathered lens."""
     if not params.self_contact:
@@ -226,13 +222,13 @@ def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=No
     except ImportError as err:
         raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
                              "or set self_contact=false") from err
-    from eyemech.problems.iol_self_contact import SelfContact
+    from eyemech.problems.contact.ipc import SelfContact
 
     return SelfContact(shell.u, params.self_contact_distance, params.self_contact_stiffness,
                        friction=params.friction, slip=params.friction_slip, excluded_dofs=excluded_dofs)
 
 
-def lens_newton(ctx) -> "NewtonOptions":
+def lens_newton(ctx: RunContext) -> NewtonOptions:
     """The run's Newton options with the lens' tolerances: relative 1e-6, absolute 1e-9 N
     (shell forces are ~1e-4 N) unless the run asked for looser ones, and 25 iterations."""
     options = ctx.options.newton
@@ -331,8 +327,7 @@ def render_frame(shell: LensShell, path: Path, title: str, obstacles: dict,
                  bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
     """The deformed lens (coloured optic / haptic) with the rigid bodies as wireframes."""
     import pyvista
-
-    from eyemech.problems.output import gather_grid, quiet_vtk
+    from eyemech.problems.run.output import gather_grid, quiet_vtk
 
     grid = gather_grid(shell.u)
     if grid is None:
@@ -358,7 +353,7 @@ def write_frame_grid(series, shell: LensShell, time: float, strain: StrainProbe 
     """The deformed lens as one ``.vtu`` frame of ``series`` (a ``PyvistaSeries``): the P2
     displacement, and per cell the thickness, the part (1 optic, 0 haptic) and the largest
     surface strain — what notebooks read with ``pyvista.read``."""
-    from eyemech.problems.output import gather_grid
+    from eyemech.problems.run.output import gather_grid
 
     if series.out is None:  # no output folder, or fields off: nothing to gather
         return

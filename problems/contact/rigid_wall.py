@@ -1,5 +1,5 @@
 r"""Node-to-rigid-surface penalty contact for the lens, evaluated in numpy, and the lens'
-self distance measured with ipctk.
+self distance measured with ipctk (:mod:`.self_distance`).
 
 Why numpy and not UFL (forms/contact.py): the lens' rigid bodies move every time step
 (plunger, closing cartridge) and are cut into regions (the cartridge acts only inside
@@ -34,116 +34,16 @@ and n makes D a potential within a step (a symmetric tangent); ε = ``slip`` (mm
 is the slip below which the law is viscous instead of sticking.
 """
 
+
 from __future__ import annotations
 
-import dataclasses
-import time
 from collections.abc import Callable
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
-
-
-def _radial(x: np.ndarray, axis_point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """ρ about the x-directed axis through ``axis_point`` and the unit radial direction."""
-    d = x[:, 1:] - axis_point[1:]
-    rho = np.sqrt(np.sum(d ** 2, axis=1) + 1e-24)
-    e = np.zeros_like(x)
-    e[:, 1:] = d / rho[:, None]
-    return rho, e
-
-
-@dataclasses.dataclass
-class TaperedBore:
-    """The cartridge bore: axis along +x through ``axis_point``; radius ``radius`` up to
-    ``taper_start``, then linear down to ``nozzle_radius`` at ``taper_end``, straight to the
-    nozzle tip ``tip``. Acts for x < tip (the body is inside). ``scale`` shrinks the whole
-    bore towards ``radius`` (the closing loading chamber of the folding stage)."""
-
-    axis_point: np.ndarray
-    radius: float
-    nozzle_radius: float
-    taper_start: float
-    taper_end: float
-    tip: float
-    opening: float = 0.0  # extra radius (mm) added everywhere: the chamber before it closes
-    lip: float = 0.0  # radius (mm) of the rounded nozzle exit (0: a sharp edge)
-
-    def wall_radius(self, x: np.ndarray) -> np.ndarray:
-        s = np.clip((x - self.taper_start) / (self.taper_end - self.taper_start), 0.0, 1.0)
-        return self.radius + (self.nozzle_radius - self.radius) * s + self.opening
-
-    def gap_normal(self, x):
-        """Inside the bore g = R(x) − ρ, n = −e_ρ. With a ``lip``, the last ``lip`` mm are the
-        inside of a torus (tube radius ``lip``) that turns the wall from axial to radial at the
-        tip: g = D − lip, n = (x − x_c, ρ − ρ_c)/D from the lip's centre circle (x_c, ρ_c).
-        Why: with a sharp edge the wall's force on a node at the nozzle radius jumps from
-        k (ρ − R) to 0 as the node crosses x = tip, and Newton cycled between two states
-        (residuals 4e-3 / 5e-4 for 25 iterations, the optic leaving the nozzle)."""
-        rho, e = _radial(x, self.axis_point)
-        gap, normal, acts = self.wall_radius(x[:, 0]) - rho, -e, x[:, 0] < self.tip
-        if self.lip > 0.0:
-            x_c, rho_c = self.tip - self.lip, self.nozzle_radius + self.opening + self.lip
-            dx, drho = x[:, 0] - x_c, rho - rho_c
-            on_lip = (dx > 0.0) & (drho < 0.0)
-            D = np.sqrt(dx ** 2 + drho ** 2) + 1e-300
-            gap = np.where(on_lip, D - self.lip, gap)
-            normal = np.where(on_lip[:, None], (dx / D)[:, None] * np.array([1.0, 0.0, 0.0])
-                              + (drho / D)[:, None] * e, normal)
-            acts = np.where(dx > 0.0, on_lip, acts)
-        return gap, normal, acts
-
-
-def turn_about_x(axis_point: np.ndarray, angle: float) -> Callable[[np.ndarray], np.ndarray]:
-    """The rigid turn by ``angle`` (rad, right-handed about +x) about the x-directed line
-    through ``axis_point``: the motion of a twisted injector's wall over one step."""
-    cos, sin = np.cos(angle), np.sin(angle)
-
-    def turned(x: np.ndarray) -> np.ndarray:
-        y, z = x[:, 1] - axis_point[1], x[:, 2] - axis_point[2]
-        return np.column_stack([x[:, 0], axis_point[1] + cos * y - sin * z, axis_point[2] + sin * y + cos * z])
-    return turned
-
-
-@dataclasses.dataclass
-class Plunger:
-    """A flat plunger head x = ``position`` of ``radius`` about the x-directed axis through
-    ``axis_point``, pushing along +x (the body lies at larger x)."""
-
-    position: float
-    axis_point: np.ndarray
-    radius: float
-
-    def gap_normal(self, x):
-        normal = np.zeros_like(x)
-        normal[:, 0] = 1.0
-        rho, _ = _radial(x, self.axis_point)
-        return x[:, 0] - self.position, normal, rho < self.radius
-
-
-@dataclasses.dataclass
-class Capsule:
-    """A rigid ellipsoidal bag (semi-axes ``semi_axes`` along x, y, z about ``center``); the
-    body is inside. Acts where x > ``entry`` (outside the injector). Gap ≈ (1 − s)/|∇s|,
-    s = |A⁻¹(x − c)|: exact on the surface to first order."""
-
-    center: np.ndarray
-    semi_axes: np.ndarray
-    entry: float
-
-    def gap_normal(self, x):
-        y = (x - self.center) / self.semi_axes
-        s = np.sqrt(np.sum(y ** 2, axis=1) + 1e-24)
-        grad_s = y / self.semi_axes / s[:, None]
-        norm = np.linalg.norm(grad_s, axis=1) + 1e-24
-        return (1.0 - s) / norm, -grad_s / norm[:, None], x[:, 0] > self.entry
 
 
 class NodalContact:
@@ -299,115 +199,3 @@ class NodalContact:
         for _nodes, d, normal, name in self._pressed(x, self.smoothing):
             total[name] += self.stiffness * (self._smoothed(d)[0][:, None] * normal).sum(axis=0)
         return {name: self.comm.allreduce(force, op=MPI.SUM) for name, force in total.items()}
-
-
-def self_distance_probe(u: dolfinx.fem.Function):
-    """A :class:`SelfDistance` when ipctk is installed (on rank 0, which measures), else None."""
-    comm = u.function_space.mesh.comm
-    available = False
-    if comm.rank == 0:
-        try:
-            import ipctk  # noqa: F401
-            available = True
-        except ImportError:
-            pass
-    return SelfDistance(u) if comm.bcast(available, root=0) else None
-
-
-class SelfDistance:
-    """Smallest distance between distant parts of the lens mid-surface, by ipctk, on the
-    flat triangles through the P2 vertex nodes.
-
-    The lens is small (hundreds of nodes), so under MPI its triangles and node positions
-    are gathered on rank 0, which measures and broadcasts the result: every rank count
-    measures the same surface (each rank alone sees only its part, and two parts of the
-    lens that meet may sit on different ranks).
-
-    Only pairs of primitives whose vertices all lie more than ``exclusion`` apart in the
-    reference (flat) lens count: on a flat mesh, neighbouring elements are a fraction of
-    an element apart, which says nothing about self-contact; parts that were apart along
-    the lens and come together (a haptic on the optic, the rolled optic's rims) are what
-    is measured. ipctk gives the candidates within ``search_radius`` and their distances.
-    """
-
-    def __init__(self, u: dolfinx.fem.Function, exclusion: float = 1.0):
-        V = u.function_space
-        self.u, self.comm = u, V.mesh.comm
-        index_map = V.dofmap.index_map
-        self.owned = index_map.size_local
-        local_count = self.owned + index_map.num_ghosts
-        to_global = index_map.local_to_global(np.arange(local_count, dtype=np.int32))
-        self.owned_global = to_global[: self.owned]
-        owned_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
-        cells = to_global[V.dofmap.list[:owned_cells, :3]]  # the vertex nodes of each P2 triangle
-        X = V.tabulate_dof_coordinates()[: self.owned]
-        gathered = self.comm.gather((cells, self.owned_global, X), root=0)
-        self.exclusion = exclusion
-        if self.comm.rank != 0:
-            return
-        import ipctk
-
-        cells = np.vstack([g[0] for g in gathered])
-        self.nodes, faces = np.unique(cells, return_inverse=True)
-        faces = faces.reshape(-1, 3)
-        self.slot = np.full(max(int(g[1].max(initial=-1)) for g in gathered) + 1, -1, np.int64)
-        self.slot[self.nodes] = np.arange(len(self.nodes))
-        self.X = np.empty((len(self.nodes), 3))
-        for _, node, x in gathered:
-            keep = self.slot[node] >= 0
-            self.X[self.slot[node[keep]]] = x[keep]
-        self.faces = np.asfortranarray(faces.astype(np.int32))
-        self.edges = np.asfortranarray(ipctk.edges(self.faces))
-        self.mesh = ipctk.CollisionMesh(np.asfortranarray(self.X), self.edges, self.faces)
-        self._ipctk = ipctk
-
-    def positions(self) -> np.ndarray | None:
-        """Deformed positions of the vertex nodes on rank 0 (None elsewhere); collective."""
-        x = self.u.x.array[: 3 * self.owned].reshape(-1, 3)
-        gathered = self.comm.gather((self.owned_global, x), root=0)
-        if self.comm.rank != 0:
-            return None
-        u = np.empty_like(self.X)
-        for node, values in gathered:
-            keep = self.slot[node] >= 0
-            u[self.slot[node[keep]]] = values[keep]
-        return np.asfortranarray(self.X + u)
-
-    def __call__(self, search_radius: float = 0.25, distances: bool = True) -> tuple[float, bool]:
-        """(minimum distance in mm — ``inf`` when nothing distant is within
-        ``search_radius``, NaN when ``distances`` is False —, whether the surface
-        intersects itself); collective, measured on rank 0."""
-        x = self.positions()
-        found = self._measure(x, search_radius, distances) if self.comm.rank == 0 else None
-        return self.comm.bcast(found, root=0)
-
-    def _measure(self, x: np.ndarray, search_radius: float, distances: bool) -> tuple[float, bool]:
-        """The measurement on rank 0: ipctk's exact triangle–edge intersection test is
-        cheap and always done, the distance search only when ``distances``."""
-        ipctk = self._ipctk
-        if not distances:
-            return float("nan"), bool(ipctk.has_intersections(self.mesh, x, broad_phase=ipctk.BVH()))
-        collisions = ipctk.NormalCollisions()
-        t0 = time.perf_counter()
-        collisions.build(self.mesh, x, search_radius, broad_phase=ipctk.BVH())
-        self.timing = [time.perf_counter() - t0, len(collisions)]
-        best = np.inf
-        for i in range(len(collisions)):
-            collision = collisions[i]
-            ids = [v for v in collision.vertex_ids(self.edges, self.faces) if v >= 0]
-            split = 2 if isinstance(collision, ipctk.EdgeEdgeNormalCollision) else 1
-            first, second = self.X[ids[:split]], self.X[ids[split:]]
-            if np.min(np.linalg.norm(first[:, None] - second[None], axis=2)) < self.exclusion:
-                continue
-            best = min(best, float(np.sqrt(collision.compute_distance(collision.dof(x, self.edges,
-                                                                                     self.faces)))))
-        # An element of NormalCollisions refers into the container: let it go first. Python
-        # clears a frame's locals in the order they were bound, so a `collision` left alive
-        # outlived `collisions` and its deallocation read freed memory (SIGSEGV once VTK had
-        # reused that memory: the lens notebook's run, 2026-11-22).
-        collision = None
-        del collision, collisions
-        t0 = time.perf_counter()
-        crossing = bool(ipctk.has_intersections(self.mesh, x, broad_phase=ipctk.BVH()))
-        self.timing.append(time.perf_counter() - t0)
-        return best, crossing

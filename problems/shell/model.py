@@ -12,20 +12,26 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
-
 from eyemech.forms.shell import Kinematics, ShellMaterial, shell_energy
-from eyemech.meshes.surface import Diagonal, mapped_surface, orientation, require_surface, tag_boundary
+from eyemech.meshes.surface import (
+    Diagonal,
+    mapped_surface,
+    orientation,
+    require_surface,
+    tag_boundary,
+)
 from eyemech.meshes.tagged import TaggedMesh
-from eyemech.problems.context import RunContext, RunOptions
-from eyemech.problems.driver import NewtonOptions, NonlinearSolver, Stepping, follow_path
-from eyemech.problems.output import FieldWriter, gather_grid, render_png
-from eyemech.problems.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.solve.driver import (
+    NewtonOptions,
+    NonlinearSolver,
+    Stepping,
+    follow_path,
+)
 
 
 def newton_options(ctx: RunContext, kinematics: Kinematics) -> NewtonOptions:

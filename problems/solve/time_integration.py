@@ -1,5 +1,5 @@
 r"""Implicit time integration of  M ü + c M u̇ + f_int(u) = f_ext  on top of a static
-residual f_int - f_ext (a UFL form solved by :class:`~eyemech.problems.driver.NonlinearSolver`).
+residual f_int - f_ext (a UFL form solved by :class:`~eyemech.problems.solve.driver.NonlinearSolver`).
 
 The inertia and damping enter as residual/Jacobian hooks with a mass matrix assembled
 once, so the (expensive to compile) static shell form is the same compiled kernel in a
@@ -38,10 +38,6 @@ from typing import Literal
 
 import numpy as np
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
 import dolfinx.fem.petsc
 from petsc4py import PETSc

@@ -69,10 +69,6 @@ import time
 import numpy as np
 from petsc4py import PETSc
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx.fem
 
 # the four flat sub-triangles of a P2 triangle, in basix's node order (edge i is opposite

@@ -3,7 +3,7 @@
 
 A scene offers the choice by adding :class:`SolverChoice` to its parameters
 (``solver = direct | iterative``) and passing ``params.linear_solver(μ, dx)`` to
-:class:`~eyemech.problems.driver.NonlinearSolver`.
+:class:`~eyemech.problems.solve.driver.NonlinearSolver`.
 
 ``solver = "iterative"`` on a mixed [u, p, (P)] system (``NonlinearProblem(...,
 kind="mpi")``: one monolithic matrix, each rank's owned dofs of every block one after
@@ -44,16 +44,11 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-try:
-    import dolfinx_solver  # noqa: F401
-except ImportError:
-    pass
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
+from eyemech.problems.run.parameters import ParameterError, field
 from petsc4py import PETSc
-
-from eyemech.problems.parameters import ParameterError, field
 
 LinearSolverName = Literal["direct", "iterative"]
 
@@ -145,7 +140,7 @@ class IterativeSolver:
 
     def install(self, solver) -> None:
         """Index sets, near-nullspace and Schur preconditioning matrix for ``solver``
-        (a :class:`~eyemech.problems.driver.NonlinearSolver`), after its options are
+        (a :class:`~eyemech.problems.solve.driver.NonlinearSolver`), after its options are
         set. Sets up only what PETSc will use (e.g. nothing of the Schur matrix when
         ``pc_fieldsplit_schur_precondition`` was overridden)."""
         spaces = [u.function_space for u in solver.unknowns]

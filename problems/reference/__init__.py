@@ -1,0 +1,1 @@
+"""Exact and reference solutions the benchmarks are checked against."""

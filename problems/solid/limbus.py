@@ -1,0 +1,39 @@
+"""The cornea's limbus, held rigidly or by the sclera's compliance: shared by
+``keratotomy`` and ``tonometry``."""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+
+import dolfinx
+from eyemech.forms.elastic import spring_support_energy
+from eyemech.problems.run.parameters import ParameterError
+
+SUPPORTS = ("clamped", "elastic")
+
+
+def validate_support(params) -> None:
+    """ParameterError for an unknown ``support`` or a non-positive ``limbus_stiffness``."""
+    if params.support not in SUPPORTS:
+        raise ParameterError("support", f"unknown limbus support {params.support!r}; choose one of "
+                             f"{', '.join(SUPPORTS)}")
+    if params.support == "elastic":
+        params.require_positive("limbus_stiffness")
+        if not np.isfinite(params.limbus_stiffness):
+            raise ParameterError("limbus_stiffness", "must be finite")
+
+
+def limbus_support(params, u, v, tagged, ds):
+    """The limbus held by ``params.support``: (residual term or None, Dirichlet conditions).
+    ``clamped``: u = 0 on the limbus face. ``elastic``: distributed springs of stiffness
+    ``limbus_stiffness`` per area in all directions (forms/elastic.py), the sclera's
+    compliance in place of a rigid wall."""
+    V = u.function_space
+    if params.support == "elastic":
+        energy = spring_support_energy(u, params.limbus_stiffness, ds(tagged.tag("limbus")))
+        return ufl.derivative(energy, u, v), []
+    fdim = tagged.mesh.topology.dim - 1
+    clamp = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(
+        V, fdim, tagged.facets("limbus")), V)
+    return None, [clamp]
