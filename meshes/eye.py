@@ -435,7 +435,6 @@ def _classify_faces(geo, points, hexes, tissue, level_index, retina_outer_index,
     boundary = counts[inverse.ravel()] == 1
     faces, owner = faces[boundary], owner[boundary]
 
-    n_dir = len(level_index[0])
     level = np.full(len(points), -1)
     for k, index in enumerate(level_index):
         level[index] = k

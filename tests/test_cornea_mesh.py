@@ -68,7 +68,6 @@ def test_incisions_are_real_cuts():
     intact, cut = CorneaGeometry(), CorneaGeometry(incisions=8)
     a, b = cornea(intact), cornea(cut)
     Ra = cut.anterior_radius
-    arc = lambda r: Ra * math.asin(r / Ra)
     theta = np.linspace(math.asin(1.5 / Ra), math.asin(5.35 / Ra), 50)
     strip = np.trapezoid(0.9 * cut.thickness(theta) * (Ra - 0.45 * cut.thickness(theta)), theta)
     assert measure(b, "incision") == pytest.approx(16 * strip, rel=3e-2)

@@ -1,0 +1,102 @@
+"""The layout of the design card (shared/design.md §2), kept by a test: which package may
+import what, read from the source with ``ast`` (nothing is imported), and ruff's lint."""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+STDLIB = sys.stdlib_module_names
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Absolute names of every module ``path`` imports (relative imports resolved)."""
+    package = "eyemech." + ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                module = f"{base}.{node.module}" if node.module else base
+            else:
+                module = node.module
+            names.add(module)
+            # `from eyemech.problems import keratotomy` imports a module, not a name
+            names.update(f"{module}.{alias.name}" for alias in node.names)
+    return names
+
+
+def sources(folder: str) -> list[Path]:
+    return sorted((ROOT / folder).rglob("*.py"))
+
+
+def scene_modules() -> set[str]:
+    """Top-level modules of problems/ that define a SCENE."""
+    found = set()
+    for path in (ROOT / "problems").glob("*.py"):
+        tree = ast.parse(path.read_text())
+        if any(isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "SCENE" for t in node.targets)
+               for node in tree.body):
+            found.add(f"eyemech.problems.{path.stem}")
+    return found
+
+
+def test_forms_are_pure_ufl():
+    allowed = {"ufl", "numpy", "basix"}
+    for path in sources("forms"):
+        for name in imported_modules(path):
+            top = name.split(".")[0]
+            if top in STDLIB or top in allowed or name.startswith("eyemech.forms"):
+                continue
+            # `from eyemech.forms import x` adds "eyemech.forms.x"; anything else is a breach
+            pytest.fail(f"{path.relative_to(ROOT)} imports {name}: forms/ may import only ufl, numpy, basix")
+
+
+def test_meshes_never_import_problems_or_scripts():
+    for path in sources("meshes"):
+        for name in imported_modules(path):
+            assert not name.startswith(("eyemech.problems", "eyemech.scripts")), \
+                f"{path.relative_to(ROOT)} imports {name}"
+
+
+def test_no_scene_imports_another_scene():
+    scenes = scene_modules()
+    assert len(scenes) >= 22
+    for path in (ROOT / "problems").rglob("*.py"):
+        if "studies" in path.parts:  # a study runs scenes: that is its job
+            continue
+        own = "eyemech." + ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        for name in imported_modules(path) & scenes - {own}:
+            pytest.fail(f"{path.relative_to(ROOT)} imports the scene {name}: move what they share to a room")
+
+
+def test_rooms_hold_no_scene():
+    """Scenes live at eyemech.problems.<scene>; the rooms hold what scenes share."""
+    for room in ("run", "solve", "solid", "contact", "lens", "shell", "reference"):
+        for path in (ROOT / "problems" / room).glob("*.py"):
+            assert "SCENE = Scene(" not in path.read_text(), f"{path.relative_to(ROOT)} defines a scene"
+
+
+def test_packages_are_installed():
+    """Every folder of problems/ with an __init__.py is in pyproject's package list, so a
+    wheel carries it."""
+    text = (ROOT / "pyproject.toml").read_text()
+    for init in (ROOT / "problems").rglob("__init__.py"):
+        dotted = "eyemech." + ".".join(init.parent.relative_to(ROOT).parts)
+        assert f'"{dotted}"' in text, f"{dotted} is missing from [tool.setuptools] packages"
+
+
+def test_ruff():
+    ruff = shutil.which("ruff") or str(Path(sys.executable).parent / "ruff")
+    if not Path(ruff).exists():
+        pytest.fail("ruff is not installed: it comes with the `test` extra")
+    done = subprocess.run([ruff, "check", "--no-cache", "."], cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-1000:]
