@@ -73,7 +73,7 @@ class Parameters(FoldParameters):
                                         "much since the last one (0: every frames_every steps)", "s")
     fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
                                       "fluid, which the plunger drives through the bore (false: relative to "
-                                      "rest, the session-3 drag that crushed the trailing haptic)")
+                                      "rest: a drag that crushes the trailing haptic, docs/iol.md)")
     plunger_engages: str = field("optic", "what the plunger head pushes: 'optic' (the trailing haptic lies "
                                           "beside the plunger tip, as loading instructions ask) or 'lens' "
                                           "(every node: the trailing haptic is crushed)")
@@ -214,7 +214,7 @@ class FluidDrag:
     is pushed through the cartridge by the plunger ahead of and around the lens. A drag on the
     absolute velocity resists the lens' rigid translation with c m v ≈ 2e4 /s × 1e-8 t ×
     40 mm/s ≈ 8e-3 N — about a thousand times the Euler load of a haptic (π² EI/(4L²) ≈ 1e-5 N):
-    the plunger then crushes the trailing haptic before the lens moves (session 3: Δt cut to
+    the plunger then crushes the trailing haptic before the lens moves (Δt is cut to
     0.1 ms). Fluid velocity (along the axis, lagged at the start of each step): the plunger's
     speed times the bore's area ratio (R_bore/R(x))² inside the injector (incompressible plug
     flow), then a jet decaying as exp(−(x − tip)/``jet_length``) in the capsule."""
@@ -304,8 +304,8 @@ def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
                                 damping=params.damping)
     fluid = FluidDrag(dynamics, shell, layout.cartridge(params), params.jet_length) \
         if params.fluid_carried else None
-    # the shell's Jacobian written out (speed5: equal to UFL's derivative to 2e-16, about half
-    # its assembly time): the same Newton iterates, cheaper iterations
+    # the shell's Jacobian written out (equal to UFL's derivative to 2e-16, tests/test_iol_speed.py;
+    # about half its assembly time): the same Newton iterates, cheaper iterations
     solver = NonlinearSolver(shell.residual(), shell.u, [], jacobian=shell.jacobian(),
                              options=_newton(ctx, params), timings=ctx.timings,
                              residual_hooks=[dynamics.residual_hook, contact.residual_hook,

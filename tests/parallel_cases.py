@@ -63,11 +63,11 @@ CASES: dict[str, Case] = {
     # into the nonlinear range (linear theory: 1.9), 6 Newton iterations per step
     "hemisphere-nonlinear": Case(dict(divisions=4, force=40.0, load_steps=2)),
     "hertz": Case(dict(mesh_size=0.03, far_size=0.5)),
-    # the lens self-contact (ipctk on rank 0 of the gathered lens, session 5) in the coarse
+    # the lens self-contact (ipctk on rank 0 of the gathered lens) in the coarse
     # fold's first 0.02 s: 9 steps, 107 Newton iterations (+ 6 cut attempts), the same on 1
     # and 2 ranks, the quantities 1e-13 apart. The first step needs 23 iterations: 30
     # allowed instead of 25, so round-off cannot decide a cut-back. 2 ranks only: 3 ranks
-    # (session 3, without self-contact) once took another step sequence (9 steps instead of
+    # (without self-contact) took another step sequence (9 steps instead of
     # 7: an iteration count at a limit), and a third run of ≈ 60 s adds nothing the 2-rank
     # run does not check
     "iol-fold": Case(dict(resolution="coarse", fold_time=0.02, time_step=0.01, frames=1),

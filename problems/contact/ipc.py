@@ -21,8 +21,8 @@ not added: the barrier keeps the mid-surfaces apart (distance > 0), not h apart.
 b(s, ŝ) = −(s − ŝ)² ln(s/ŝ) for s < ŝ (ipctk's barrier on squared distances), summed over
 the point–triangle and edge–edge pairs k closer than d̂ whose vertices are not all within
 ``exclusion`` of each other in the reference (flat) lens. Residual hook: F += ∇Π_s;
-Jacobian hook: J += ∇²Π_s exact (session 4; projecting it to positive semi-definite, as IPC
-does for its energy line search, made our Newton converge only linearly).
+Jacobian hook: J += ∇²Π_s exact (projecting it to positive semi-definite, as IPC does for
+its energy line search, makes this Newton converge only linearly).
 
 **Why the exclusion.** In the flat lens, neighbouring sub-triangles are a fraction of an
 element apart: pairs within d̂ at rest would feel the barrier before anything touches.
@@ -46,7 +46,7 @@ the start of the step (x_n) and Δx = x − x_n; f₀ is C¹, linear (viscous) b
 ``slip`` (mm per step) and |·| above it. Residual += ∇D, Jacobian += ∇²D (PSD-projected:
 unprojected, Newton wandered).
 
-**On N ranks** (session 5). ipctk works on one whole surface, and the lens is small (≈ 1700
+**On N ranks.** ipctk works on one whole surface, and the lens is small (≈ 1700
 collision vertices, ≈ 5000 dofs), so rank 0 holds the whole collision mesh and evaluates
 everything; the other ranks only exchange arrays with it (see :class:`_Lens`):
 - the node numbering is DOLFINx's global one: rank r owns the nodes
