@@ -73,6 +73,10 @@ fig.tight_layout()
 # %%
 import dataclasses
 
+try:  # the PyPI DOLFINx wheel: MPI ordered before the bindings
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
 import dolfinx
 from eyemech.problems import keratotomy as kt
 from eyemech.problems.run.context import RunContext, RunOptions

@@ -3,6 +3,14 @@ the JSON it prints as its last stdout line."""
 
 from __future__ import annotations
 
+# Test modules import dolfinx beside eyemech; the PyPI DOLFINx wheel needs dolfinx_solver
+# imported first (it orders MPI ahead of the compiled bindings), and conftest is imported
+# before every test module.
+try:
+    import dolfinx_solver  # noqa: F401
+except ImportError:
+    pass
+
 import json
 import os
 import subprocess
