@@ -5,7 +5,6 @@ refusal of an obstacle that starts inside the body, and the resultant force."""
 from __future__ import annotations
 
 import numpy as np
-import ufl
 from mpi4py import MPI
 
 import dolfinx
@@ -67,6 +66,3 @@ def resultant_force(obstacle, u, penalty, measure) -> list[callable]:
     traction = contact.contact_traction(obstacle, u, penalty)
     return [surface_integral(traction[i], measure) for i in range(len(u))]
 
-
-def reference_coordinates(u):
-    return ufl.SpatialCoordinate(u.ufl_function_space().mesh)

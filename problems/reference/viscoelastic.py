@@ -19,7 +19,6 @@ from typing import Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 
 def axial_stress(stretch: float, a: float, mu_inf: float, mu_v: float) -> float:
@@ -44,26 +43,6 @@ def relaxation(times, stretch: Callable[[float], float], mu_inf: float, mu_v: fl
         start, end, dense = next(p for p in pieces if p[0] <= t <= p[1])
         out[i] = axial_stress(stretch(t), dense(t)[0], mu_inf, mu_v)
     return out
-
-
-def creep_stretch(times, stress: float, mu_inf: float, mu_v: float, tau: float,
-                  rtol: float = 1e-11) -> np.ndarray:
-    """λ(t) under a constant true axial stress applied at t = 0 (a(0) = 1): the ODE in
-    a with λ(a) from σ11(λ, a) = stress solved at every evaluation."""
-
-    def stretch_of(a: float) -> float:
-        return brentq(lambda s: axial_stress(s, a, mu_inf, mu_v) - stress, 0.2, 10.0, xtol=1e-15)
-
-    rate = lambda t, y: [2.0 / 3.0 * (stretch_of(y[0]) ** 2 - y[0] ** 1.5 / stretch_of(y[0])) / tau]
-    times = np.asarray(times, dtype=float)
-    sol = solve_ivp(rate, (0.0, float(times.max())), [1.0], method="DOP853", rtol=rtol, atol=1e-14,
-                    dense_output=True)
-    return np.array([stretch_of(sol.sol(t)[0]) for t in times])
-
-
-def sls_relaxation_modulus(times, mu_inf: float, mu_v: float, tau: float) -> np.ndarray:
-    """Small strain, step strain: σ/ε = 3 (μ∞ + μv e^(−t/τ))."""
-    return 3.0 * (mu_inf + mu_v * np.exp(-np.asarray(times) / tau))
 
 
 def sls_creep_strain(times, stress: float, mu_inf: float, mu_v: float, tau: float) -> np.ndarray:

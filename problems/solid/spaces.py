@@ -70,13 +70,6 @@ def check_element(name: str, key: str = "element") -> None:
         raise ParameterError(key, f"unknown element family {name!r}; valid: {', '.join(ELEMENTS)}")
 
 
-def element_family(name: str) -> ElementFamily:
-    """The family called ``name``; a ValueError listing the valid names otherwise."""
-    if name not in ELEMENTS:
-        raise ValueError(f"unknown element family {name!r}; valid: {', '.join(ELEMENTS)}")
-    return ELEMENTS[name]
-
-
 def displacement_space(mesh: dolfinx.mesh.Mesh, family: ElementFamily) -> dolfinx.fem.FunctionSpace:
     if mesh.basix_cell().name != family.cell:
         raise ValueError(f"{family.name} needs {family.cell} cells, the mesh has {mesh.basix_cell().name}")

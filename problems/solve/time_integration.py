@@ -146,10 +146,6 @@ class ImplicitDynamics:
         target.array[:] = self.u.x.array[:owned]
 
     # -- the state ----------------------------------------------------------------------
-    def set_velocity(self, values: np.ndarray) -> None:
-        """Initial velocity, as an array over the (local, ghosted) dofs of u."""
-        self.v_n.array[:] = values[: len(self.v_n.array)]
-
     def initial_acceleration(self, static_residual) -> None:
         """a_0 from M a_0 = −(f_int(u_0) − f_ext) − c M v_0 (needed by Newmark)."""
         compiled = dolfinx.fem.form(static_residual)

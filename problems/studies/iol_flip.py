@@ -2,9 +2,9 @@ r"""Does the optic flip? Haptic stiffness and lens–lens friction against the w
 lands in the capsule (issue 8, "Done when" 3).
 
 Every case is a whole ``iol-injection`` on the coarse lens (``resolution=coarse``, 250
-triangles) from one folded state — ``tests/data/iol_folded_coarse.npz`` (``iol-fold`` of the
-default coarse lens) when the source tree is at hand, else a fold run once here: the fold is
-the same for every case, so only the deployment differs. Varied, one at a time:
+triangles) from one folded state — the default coarse lens folded by ``iol-fold``, taken
+from the fold cache of ``iol-injection`` (folded once and stored there when missing): the
+fold is the same for every case, so only the deployment differs. Varied, one at a time:
 
 - the Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion): 0, 0.2, 0.5, 1,
   h_h = 0.13 mm;
@@ -96,7 +96,6 @@ QUICK_SETTINGS = {"contact": False, "settle_time": 0.0, "plunger_speed": 50.0}
 FRAMES_ONLY = RunOptions(fields=True, pictures=False)
 FLIP_ANGLE = 90.0  # degrees of rigid roll beyond which the optic lands upside down
 UNROLLED = 0.9  # optic flatness above which it is open (the scene's ``optic_unrolled``)
-COMMITTED_FOLD = Path(__file__).resolve().parents[2] / "tests" / "data" / "iol_folded_coarse.npz"
 
 
 def rolled_state(out: Path, comm) -> Path:
@@ -114,16 +113,23 @@ def rolled_state(out: Path, comm) -> Path:
 
 
 def folded_state(out: Path, comm) -> Path:
-    """The committed coarse fold, or the coarse lens folded once here (reused)."""
-    if COMMITTED_FOLD.is_file():
-        return COMMITTED_FOLD
-    path = out / "iol_flip_folded_coarse.npz"
-    if not path.is_file():
-        work = out / "iol_flip_fold"
-        iol_fold.run(iol_fold.Parameters(resolution="coarse"), comm=comm, out=work,
-                     options=RunOptions(fields=False, pictures=False))
-        (work / "folded_state.npz").replace(path)
-    return path
+    """The default coarse lens folded: from ``iol-injection``'s fold cache, or folded once
+    here and stored in that cache (or in ``out`` when the cache cannot be written)."""
+    cached = iol_injection.fold_cache_path(iol_injection.Parameters(resolution="coarse"))
+    if cached.is_file():
+        return cached
+    work = out / "iol_flip_fold"
+    iol_fold.run(iol_fold.Parameters(resolution="coarse"), comm=comm, out=work,
+                 options=RunOptions(fields=False, pictures=False))
+    target = cached
+    if comm.rank == 0:
+        try:
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            (work / "folded_state.npz").replace(cached)
+        except OSError:
+            target = out / "iol_flip_folded_coarse.npz"
+            (work / "folded_state.npz").replace(target)
+    return comm.bcast(target, root=0)
 
 
 def case_name(case: dict) -> str:
