@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from mpi4py import MPI
@@ -53,7 +54,7 @@ from eyemech.problems.run.output import PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
-from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics
+from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,7 +63,7 @@ class Parameters(FoldParameters):
     plunger_speed: float = field(40.0, "plunger speed", "mm/s")
     plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
     settle_time: float = field(0.2, "time after the plunger stops", "s")
-    scheme: str = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
+    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
     linearised: bool = field(False, "one linearised implicit solve per step (SOFA style) instead of Newton")
     jacobian_lag: int = field(1, "reuse the Jacobian and its factorisation for this many Newton "
                                  "iterations, across steps (1 = full Newton)")
@@ -74,7 +75,7 @@ class Parameters(FoldParameters):
     fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
                                       "fluid, which the plunger drives through the bore (false: relative to "
                                       "rest: a drag that crushes the trailing haptic, docs/iol.md)")
-    plunger_engages: str = field("optic", "what the plunger head pushes: 'optic' (the trailing haptic lies "
+    plunger_engages: Literal["optic", "lens"] = field("optic", "what the plunger head pushes: 'optic' (the trailing haptic lies "
                                           "beside the plunger tip, as loading instructions ask) or 'lens' "
                                           "(every node: the trailing haptic is crushed)")
     jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm")
@@ -103,10 +104,6 @@ class Parameters(FoldParameters):
         self.require_nonnegative("settle_time", "plunger_overshoot", "start_ramp", "frame_interval",
                                  "capsule_friction", "cartridge_friction")
         self.require_positive("jet_length")
-        if self.plunger_engages not in ("optic", "lens"):
-            raise ParameterError("plunger_engages", f"must be 'optic' or 'lens', got {self.plunger_engages!r}")
-        if self.scheme not in SCHEMES:
-            raise ParameterError("scheme", f"must be one of {sorted(SCHEMES)}, got {self.scheme!r}")
         if self.folded_state and not Path(self.folded_state).is_file():
             raise ParameterError("folded_state", f"no such file: {self.folded_state}")
         if self.plunger_speed * self.time_step > 0.5 * self.nozzle_radius:

@@ -41,6 +41,7 @@ import dataclasses
 import os
 import time
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 import ufl
@@ -55,19 +56,20 @@ from eyemech.problems.lens.model import LensParameters, LensShell, rolled
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, field
 from eyemech.problems.run.scene import Scene
-from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics
+from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
 from petsc4py import PETSc
 
-METHODS = ("newton", "linearised")
-JACOBIANS = ("fresh", "lagged", "matrix-free")
-TANGENTS = ("explicit", "ufl")
+Method = Literal["newton", "linearised"]
+JacobianKind = Literal["fresh", "lagged", "matrix-free"]
+Tangent = Literal["explicit", "ufl"]
+METHODS, JACOBIANS, TANGENTS = get_args(Method), get_args(JacobianKind), get_args(Tangent)
 PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(LensParameters):
-    method: str = field("newton", "how a step is solved: " + " | ".join(METHODS))
-    jacobian: str = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
+    method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS))
+    jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
     refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
     stall: float = field(0.5, "lagged Newton: a new Jacobian when an iteration reduces the residual "
                               "by less than this factor")
@@ -75,7 +77,7 @@ class Parameters(LensParameters):
     krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed")
     steps: int = field(30, "time steps per run")
     time_step: float = field(0.01, "Δt (the paper: 0.01 s)", "s")
-    scheme: str = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
+    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
     rtol: float = field(1e-6, "Newton: relative residual reduction per step")
     atol: float = field(1e-11, "Newton: absolute residual (shell forces are ~1e-4 N; round-off ~1e-13)", "N")
     max_iterations: int = field(25, "Newton iterations per step before the run is declared failed")
@@ -84,7 +86,7 @@ class Parameters(LensParameters):
     roll_radius: float = field(3.0, "the released lens starts rolled onto a cylinder of this radius", "mm")
     contact: bool = field(False, "release it inside a rigid ellipsoidal capsule (penalty contact)")
     capsule_semi_axes: tuple = field((5.6, 5.6, 2.6), "capsule semi-axes (x, y, z)", "mm")
-    tangent: str = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative of "
+    tangent: Tangent = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative of "
                                      "the residual: the same matrix, twice the compile and assembly time)")
     native_kernels: bool = field(False, "compile the shell kernels with -O3 -march=native (≈ 20 % faster "
                                         "Jacobian here; the JIT cache must then not be shared between CPU types)")
@@ -95,18 +97,10 @@ class Parameters(LensParameters):
         self.require_positive("refresh", "steps", "time_step", "rtol", "atol", "max_iterations", "mesh_scale",
                               "roll_radius", "repeats")
         self.require_nonnegative("quadrature_degree")
-        if self.method not in METHODS:
-            raise ParameterError("method", f"must be one of {METHODS}, got {self.method!r}")
-        if self.tangent not in TANGENTS:
-            raise ParameterError("tangent", f"must be one of {TANGENTS}, got {self.tangent!r}")
-        if self.jacobian not in JACOBIANS:
-            raise ParameterError("jacobian", f"must be one of {JACOBIANS}, got {self.jacobian!r}")
         self.require_positive("stall", "krylov_rtol", "krylov_max_it")
         if self.method == "linearised" and SCHEMES[self.scheme].alpha_f:
             raise ParameterError("scheme", "generalized-alpha needs the residual at the accepted state "
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
-        if self.scheme not in SCHEMES:
-            raise ParameterError("scheme", f"must be one of {sorted(SCHEMES)}, got {self.scheme!r}")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
             raise ParameterError("capsule_semi_axes", "three positive semi-axes, mm")
         if self.roll_radius < 0.5 * self.overall_length / np.pi:

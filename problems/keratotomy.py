@@ -32,7 +32,7 @@ from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import displacement_grid, render_png
 from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
-from eyemech.problems.solid.limbus import limbus_support, validate_support
+from eyemech.problems.solid.limbus import Support, limbus_support, validate_support
 from eyemech.problems.solid.spaces import (
     ELEMENTS,
     global_dofs,
@@ -63,7 +63,7 @@ class Parameters(SceneParameters, SolverChoice):
     central_thickness: float = field(0.52, "central thickness", "mm")
     limbal_thickness: float = field(0.67, "thickness at the limbus", "mm")
     diameter: float = field(11.7, "planform diameter at the limbus", "mm")
-    support: Literal["clamped", "elastic"] = field("clamped", "limbus support: clamped, or "
+    support: Support = field("clamped", "limbus support: clamped, or "
                                                    "elastic (distributed springs standing in for the sclera)")
     limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
                                     "(≈ E_sclera / 5 mm)", "MPa/mm")
@@ -85,8 +85,6 @@ class Parameters(SceneParameters, SolverChoice):
         except MeshError as err:
             raise ParameterError(getattr(err, "key", "geometry"), str(err)) from None
         validate_support(self)
-        if self.symmetry not in ("full", "quarter"):
-            raise ParameterError("symmetry", f"unknown symmetry {self.symmetry!r}; choose full or quarter")
         if not self.dt_growth >= 1.0:
             raise ParameterError("dt_growth", f"must be >= 1, got {self.dt_growth}")
         if self.first_dt > self.t_end:

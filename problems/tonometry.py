@@ -40,7 +40,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Literal
 
 import dolfinx
 import dolfinx.fem
@@ -55,7 +54,7 @@ from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries, displacement_grid, render_png
 from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
-from eyemech.problems.solid.limbus import SUPPORTS, limbus_support, validate_support
+from eyemech.problems.solid.limbus import Support, SUPPORTS, limbus_support, validate_support
 from eyemech.problems.solid.spaces import (
     ELEMENTS,
     global_dofs,
@@ -88,7 +87,7 @@ class Parameters(SceneParameters):
     tear_film_mmHg: float = field(4.57, "capillary attraction of the tear meniscus on the prism, as a "
                                   "pressure over the disc (McCafferty et al. 2018: 4.57 ± 0.18 mmHg)", "mmHg")
     penalty: float = field(30.0, "applanator penalty factor: α = penalty · E / mesh_size", "")
-    support: Literal["clamped", "elastic"] = field("clamped", "limbus support: " + ", ".join(SUPPORTS))
+    support: Support = field("clamped", "limbus support: " + ", ".join(SUPPORTS))
     limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
                                     "(≈ E_sclera / 5 mm)", "MPa/mm")
     mesh_size: float = field(0.5, "radial element size in the planform", "mm")

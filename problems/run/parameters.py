@@ -29,7 +29,15 @@ class ParameterError(ValueError):
 
 @dataclasses.dataclass(frozen=True)
 class SceneParameters:
-    """Base class: field metadata ``help`` and ``unit`` document each parameter."""
+    """Base class: field metadata ``help`` and ``unit`` document each parameter. A choice
+    is typed ``Literal[...]``: a value outside it is refused on construction, from the
+    command line, a TOML file or Python alike."""
+
+    def __post_init__(self) -> None:
+        for key, kind in _field_types(type(self)).items():
+            if get_origin(kind) is Literal and getattr(self, key) not in get_args(kind):
+                raise ParameterError(key, f"must be one of {', '.join(map(repr, get_args(kind)))}, "
+                                          f"got {getattr(self, key)!r}")
 
     def validate(self) -> None:
         """Check physical sense; subclasses extend and raise ParameterError."""

@@ -47,7 +47,7 @@ from mpi4py import MPI
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import field
 from petsc4py import PETSc
 
 LinearSolverName = Literal["direct", "iterative"]
@@ -103,21 +103,13 @@ SOLVER_HELP = ("linear solver inside Newton: direct (MUMPS LU) or iterative (FGM
                "fieldsplit Schur + GAMG; docs/scaling.md)")
 
 
-def check_solver(name: str, key: str = "solver") -> None:
-    if name not in ("direct", "iterative"):
-        raise ParameterError(key, f"must be direct or iterative, got {name!r}")
-
-
 @dataclasses.dataclass(frozen=True)
 class SolverChoice:
     """Parameter mixin of the scenes whose linear systems the iterative solver handles:
-    ``class Parameters(SceneParameters, SolverChoice)``. Checked on construction, so a
-    scene's own ``validate`` needs nothing."""
+    ``class Parameters(SceneParameters, SolverChoice)``. ``solver`` is a Literal, checked on
+    construction by :class:`SceneParameters`."""
 
     solver: LinearSolverName = field("direct", SOLVER_HELP)
-
-    def __post_init__(self) -> None:
-        check_solver(self.solver)
 
     def linear_solver(self, shear_modulus=1.0, measure=None) -> "IterativeSolver | None":
         """What ``solver`` selects for NonlinearSolver(..., iterative=...): None (MUMPS

@@ -72,6 +72,7 @@ def generalized_alpha(rho_infinity: float, name: str = "generalized-alpha") -> S
     return Scheme(name, 0.25 * (1.0 - alpha_m + alpha_f) ** 2, gamma, alpha_m, alpha_f)
 
 
+SchemeName = Literal["backward-euler", "generalized-alpha", "newmark", "newmark-damped"]
 SCHEMES = {"backward-euler": Scheme("backward-euler", None, 1.0),
            "generalized-alpha": generalized_alpha(0.8),
            "newmark": Scheme("newmark", 0.25, 0.5),
