@@ -10,9 +10,11 @@ from eyemech.forms.hyperelastic import (
     MooneyRivlin,
     NeoHooke,
     PolynomialIsochoric,
+    cauchy_stress,
     incompressible_energy_density,
     nearly_incompressible_energy_density,
     volumetric_energy,
+    von_mises,
 )
 from eyemech.forms.cavity import (axis_volumes, enclosed_volume, follower_pressure, liquid_law_residual,
                                   liquid_pressure, volume_density)
@@ -28,6 +30,7 @@ __all__ = [
     "NeoHooke",
     "PolynomialIsochoric",
     "Viscoelastic",
+    "cauchy_stress",
     "deformation_gradient",
     "enclosed_volume",
     "follower_pressure",
@@ -35,6 +38,7 @@ __all__ = [
     "isochoric_invariants",
     "nearly_incompressible_energy_density",
     "volumetric_energy",
+    "von_mises",
 ]
 
 from eyemech.forms import contact  # noqa: E402  (obstacles: contact.Plane, contact.Ring, ...)

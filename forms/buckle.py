@@ -59,28 +59,3 @@ class Buckle:
         tire, band = buckle_rings(self.shape, self.axial_position, self.base_radius,
                                   self.indentation)
         return ufl.min_value(tire.gap(x), band.gap(x))
-
-
-def smoothed_penalty_energy(obstacle, u, penalty, smoothing: float, measure):
-    """Π_c = ∫ φ(g(X + u)) dA with the penalty's kink rounded off over |g| < ε:
-
-        φ = ½ α g² + α ε²/6        g ≤ −ε
-        φ = α (ε − g)³ / (12 ε)    −ε < g < ε
-        φ = 0                      g ≥ ε
-
-    so p = −φ' is α⟨−g⟩ outside the band and joins it with matching slope
-    (the pressure law of :func:`eyemech.problems.contact.node_to_surface.penalty_pressure`).
-    ε = 0 is the plain ½ α ⟨−g⟩². A C² energy keeps Newton from cycling on
-    quadrature points that sit at g ≈ 0 (measured on the buckle: a 2-cycle at
-    residual 1e-4 without it)."""
-    from eyemech.forms.contact import deformed_position, penalty_energy
-
-    if smoothing <= 0:
-        return penalty_energy(obstacle, u, penalty, measure)
-    g = obstacle.gap(deformed_position(u))
-    eps = smoothing
-    density = ufl.conditional(
-        ufl.ge(g, eps), 0.0,
-        ufl.conditional(ufl.le(g, -eps), 0.5 * penalty * g**2 + penalty * eps**2 / 6,
-                        penalty * (eps - g) ** 3 / (12 * eps)))
-    return density * measure

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import ufl
 
+from eyemech.forms.kinematics import deformation_gradient
+
 
 def _nanson(u):
     """J F^-T = cof F, the map from reference area vectors N dA to deformed n da."""
-    dim = len(u)
-    F = ufl.Identity(dim) + ufl.grad(u)
+    F = deformation_gradient(u)
     return ufl.det(F) * ufl.inv(F).T
 
 

@@ -220,6 +220,47 @@ def penalty_energy(obstacle, u, penalty, measure):
     return 0.5 * penalty * penetration(obstacle, u) ** 2 * measure
 
 
+def smoothed_penalty_density(g, penalty, smoothing: float):
+    """The penalty energy per area φ(g) with its kink rounded off over |g| < ε (UFL):
+
+        φ = ½ α g² + α ε²/6        g ≤ −ε
+        φ = α (ε − g)³ / (12 ε)    −ε < g < ε
+        φ = 0                      g ≥ ε
+
+    so the pressure p = −φ' is α⟨−g⟩ outside the band and α (ε − g)²/(4ε) inside it
+    (:func:`smoothed_penalty_pressure` evaluates the same law on arrays). ε = 0 is the
+    plain ½ α ⟨−g⟩². Why: a C² energy keeps Newton from cycling on points that sit at
+    g ≈ 0 (measured on the buckle: a 2-cycle at residual 1e-4 without it); the price is a
+    pressure up to αε/4 for gaps below ε (a stand-off ≤ ε)."""
+    if smoothing <= 0:
+        return 0.5 * penalty * ufl.max_value(-g, 0.0) ** 2
+    eps = smoothing
+    return ufl.conditional(
+        ufl.ge(g, eps), 0.0,
+        ufl.conditional(ufl.le(g, -eps), 0.5 * penalty * g**2 + penalty * eps**2 / 6,
+                        penalty * (eps - g) ** 3 / (12 * eps)))
+
+
+def smoothed_penalty_energy(obstacle, u, penalty, smoothing: float, measure):
+    """Π_c = ∫ φ(g(X + u)) dA over ``measure`` with φ of :func:`smoothed_penalty_density`."""
+    return smoothed_penalty_density(obstacle.gap(deformed_position(u)), penalty, smoothing) * measure
+
+
+def smoothed_penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+    """p(g) = −φ'(g) ≥ 0 of :func:`smoothed_penalty_density` and its slope dp/dg, on
+    arrays of gaps (for the node-wise contacts evaluated in numpy)."""
+    gaps = np.asarray(gaps, dtype=float)
+    if smoothing <= 0.0:
+        return penalty * np.maximum(-gaps, 0.0), np.where(gaps < 0, -penalty, 0.0)
+    eps = smoothing
+    blend = (gaps > -eps) & (gaps < eps)
+    pressure = np.where(gaps <= -eps, -penalty * gaps, 0.0)
+    slope = np.where(gaps <= -eps, -penalty, 0.0)
+    pressure = np.where(blend, penalty * (eps - gaps) ** 2 / (4 * eps), pressure)
+    slope = np.where(blend, -penalty * (eps - gaps) / (2 * eps), slope)
+    return pressure, slope
+
+
 def contact_traction(obstacle, u, penalty):
     """t = α ⟨−g⟩ n: the force per reference area the obstacle exerts on the body."""
     return penalty * penetration(obstacle, u) * obstacle_normal(obstacle, u)

@@ -13,11 +13,10 @@ def lame(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
     return mu, lmbda
 
 
-def compressible_neo_hooke(u, youngs_modulus: float, poisson_ratio: float):
+def compressible_neo_hooke(F, youngs_modulus: float, poisson_ratio: float):
     """W = μ/2 (I1 − 3 − 2 ln J) + λ/2 (ln J)², with I1 = tr(FᵀF): linear elasticity
     with (E, ν) at small strain, well behaved under large compression."""
     mu, lmbda = lame(youngs_modulus, poisson_ratio)
-    F = ufl.Identity(len(u)) + ufl.grad(u)
     J = ufl.det(F)
     return 0.5 * mu * (ufl.tr(F.T * F) - 3 - 2 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
 

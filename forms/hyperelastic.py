@@ -58,11 +58,24 @@ def MooneyRivlin(c10: float, c01: float) -> PolynomialIsochoric:
     return PolynomialIsochoric(((1, 0, c10), (0, 1, c01)))
 
 
-def incompressible_energy_density(material: Material, u, p):
+def incompressible_energy_density(material: Material, F, p):
     """Mixed u–p energy density W(F) + p (J − 1); its stationary point is the
     incompressible equilibrium and p the Lagrange multiplier."""
-    F = ufl.Identity(len(u)) + ufl.grad(u)
     return material.strain_energy(F) + p * (ufl.det(F) - 1)
+
+
+def cauchy_stress(material: Material, F, p=0.0):
+    """σ = J⁻¹ P Fᵀ of the mixed energy, P = ∂W/∂F + p J F⁻ᵀ; ``F`` a ``ufl.variable``
+    (:func:`eyemech.forms.kinematics.deformation_gradient`). With p = 0 it is the
+    isochoric part: its deviator is the whole deviatoric stress."""
+    P = ufl.diff(incompressible_energy_density(material, F, p), F)
+    return P * F.T / ufl.det(F)
+
+
+def von_mises(sigma):
+    """√(3/2 dev σ : dev σ): the equivalent stress; a pressure does not change it."""
+    deviator = ufl.dev(sigma)
+    return ufl.sqrt(1.5 * ufl.inner(deviator, deviator))
 
 
 def volumetric_energy(J, bulk_modulus, kind: str = "log"):
@@ -79,9 +92,8 @@ def volumetric_energy(J, bulk_modulus, kind: str = "log"):
     raise ValueError(f"unknown volumetric energy {kind!r}: quadratic | log")
 
 
-def nearly_incompressible_energy_density(material: Material, u, bulk_modulus, kind: str = "log"):
+def nearly_incompressible_energy_density(material: Material, F, bulk_modulus, kind: str = "log"):
     """Displacement-only energy density W(F) + U(J): the isochoric law (invariants
     of C̄ = J^(-2/3) C) plus a bulk penalty. With K ≫ μ and low-order elements it
     locks volumetrically (the point of the ``P1`` family)."""
-    F = ufl.Identity(len(u)) + ufl.grad(u)
     return material.strain_energy(F) + volumetric_energy(ufl.det(F), bulk_modulus, kind)

@@ -35,6 +35,8 @@ import dataclasses
 from typing import Literal
 
 import ufl
+
+from eyemech.forms.kinematics import deformation_gradient
 import ufl.algorithms
 
 Kinematics = Literal["linear", "nonlinear"]
@@ -185,7 +187,7 @@ def end_rotation(u, co_normal, reference_angle, plane=(0, 2)):
     """Angle (in the plane of axes ``plane``) of the deformed material direction
     F ν at an edge, unwrapped around ``reference_angle`` (updated after each
     converged step so that rotations beyond ±π stay continuous)."""
-    F = ufl.Identity(3) + ufl.grad(u)
+    F = deformation_gradient(u)
     a = F * co_normal
     i, k = plane
     c, s = ufl.cos(reference_angle), ufl.sin(reference_angle)

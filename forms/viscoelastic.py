@@ -63,6 +63,8 @@ from typing import Literal
 
 import ufl
 
+from eyemech.forms.kinematics import deformation_gradient
+
 TimeScheme = Literal["backward-euler", "forward-euler"]
 TIME_SCHEMES: tuple[str, ...] = ("backward-euler", "forward-euler")
 
@@ -114,32 +116,30 @@ def forward_euler(Cbar_n, Cv_n, dt, tau):
     return Cv_n + dt * evolution_rate(Cbar_n, Cv_n, tau)
 
 
-def first_piola(material: Viscoelastic, u, p, Cv):
-    """P = ∂(Ψ + p(J − 1))/∂F at fixed Cv (Cv may itself depend on u: it is held
-    fixed in this partial derivative and differentiated only by the tangent)."""
-    F = ufl.variable(ufl.Identity(len(u)) + ufl.grad(u))
+def first_piola(material: Viscoelastic, F, p, Cv):
+    """P = ∂(Ψ + p(J − 1))/∂F at fixed Cv, ``F`` a ``ufl.variable``. Cv may itself depend on
+    u: built from another :func:`deformation_gradient` (each call is a new variable) it is
+    held fixed in this partial derivative and differentiated only by the tangent."""
     energy = material.free_energy(F, Cv) + p * (ufl.det(F) - 1)
     return ufl.diff(energy, F)
 
 
 def residual(material: Viscoelastic, u, p, v, q, Cv, dx):
     """Mixed u–p residual ∫ P : Grad v + q (J − 1) dV (no loads; add tractions outside)."""
-    F = ufl.Identity(len(u)) + ufl.grad(u)
-    return (ufl.inner(first_piola(material, u, p, Cv), ufl.grad(v)) * dx
+    F = deformation_gradient(u)
+    return (ufl.inner(first_piola(material, F, p, Cv), ufl.grad(v)) * dx
             + q * (ufl.det(F) - 1) * dx)
 
 
-def cauchy_stress(material: Viscoelastic, u, p, Cv):
-    """σ = J⁻¹ P Fᵀ."""
-    F = ufl.Identity(len(u)) + ufl.grad(u)
-    return first_piola(material, u, p, Cv) * F.T / ufl.det(F)
+def cauchy_stress(material: Viscoelastic, F, p, Cv):
+    """σ = J⁻¹ P Fᵀ, ``F`` a ``ufl.variable``."""
+    return first_piola(material, F, p, Cv) * F.T / ufl.det(F)
 
 
-def current_internal_variable(scheme: str, material: Viscoelastic, u, Cv_n, Cbar_n, dt):
-    """Cv_{n+1} as a UFL expression for the chosen time scheme: a function of u for
+def current_internal_variable(scheme: str, material: Viscoelastic, F, Cv_n, Cbar_n, dt):
+    """Cv_{n+1} as a UFL expression for the chosen time scheme: a function of F for
     backward Euler, of the stored previous state (Cv_n, C̄_n) for forward Euler."""
     if scheme == "backward-euler":
-        F = ufl.Identity(len(u)) + ufl.grad(u)
         return backward_euler(isochoric_cauchy_green(F), Cv_n, dt, material.tau)
     if scheme == "forward-euler":
         return forward_euler(Cbar_n, Cv_n, dt, material.tau)

@@ -27,7 +27,7 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
-from eyemech.forms import compressible_neo_hooke, contact
+from eyemech.forms import compressible_neo_hooke, deformation_gradient, contact
 from eyemech.meshes.contact_bodies import quarter_hemisphere
 from eyemech.problems.contact.rigid import (
     NodalPenetration,
@@ -98,7 +98,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                               translation=lift)
         alpha = dolfinx.fem.Constant(mesh, params.penalty_stiffness)
         ds_contact = ball.ds(CONTACT_QUADRATURE)(ball.tag("contact"))
-        energy = (compressible_neo_hooke(u, params.youngs_modulus, params.poisson_ratio)
+        energy = (compressible_neo_hooke(deformation_gradient(u), params.youngs_modulus, params.poisson_ratio)
                   * ball.dx(QUADRATURE) + contact.penalty_energy(plane, u, alpha, ds_contact))
         residual = ufl.derivative(energy, u, v)
         bcs = symmetry_bcs(V, ball, {"symmetry_x": 0, "symmetry_y": 1, "top": 2})

@@ -25,7 +25,7 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
-from eyemech.forms import compressible_neo_hooke, follower_pressure
+from eyemech.forms import compressible_neo_hooke, deformation_gradient, follower_pressure
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.contact_bodies import layered_caps
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
@@ -88,8 +88,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", params.degree, (3,)))
         u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
         dx = caps.dx(QUADRATURE)
-        energy = (compressible_neo_hooke(u, params.soft_modulus, params.poisson_ratio) * dx(caps.tag("soft"))
-                  + compressible_neo_hooke(u, params.stiff_modulus, params.poisson_ratio)
+        energy = (compressible_neo_hooke(deformation_gradient(u), params.soft_modulus, params.poisson_ratio) * dx(caps.tag("soft"))
+                  + compressible_neo_hooke(deformation_gradient(u), params.stiff_modulus, params.poisson_ratio)
                   * dx(caps.tag("stiff")))
         pressure = dolfinx.fem.Constant(mesh, 0.0)
         residual = ufl.derivative(energy, u, v) + follower_pressure(

@@ -47,12 +47,15 @@ import numpy as np
 import ufl
 from eyemech.forms import (
     NeoHooke,
+    cauchy_stress,
+    deformation_gradient,
     enclosed_volume,
     follower_pressure,
     liquid_law_residual,
+    von_mises,
 )
-from eyemech.forms.buckle import Buckle, BuckleShape, smoothed_penalty_energy
-from eyemech.forms.contact import default_penalty
+from eyemech.forms.buckle import Buckle, BuckleShape
+from eyemech.forms.contact import default_penalty, smoothed_penalty_energy
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems import buckling_output
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
@@ -590,13 +593,9 @@ class BucklingModel:
 
 
 def _von_mises(u, stiffness):
-    """Von Mises stress of the neo-Hookean tissues: σ_dev = (2c/J) dev(b̄)
-    (the pressure multiplier is hydrostatic and drops out)."""
-    F = ufl.Identity(3) + ufl.grad(u)
-    J = ufl.det(F)
-    b_bar = J ** (-2.0 / 3.0) * F * F.T
-    deviator = 2 * stiffness / J * (b_bar - ufl.tr(b_bar) / 3 * ufl.Identity(3))
-    return ufl.sqrt(1.5 * ufl.inner(deviator, deviator))
+    """Von Mises stress of the neo-Hookean tissues (c per cell): the deviator of σ is that
+    of the isochoric part, (2c/J) dev(b̄); the pressure multiplier drops out."""
+    return von_mises(cauchy_stress(NeoHooke(stiffness), deformation_gradient(u)))
 
 
 SCENE = Scene(name="scleral-buckling", kind="scene", parameters=Parameters, run=run,

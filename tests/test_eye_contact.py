@@ -27,7 +27,7 @@ import basix.ufl
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
-from eyemech.forms import compressible_neo_hooke
+from eyemech.forms import compressible_neo_hooke, deformation_gradient
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.solve.driver import NewtonOptions, NonlinearSolver
@@ -111,7 +111,7 @@ def squeeze(blocked: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
     u = dolfinx.fem.Function(V)
     dx = ufl.dx(domain=mesh, metadata={"quadrature_degree": 2})
-    energy = compressible_neo_hooke(u, 1.0, 0.3) * dx
+    energy = compressible_neo_hooke(deformation_gradient(u), 1.0, 0.3) * dx
     bottom = dolfinx.fem.locate_dofs_topological(V, 2, blocks.facets("bottom"))
     top = dolfinx.fem.locate_dofs_topological(V, 2, blocks.facets("top"))
     push = dolfinx.fem.Constant(mesh, np.zeros(3))

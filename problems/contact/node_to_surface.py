@@ -51,6 +51,7 @@ from scipy.spatial import cKDTree
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
+from eyemech.forms.contact import smoothed_penalty_pressure
 from eyemech.meshes.tagged import MeshError, TaggedMesh
 from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.run.results import Timings
@@ -383,22 +384,9 @@ class NodeToSurfaceContact:
 
 
 def penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Contact pressure p(g) ≥ 0 and its slope dp/dg.
-
-    ε = 0: p = α ⟨−g⟩ (kink at g = 0). ε > 0: the kink is rounded off over
-    −ε < g < ε by p = α (ε − g)² / (4ε), which joins α(−g) and 0 with matching
-    slopes; p is then C¹, so Newton cannot cycle on a node sitting at g ≈ 0.
-    The price: a pressure up to αε/4 for gaps below ε (a stand-off ≤ ε).
-    """
-    if smoothing == 0.0:
-        return penalty * np.maximum(-gaps, 0.0), np.where(gaps < 0, -penalty, 0.0)
-    eps = smoothing
-    blend = (gaps > -eps) & (gaps < eps)
-    pressure = np.where(gaps <= -eps, -penalty * gaps, 0.0)
-    slope = np.where(gaps <= -eps, -penalty, 0.0)
-    pressure = np.where(blend, penalty * (eps - gaps) ** 2 / (4 * eps), pressure)
-    slope = np.where(blend, -penalty * (eps - gaps) / (2 * eps), slope)
-    return pressure, slope
+    """Contact pressure p(g) ≥ 0 and its slope dp/dg: the smoothed penalty law of
+    :func:`eyemech.forms.contact.smoothed_penalty_pressure` (ε = ``smoothing``)."""
+    return smoothed_penalty_pressure(gaps, penalty, smoothing)
 
 
 def plane_barycentric(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -45,6 +45,8 @@ from petsc4py import PETSc
 
 import dolfinx.fem
 
+from eyemech.forms.contact import smoothed_penalty_pressure
+
 
 class NodalContact:
     """Penalty contact of the (owned) nodes of a vector Lagrange ``u`` with rigid obstacles,
@@ -85,13 +87,8 @@ class NodalContact:
         """⟨d⟩ smoothed over |d| < ε by the C¹ ramp (d + ε)²/(4ε), and its derivative: a
         kinked ⟨d⟩ makes Newton cycle when a node sits at the wall (measured: residuals
         alternating 1e-2 / 1e-4 for 25 iterations); ε = ``smoothing`` mm."""
-        eps = self.smoothing
-        if eps <= 0.0:
-            return np.maximum(depth, 0.0), (depth > 0.0).astype(float)
-        inside = depth >= eps
-        value = np.where(inside, depth, (depth + eps) ** 2 / (4.0 * eps))
-        slope = np.where(inside, 1.0, (depth + eps) / (2.0 * eps))
-        return value, slope
+        value, slope = smoothed_penalty_pressure(-depth, 1.0, self.smoothing)  # the one law
+        return value, -slope
 
     def begin_step(self, wall_motion: dict[str, Callable[[np.ndarray], np.ndarray]] | None = None) -> None:
         """Lag the wall friction at the step's start (the current ``u``): each pressed

@@ -8,6 +8,7 @@ from typing import Mapping
 
 import ufl
 from eyemech.forms import (
+    deformation_gradient,
     Material,
     incompressible_energy_density,
     nearly_incompressible_energy_density,
@@ -26,13 +27,14 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     parts = material.items() if isinstance(material, Mapping) else [(None, material)]
     if family.pressure_family is None and (bulk_modulus is None or not bulk_modulus > 0):
         raise ValueError(f"{family.name} is displacement-only and needs a bulk modulus > 0")
+    F = deformation_gradient(u)
     energy = 0
     for tag, law in parts:
         measure = dx if tag is None else dx(tag)
         if family.pressure_family is None:
-            energy += nearly_incompressible_energy_density(law, u, bulk_modulus) * measure
+            energy += nearly_incompressible_energy_density(law, F, bulk_modulus) * measure
         else:
-            energy += incompressible_energy_density(law, u, fields[1]) * measure
+            energy += incompressible_energy_density(law, F, fields[1]) * measure
     residual = ufl.derivative(energy, u, v)
     if family.pressure_family is not None:
         residual += ufl.derivative(energy, fields[1], tests[1])

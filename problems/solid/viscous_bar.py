@@ -23,6 +23,7 @@ import dolfinx.mesh
 import numpy as np
 import ufl
 from eyemech.forms import viscoelastic as ve
+from eyemech.forms.kinematics import deformation_gradient
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.solid.spaces import ELEMENTS, mixed_displacement_pressure
@@ -86,8 +87,8 @@ class ViscousHistory:
         points = Q.element.interpolation_points
         self.Cv_n = self._identity(Q, "Cv_n")
         self.Cbar_n = self._identity(Q, "Cbar_n")  # read by forward Euler only
-        self.Cv = ve.current_internal_variable(scheme, material, u, self.Cv_n, self.Cbar_n, self.dt)
-        F = ufl.Identity(3) + ufl.grad(u)
+        F = deformation_gradient(u)
+        self.Cv = ve.current_internal_variable(scheme, material, F, self.Cv_n, self.Cbar_n, self.dt)
         self._Cv_next = dolfinx.fem.Expression(self.Cv, points)
         self._Cbar_next = dolfinx.fem.Expression(ve.isochoric_cauchy_green(F), points)
         self._scratch = dolfinx.fem.Function(Q)
@@ -155,12 +156,12 @@ class ViscousBar:
         self.history = ViscousHistory(self.u, self.material, params.time_scheme, degree)
         self.dt, self.Cv = self.history.dt, self.history.Cv
         self.update_history, self.store_strain = self.history.update, self.history.store_strain
-        F = ufl.Identity(3) + ufl.grad(self.u)
+        F = deformation_gradient(self.u)
         self.residual = ve.residual(self.material, self.u, self.p, self.v, self.q, self.Cv, self.dx)
 
         volume = comm.allreduce(dolfinx.fem.assemble_scalar(
             dolfinx.fem.form(1.0 * self.dx)), op=MPI.SUM)
-        sigma = ve.cauchy_stress(self.material, self.u, self.p, self.Cv)
+        sigma = ve.cauchy_stress(self.material, F, self.p, self.Cv)
         self._stress_form = dolfinx.fem.form(sigma[0, 0] / volume * self.dx)
         self._stretch_form = dolfinx.fem.form(F[0, 0] / volume * self.dx)
         self.comm = comm
@@ -182,7 +183,7 @@ class ViscousBar:
     def axial_cauchy_traction(self, stress: dolfinx.fem.Constant):
         """−∫ σ0 n da · v on x = L, pulled back with Nanson (cof F N dA): a constant
         true (Cauchy) axial stress σ0 however much the face shrinks."""
-        F = ufl.Identity(3) + ufl.grad(self.u)
+        F = deformation_gradient(self.u)
         N = ufl.FacetNormal(self.mesh)
         nanson = ufl.det(F) * ufl.inv(F).T * N
         return -stress * ufl.dot(nanson, self.v) * self.ds(LOADED_FACE)
