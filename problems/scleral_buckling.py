@@ -271,7 +271,6 @@ class BucklingModel:
         mesh = self.eye.mesh
         fields, tests = solid_fields(mesh, family, real_pressure_space(mesh))
         self.fields, self.u, self.P = fields, fields[0], fields[-1]
-        v, qP = tests[0], tests[-1]
         metadata = {"quadrature_degree": family.quadrature_degree}
         dx, ds = self.eye.dx(metadata), self.eye.ds(metadata)
         self.wall = ds(self.eye.tag("cavity_wall"))
@@ -287,13 +286,7 @@ class BucklingModel:
         self.initial_volume.value = volume0
         area = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
             dolfinx.fem.Constant(mesh, 1.0) * self.wall)), op=MPI.SUM)
-        liquid = liquid_law_residual(self.P, qP, self.u, self.wall, area, self.initial_volume,
-                                     self.initial_pressure, params.bulk_modulus)
-        pinned = self.initial_volume / params.bulk_modulus * (self.P - self.pressure_target) \
-            / area * qP * self.wall
-        residual = (solid_residual(NeoHooke(self.stiffness), family, fields, tests, dx)
-                    + follower_pressure(self.P, self.u, v, self.wall)
-                    + self.coupled * liquid + (1 - self.coupled) * pinned)
+        self.wall_area = area
 
         # the buckle: placed after step 1 at the clearance from the inflated sclera
         self.axial_position, self.buckle_angle = self._buckle_axial_position()
@@ -303,14 +296,10 @@ class BucklingModel:
                              self.indentation)
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
-        contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
-        contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
-                                          contact_ds(self.eye.tag("sclera_outer")))
-        residual += ufl.derivative(contact, self.u, v)
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
                                     self.sclera_nodes, params.suture_bite_radius)
-        residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
+        residual = self.residual(tests, dx, ds)
 
         self.bcs = self._boundary_conditions()
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
@@ -334,6 +323,34 @@ class BucklingModel:
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
         self.stage_results: dict[int, dict] = {}
         self.reference_positions: dict[str, np.ndarray] = {}
+
+    def residual(self, tests, dx, ds):
+        """The eye's residual, all of it but the node-wise terms:
+
+        R = R_solid(u, p)                    incompressible neo-Hookean tissues (Q1P0 …)
+          + ∫ P J F⁻ᵀN·v dA                 the vitreous pressure P on the cavity wall
+          + c · R_liquid + (1 − c) · R_pin   P's row: the liquid law from step 2 (c = 1),
+                                             P pinned to the IOP ramp in step 1 (c = 0)
+          + δΠ_buckle                        smoothed penalty contact with the rigid buckle
+          + R_sutures                        suture forces at the bites (lagged directions)
+
+        The zonule bars and the retina–choroid contact are added node-wise by hooks of the
+        nonlinear solver (:meth:`_zonules`, :meth:`_retina_contact`)."""
+        params, family = self.params, self.family
+        v, qP = tests[0], tests[-1]
+        liquid = liquid_law_residual(self.P, qP, self.u, self.wall, self.wall_area, self.initial_volume,
+                                     self.initial_pressure, params.bulk_modulus)
+        pinned = self.initial_volume / params.bulk_modulus * (self.P - self.pressure_target) \
+            / self.wall_area * qP * self.wall
+        residual = (solid_residual(NeoHooke(self.stiffness), family, self.fields, tests, dx)
+                    + follower_pressure(self.P, self.u, v, self.wall)
+                    + self.coupled * liquid + (1 - self.coupled) * pinned)
+        contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
+        contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
+                                          contact_ds(self.eye.tag("sclera_outer")))
+        residual += ufl.derivative(contact, self.u, v)
+        residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
+        return residual
 
     # -- set-up pieces --------------------------------------------------------------
     def _stiffness_field(self) -> dolfinx.fem.Function:
