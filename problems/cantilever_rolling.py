@@ -29,12 +29,13 @@ from mpi4py import MPI
 
 import dolfinx.fem
 from eyemech.forms.shell import Kinematics, end_rotation
-from eyemech.meshes.surface import Diagonal, mapped_surface, tag_boundary
+from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
+    ShellDiscretisation,
     Shell,
     check_shell_parameters,
     newton_options,
@@ -44,7 +45,7 @@ from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, ShellDiscretisation):
     moment_fraction: float = field(
         1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)")
     youngs_modulus: float = field(1.2e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa")
@@ -54,10 +55,7 @@ class Parameters(SceneParameters):
     thickness: float = field(0.1, "strip thickness", "mm")
     divisions: int = field(32, "squares along the length")
     width_divisions: int = field(1, "squares across the width")
-    diagonal: Diagonal = field("crossed", "triangulation of each square")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     load_steps: int = field(8, "initial number of load steps (cut and grown as needed)")
 
     def validate(self) -> None:

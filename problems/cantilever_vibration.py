@@ -27,11 +27,11 @@ from mpi4py import MPI
 
 from eyemech.forms.dynamics import mass_form
 from eyemech.forms.shell import Kinematics
-from eyemech.meshes.surface import Diagonal, mapped_surface, tag_boundary
+from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
-from eyemech.problems.shell.model import Shell, check_shell_parameters, newton_options
+from eyemech.problems.shell.model import Shell, ShellDiscretisation, check_shell_parameters, newton_options
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.time_integration import (
     SCHEMES,
@@ -44,7 +44,7 @@ BETA_L = 1.8751040687  # first root of cos βL cosh βL = −1
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, ShellDiscretisation):
     youngs_modulus: float = field(1.0, "Young's modulus (the lens acrylic)", "MPa")
     poisson_ratio: float = field(0.0, "Poisson's ratio (0: the strip is a beam)")
     density: float = field(1.2e-9, "mass density (1.2 g/cm³)", "tonne/mm³")
@@ -52,10 +52,7 @@ class Parameters(SceneParameters):
     width: float = field(1.0, "strip width", "mm")
     thickness: float = field(0.13, "strip thickness", "mm")
     divisions: int = field(12, "squares along the length")
-    diagonal: Diagonal = field("crossed", "triangulation of each square")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     kinematics: Kinematics = field("linear", "linear (small vibration) or nonlinear")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     amplitude: float = field(0.01, "initial tip deflection as a fraction of the length")
     scheme: SchemeName = field("newmark", "time scheme: " + " | ".join(SCHEMES))
     damping: float = field(0.0, "mass-proportional damping c as a fraction of ω₁", "")

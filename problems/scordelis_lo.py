@@ -18,11 +18,12 @@ from pathlib import Path
 import numpy as np
 import ufl
 from eyemech.forms.shell import Kinematics
-from eyemech.meshes.surface import Diagonal, mapped_surface, tag_boundary
+from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
+    ShellDiscretisation,
     Shell,
     check_shell_parameters,
     newton_options,
@@ -35,7 +36,7 @@ REFERENCE = 0.3024  # MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, ShellDiscretisation):
     radius: float = field(25.0, "cylinder radius", "mm")
     length: float = field(50.0, "roof length (between the diaphragms)", "mm")
     half_angle: float = field(40.0, "half opening angle", "deg")
@@ -44,10 +45,7 @@ class Parameters(SceneParameters):
     poisson_ratio: float = field(0.0, "Poisson's ratio")
     gravity_load: float = field(90.0, "self weight per unit (reference) area, acting along -z", "MPa")
     divisions: int = field(16, "squares along the length and around the arc")
-    diagonal: Diagonal = field("crossed", "triangulation of each square")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
 
     def validate(self) -> None:
         self.require_positive("radius", "length", "half_angle", "divisions")

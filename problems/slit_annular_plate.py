@@ -34,13 +34,14 @@ import dolfinx.fem
 import dolfinx.la
 import dolfinx.mesh
 from eyemech.forms.shell import Kinematics
-from eyemech.meshes.surface import Diagonal, mapped_surface
+from eyemech.meshes.surface import mapped_surface
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
+    ShellDiscretisation,
     Shell,
     check_shell_parameters,
     newton_options,
@@ -57,7 +58,7 @@ SZE_MAX_LINE_LOAD = 0.8
 
 
 @dataclasses.dataclass(frozen=True)
-class Parameters(SceneParameters):
+class Parameters(SceneParameters, ShellDiscretisation):
     line_load: float = field(SZE_MAX_LINE_LOAD, "vertical line load on the free slit edge at the "
                                                 "end of the path (per unit length)", "N/mm")
     inner_radius: float = field(6.0, "inner radius", "mm")
@@ -67,10 +68,7 @@ class Parameters(SceneParameters):
     poisson_ratio: float = field(0.0, "Poisson's ratio")
     divisions: int = field(48, "squares around the ring")
     radial_divisions: int = field(6, "squares across the ring")
-    diagonal: Diagonal = field("crossed", "triangulation of each square")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     load_steps: int = field(20, "initial number of load steps (cut and grown as needed)")
 
     def validate(self) -> None:

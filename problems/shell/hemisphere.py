@@ -15,11 +15,12 @@ from typing import Callable
 import numpy as np
 import ufl
 from eyemech.forms.shell import Kinematics
-from eyemech.meshes.surface import Diagonal, mapped_surface, tag_boundary
+from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import SceneParameters, field
 from eyemech.problems.shell.model import (
+    ShellDiscretisation,
     Shell,
     check_shell_parameters,
     newton_options,
@@ -32,7 +33,7 @@ REFERENCE = 0.093
 
 
 @dataclasses.dataclass(frozen=True)
-class HemisphereParameters(SceneParameters):
+class HemisphereParameters(SceneParameters, ShellDiscretisation):
     radius: float = field(10.0, "sphere radius", "mm")
     hole_angle: float = field(18.0, "half angle of the hole at the pole", "deg")
     thickness: float = field(0.04, "shell thickness", "mm")
@@ -40,10 +41,7 @@ class HemisphereParameters(SceneParameters):
     poisson_ratio: float = field(0.3, "Poisson's ratio")
     force: float = field(2.0, "each point load (whole shell)", "N")
     divisions: int = field(24, "divisions from the equator to the hole (5× as many around)")
-    diagonal: Diagonal = field("crossed", "triangulation of each square")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     load_steps: int = field(10, "initial number of load steps (nonlinear; cut and grown as needed)")
 
     def validate(self) -> None:

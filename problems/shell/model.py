@@ -141,18 +141,25 @@ InPlane = Literal["immovable", "sliding"]
 
 
 @dataclasses.dataclass(frozen=True)
-class PlateParameters(SceneParameters):
+class ShellDiscretisation:
+    """Parameter mixin of the shell benchmarks (``class Parameters(SceneParameters,
+    ShellDiscretisation)``): the triangulation and the C0 interior-penalty discretisation."""
+
+    diagonal: Diagonal = field("crossed", "triangulation of each square: crossed|right|left|alternating")
+    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
+    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
+
+
+@dataclasses.dataclass(frozen=True)
+class PlateParameters(SceneParameters, ShellDiscretisation):
     q: float = field(1.0, "uniform transverse load (dead load, per reference area)", "MPa")
     youngs_modulus: float = field(1.092e6, "Young's modulus (the shell paper's test)", "MPa")
     poisson_ratio: float = field(0.3, "Poisson's ratio")
     length: float = field(10.0, "side of the square plate", "mm")
     thickness: float = field(0.1, "plate thickness", "mm")
     divisions: int = field(32, "squares per side (each split in 4 triangles when crossed)")
-    diagonal: Diagonal = field("crossed", "triangulation of each square: crossed|right|left|alternating")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     kinematics: Kinematics = field("linear", "linear (small displacement) or nonlinear "
                                                         "(total Lagrangian)")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
     load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)")
     in_plane: InPlane = field("immovable", "in-plane edge condition: immovable (u = 0) or sliding "
                                            "(normal in-plane displacement 0, tangential free: Levy 1942)")
