@@ -145,8 +145,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             if ctx.out is not None:  # reusable: folded_state=<out>/folded_state.npz
                 save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
                 ctx.result.fields.append("folded_state.npz")
-        history = inject(params, ctx, shell)
-        report(params, ctx, shell, history)
+        injection = Injection(params, ctx, shell)
+        injection.run()
+        report(params, ctx, injection)
     return ctx.result
 
 
@@ -276,135 +277,175 @@ class PlungerMotion:
         return self.speed * (t - 0.5 * self.ramp)
 
 
-def inject(params: Parameters, ctx: RunContext, shell: LensShell) -> dict:
-    layout = InjectorLayout()
-    axis = params.axis_point()
-    x = shell.node_coordinates() + shell.u.x.array.reshape(-1, 3)
-    start = ctx.comm.allreduce(float(x[:, 0].min()), op=MPI.MIN) - 0.05
-    # the head fills the bore and more: a node sliding along the wall must not leave its reach
-    plunger = Plunger(start, axis, params.bore_radius + 0.5)
-    obstacles = {"cartridge": layout.cartridge(params, lip=layout.nozzle_lip), "plunger": plunger,
-                 "capsule": layout.capsule(params)} if params.contact else {}
-    walls = {k: v for k, v in obstacles.items() if k != "plunger"}
-    contact = NodalContact(shell.u, walls, params.contact_stiffness, slip=params.friction_slip,
-                           friction={"capsule": params.capsule_friction,
-                                     "cartridge": params.cartridge_friction})
-    # the plunger on the optic only: a flat head pressed on the tip of a 0.13 mm haptic strip
-    # (Euler load ~1e-5 N against the ~1e-2 N the lens needs to leave the nozzle) crumples
-    # it against the optic; Newton then crawls at Δt ≈ 0.1 ms and failed (t = 0.243 s, coarse)
-    haptics = shell.nodes_of("haptic") if params.plunger_engages == "optic" else None
-    if haptics is not None:
-        haptics = np.setdiff1d(haptics, shell.nodes_of("optic"))
-    pushing = NodalContact(shell.u, {"plunger": plunger} if params.contact else {},
-                           params.contact_stiffness, excluded=haptics)
-    dynamics = ImplicitDynamics(shell.u, shell.mass(), [], scheme_name=params.scheme,
-                                damping=params.damping)
-    fluid = FluidDrag(dynamics, shell, layout.cartridge(params), params.jet_length) \
-        if params.fluid_carried else None
-    # the shell's Jacobian written out (equal to UFL's derivative to 2e-16, tests/test_iol_speed.py;
-    # about half its assembly time): the same Newton iterates, cheaper iterations
-    solver = NonlinearSolver(shell.residual(), shell.u, [], jacobian=shell.jacobian(),
-                             options=_newton(ctx, params), timings=ctx.timings,
-                             residual_hooks=[dynamics.residual_hook, contact.residual_hook,
-                                             pushing.residual_hook]
-                             + ([fluid.residual_hook] if fluid is not None else []),
-                             jacobian_hooks=[dynamics.jacobian_hook, contact.jacobian_hook,
-                                             pushing.jacobian_hook])
-    # contact=false is the deformation-only benchmark: no self-contact either
-    self_contact = lens_self_contact(shell, params) if params.contact else None
-    if self_contact is not None:
-        self_contact.check(what="the folded lens")
-        self_contact.attach(solver)
-    if params.scheme != "backward-euler":
-        dynamics.initial_acceleration(shell.residual())
-    stop = layout.tip + params.plunger_overshoot
-    motion = PlungerMotion(params.plunger_speed, params.start_ramp, stop - start)
-    push_time = motion.push_time
-    end = push_time + params.settle_time
-    twist = np.radians(params.injector_twist) / motion.travel(push_time)  # rad per mm of travel
+@dataclasses.dataclass
+class InjectionHistory:
+    """Per converged step of the injection, and its totals."""
 
-    def twisted(t: float, dt: float) -> dict:
+    time: list[float] = dataclasses.field(default_factory=list)
+    newton: list[int] = dataclasses.field(default_factory=list)
+    cuts: list[int] = dataclasses.field(default_factory=list)
+    dt: list[float] = dataclasses.field(default_factory=list)
+    penetration: list[float] = dataclasses.field(default_factory=list)
+    strain: list[float] = dataclasses.field(default_factory=list)
+    self_distance: list[float] = dataclasses.field(default_factory=list)
+    intersecting: list[bool] = dataclasses.field(default_factory=list)
+    frames: list[Path] = dataclasses.field(default_factory=list)
+    series: PyvistaSeries | None = None
+    wall: float = 0.0  # seconds of time stepping
+    end: float = 0.0  # simulated time at the end, s
+    solver_seconds: float = 0.0  # assembly + factorisation + solves, contact hooks included
+    contact_seconds: float = 0.0  # the nodal wall and plunger contact hooks
+
+
+class Injection:
+    """The injection of a folded lens, built once: the plunger pushing the optic through
+    the tapered cartridge into the capsule, the walls' nodal contact with friction, the
+    fluid drag, the lens' self-contact and the damped implicit dynamics."""
+
+    def __init__(self, params: Parameters, ctx: RunContext, shell: LensShell):
+        self.params, self.ctx, self.shell = params, ctx, shell
+        layout = InjectorLayout()
+        self.axis = params.axis_point()
+        x = shell.node_coordinates() + shell.u.x.array.reshape(-1, 3)
+        self.start = ctx.comm.allreduce(float(x[:, 0].min()), op=MPI.MIN) - 0.05
+        # the head fills the bore and more: a node sliding along the wall must not leave its reach
+        self.plunger = Plunger(self.start, self.axis, params.bore_radius + 0.5)
+        self.obstacles = {"cartridge": layout.cartridge(params, lip=layout.nozzle_lip),
+                          "plunger": self.plunger, "capsule": layout.capsule(params)} if params.contact else {}
+        walls = {k: v for k, v in self.obstacles.items() if k != "plunger"}
+        self.contact = NodalContact(shell.u, walls, params.contact_stiffness, slip=params.friction_slip,
+                                    friction={"capsule": params.capsule_friction,
+                                              "cartridge": params.cartridge_friction})
+        # the plunger on the optic only: a flat head pressed on the tip of a 0.13 mm haptic strip
+        # (Euler load ~1e-5 N against the ~1e-2 N the lens needs to leave the nozzle) crumples
+        # it against the optic; Newton then crawls at Δt ≈ 0.1 ms and failed (t = 0.243 s, coarse)
+        haptics = shell.nodes_of("haptic") if params.plunger_engages == "optic" else None
+        if haptics is not None:
+            haptics = np.setdiff1d(haptics, shell.nodes_of("optic"))
+        self.pushing = NodalContact(shell.u, {"plunger": self.plunger} if params.contact else {},
+                                    params.contact_stiffness, excluded=haptics)
+        self.dynamics = ImplicitDynamics(shell.u, shell.mass(), [], scheme_name=params.scheme,
+                                         damping=params.damping)
+        self.fluid = FluidDrag(self.dynamics, shell, layout.cartridge(params), params.jet_length) \
+            if params.fluid_carried else None
+        self.solver = self._solver()
+        # contact=false is the deformation-only benchmark: no self-contact either
+        self.self_contact = lens_self_contact(shell, params) if params.contact else None
+        if self.self_contact is not None:
+            self.self_contact.check(what="the folded lens")
+            self.self_contact.attach(self.solver)
+        if params.scheme != "backward-euler":
+            self.dynamics.initial_acceleration(shell.residual())
+        stop = layout.tip + params.plunger_overshoot
+        self.motion = PlungerMotion(params.plunger_speed, params.start_ramp, stop - self.start)
+        self.push_time = self.motion.push_time
+        self.end = self.push_time + params.settle_time
+        self.twist = np.radians(params.injector_twist) / self.motion.travel(self.push_time)  # rad/mm
+        self.self_distance = self_distance_probe(shell.u) if self.self_contact is None else None
+        self.strain = StrainProbe(shell)
+        self.frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
+        # the frames as .vtu + injection.pvd for notebooks (with the PNGs, or alone under --no-pictures)
+        self.history = InjectionHistory(
+            series=PyvistaSeries(ctx.out if ctx.options.fields else None, ctx.comm, stem="injection"))
+        self.last_frame = (0.0, 0)  # time and step of the last frame
+
+    def _solver(self) -> NonlinearSolver:
+        # the shell's Jacobian written out (equal to UFL's derivative to 2e-16,
+        # tests/test_iol_speed.py; about half its assembly time): the same Newton iterates,
+        # cheaper iterations
+        hooks = [self.dynamics.residual_hook, self.contact.residual_hook, self.pushing.residual_hook]
+        if self.fluid is not None:
+            hooks.append(self.fluid.residual_hook)
+        return NonlinearSolver(self.shell.residual(), self.shell.u, [], jacobian=self.shell.jacobian(),
+                               options=_newton(self.ctx, self.params), timings=self.ctx.timings,
+                               residual_hooks=hooks,
+                               jacobian_hooks=[self.dynamics.jacobian_hook, self.contact.jacobian_hook,
+                                               self.pushing.jacobian_hook])
+
+    # -- one step ------------------------------------------------------------------------
+    def _twisted(self, t: float, dt: float) -> dict:
         """The cartridge wall's turn over the step (t − dt, t]: the anchor of its friction."""
-        if twist == 0.0:
+        if self.twist == 0.0:
             return {}
-        angle = twist * (motion.travel(t) - motion.travel(t - dt))
-        return {"cartridge": turn_about_x(axis, angle)}
+        angle = self.twist * (self.motion.travel(t) - self.motion.travel(t - dt))
+        return {"cartridge": turn_about_x(self.axis, angle)}
 
-    self_distance = self_distance_probe(shell.u) if self_contact is None else None
-    strain = StrainProbe(shell)
-    frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
-    h = {"time": [], "penetration": [], "self_distance": [], "intersecting": [], "strain": [],
-         "frames": [], "newton": [], "cuts": [], "dt": []}
-    # the frames as .vtu + injection.pvd for notebooks (with the PNGs, or alone under --no-pictures)
-    h["series"] = PyvistaSeries(ctx.out if ctx.options.fields else None, ctx.comm, stem="injection")
+    def apply(self, t: float, dt: float) -> None:
+        """Set the step ending at t: the plunger's position, Δt, the fluid's velocity and
+        the contacts' lagged state (u is still u_n here)."""
+        self.plunger.position = self.start + self.motion.travel(t)
+        self.dynamics.set_step(dt)
+        if self.fluid is not None:
+            self.fluid.begin_step(self.motion.speed_at(t))
+        if self.self_contact is not None:
+            self.self_contact.begin_step()
+        self.contact.begin_step(self._twisted(t, dt))
 
-    def apply(t: float, dt: float) -> None:
-        plunger.position = start + motion.travel(t)
-        dynamics.set_step(dt)
-        if fluid is not None:  # u is u_n here: the step's start
-            fluid.begin_step(motion.speed_at(t))
-        if self_contact is not None:
-            self_contact.begin_step()
-        contact.begin_step(twisted(t, dt))
-
-    last_frame = [0.0, 0]  # time and step of the last frame
-
-    def converged(record) -> None:
-        dynamics.advance()
-        h["time"].append(record.load)
-        h["newton"].append(record.iterations)
-        h["cuts"].append(record.cuts)
-        h["dt"].append(record.increment)
-        depth = {**contact.max_penetration(), **pushing.max_penetration()}
-        h["penetration"].append(max(depth.values(), default=0.0))
+    def _is_frame(self, record) -> bool:
         # frames evenly in simulated time (the animation's speed is the scene's), not in steps:
         # where Δt is cut to 0.2 ms every-n-steps frames bunch up and cost their rendering
-        frame = (record.step - last_frame[1] >= params.frames_every
-                 and record.load >= last_frame[0] + params.frame_interval - 1e-9) \
-            or record.step == 1 or record.load >= end - 1e-9
+        last_time, last_step = self.last_frame
+        return (record.step - last_step >= self.params.frames_every
+                and record.load >= last_time + self.params.frame_interval - 1e-9) \
+            or record.step == 1 or record.load >= self.end - 1e-9
+
+    def converged(self, record) -> None:
+        """Advance the dynamics and record, measure and draw the converged step."""
+        ctx, h = self.ctx, self.history
+        self.dynamics.advance()
+        h.time.append(record.load)
+        h.newton.append(record.iterations)
+        h.cuts.append(record.cuts)
+        h.dt.append(record.increment)
+        depth = {**self.contact.max_penetration(), **self.pushing.max_penetration()}
+        h.penetration.append(max(depth.values(), default=0.0))
+        frame = self._is_frame(record)
         if frame:
-            last_frame[:] = [record.load, record.step]
+            self.last_frame = (record.load, record.step)
         with ctx.timings("measurements"):
-            h["strain"].append(strain.haptic_max())
-            if self_contact is not None:  # C++, cheap: every step
-                h["self_distance"].append(self_contact.min_distance())
-                h["intersecting"].append(self_contact.intersecting())
-            elif self_distance is not None:  # the distance search on frames, intersections always
-                distance, crossing = self_distance(distances=frame)
-                h["self_distance"].append(distance)
-                h["intersecting"].append(crossing)
+            h.strain.append(self.strain.haptic_max())
+            if self.self_contact is not None:  # C++, cheap: every step
+                h.self_distance.append(self.self_contact.min_distance())
+                h.intersecting.append(self.self_contact.intersecting())
+            elif self.self_distance is not None:  # the distance search on frames, intersections always
+                distance, crossing = self.self_distance(distances=frame)
+                h.self_distance.append(distance)
+                h.intersecting.append(crossing)
         ctx.record_step(step=record.step, time=record.load, newton_iterations=record.iterations,
-                        cuts=record.cuts, plunger=plunger.position, max_penetration_mm=h["penetration"][-1],
-                        kinetic_energy=dynamics.kinetic_energy())
+                        cuts=record.cuts, plunger=self.plunger.position, max_penetration_mm=h.penetration[-1],
+                        kinetic_energy=self.dynamics.kinetic_energy())
         if frame:
             with ctx.timings("output"):
-                write_frame_grid(h["series"], shell, record.load, strain)
-        if frames_dir is not None and frame:
-            path = frames_dir / f"frame_{len(h['frames']):03d}.png"
+                write_frame_grid(h.series, self.shell, record.load, self.strain)
+        if self.frames_dir is not None and frame:
+            path = self.frames_dir / f"frame_{len(h.frames):03d}.png"
             with ctx.timings("output"):
-                render_frame(shell, path, f"iol-injection  t = {record.load:.2f} s", obstacles)
-            h["frames"].append(path)
+                render_frame(self.shell, path, f"iol-injection  t = {record.load:.2f} s", self.obstacles)
+            h.frames.append(path)
 
-    dt = params.time_step
-    steps = int(np.ceil(end / dt))
-    begin = time.perf_counter()
-    solver_before = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"]
-    with ctx.timings("time_stepping"):
-        follow_path(solver, apply, Stepping(0.0, steps * dt, initial_step=1.0 / steps, max_step=1.0 / steps,
-                                            grow=2.0, min_step=1e-3 / steps, stops=(push_time,),
-                                            easy_iterations=EASY_ITERATIONS),
-                    on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
-    h["wall"] = time.perf_counter() - begin
-    h["end"] = steps * dt
-    # assembly + factorisation + solves of the steps, contact hooks included (subtracted later)
-    h["solver_seconds"] = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"] - solver_before
-    h["contact_seconds"] = contact.seconds + pushing.seconds
-    h["contact"] = contact
-    h["self_contact"] = self_contact
-    return h
+    # -- the loop ------------------------------------------------------------------------
+    def run(self) -> InjectionHistory:
+        """Push and let the lens settle; Δt is cut on failure and grows back after easy steps."""
+        ctx, h = self.ctx, self.history
+        steps = int(np.ceil(self.end / self.params.time_step))
+        begin = time.perf_counter()
+        solver_before = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"]
+        with ctx.timings("time_stepping"):
+            follow_path(self.solver, self.apply,
+                        Stepping(0.0, steps * self.params.time_step, initial_step=1.0 / steps,
+                                 max_step=1.0 / steps, grow=2.0, min_step=1e-3 / steps,
+                                 stops=(self.push_time,), easy_iterations=EASY_ITERATIONS),
+                        on_converged=self.converged, label=SCENE.name, quiet=ctx.options.quiet)
+        h.wall = time.perf_counter() - begin
+        h.end = steps * self.params.time_step
+        h.solver_seconds = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"] - solver_before
+        h.contact_seconds = self.contact.seconds + self.pushing.seconds
+        return h
 
 
-def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> None:
+def report(params: Parameters, ctx: RunContext, injection: Injection) -> None:
+    """The quantities of the finished injection: where the lens landed and how, and the cost."""
+    shell, h, self_contact = injection.shell, injection.history, injection.self_contact
     layout = InjectorLayout()
     capsule = layout.capsule(params)
     x = shell.node_coordinates() + shell.u.x.array.reshape(-1, 3)
@@ -412,39 +453,39 @@ def report(params: Parameters, ctx: RunContext, shell: LensShell, h: dict) -> No
     center = optic_center(shell)
     normal = optic_normal(shell)
     flatness = optic_flatness(shell)
-    steps = len(h["time"])
-    deformation = h["solver_seconds"] - h["contact_seconds"]
-    distances = [d for d in h["self_distance"] if np.isfinite(d)]
+    steps = len(h.time)
+    deformation = h.solver_seconds - h.contact_seconds
+    distances = [d for d in h.self_distance if np.isfinite(d)]
     q = ctx.result.quantities
     q.update(
-        steps=steps, newton_iterations_total=int(sum(h["newton"])),
-        steps_per_second=steps / h["wall"],
+        steps=steps, newton_iterations_total=int(sum(h.newton)),
+        steps_per_second=steps / h.wall,
         steps_per_second_deformation=steps / max(deformation, 1e-12),
-        max_penetration_mm=float(max(h["penetration"], default=0.0)),
-        haptic_max_strain=float(max(h["strain"], default=0.0)),
+        max_penetration_mm=float(max(h.penetration, default=0.0)),
+        haptic_max_strain=float(max(h.strain, default=0.0)),
         min_self_distance_mm=float(min(distances)) if distances else None,
-        self_intersecting=bool(any(h["intersecting"])),
+        self_intersecting=bool(any(h.intersecting)),
         self_contact_forces=(self_contact_kind(params) if params.contact
                              else "not applied (contact=false)"),
-        self_contact_seconds=getattr(h["self_contact"], "seconds", 0.0),
-        ccd_limited_updates=len(getattr(h["self_contact"], "step_limits", [])),
+        self_contact_seconds=getattr(self_contact, "seconds", 0.0),
+        ccd_limited_updates=len(getattr(self_contact, "step_limits", [])),
         lens_exited=bool(exited),
         optic_normal_z=float(normal[2]),
         optic_flipped=bool(normal[2] < 0.0),
         optic_flatness=flatness, optic_unrolled=bool(flatness > 0.9),
-        end_time_s=h["end"], newton_iterations_per_step=float(np.mean(h["newton"])) if steps else 0.0,
-        step_cuts=int(sum(h["cuts"])), min_time_step_s=float(min(h["dt"], default=0.0)),
-        wall_seconds=h["wall"],
+        end_time_s=h.end, newton_iterations_per_step=float(np.mean(h.newton)) if steps else 0.0,
+        step_cuts=int(sum(h.cuts)), min_time_step_s=float(min(h.dt, default=0.0)),
+        wall_seconds=h.wall,
         final_decentration_mm=float(np.hypot(*(center - capsule.center)[:2])),
         final_optic_center=center.tolist(),
-        contact_seconds=h["contact_seconds"],
-        time=h["time"], penetration_mm=h["penetration"], self_distance_mm=h["self_distance"],
+        contact_seconds=h.contact_seconds,
+        time=h.time, penetration_mm=h.penetration, self_distance_mm=h.self_distance,
         triangles=shell.mesh.topology.index_map(2).size_global,
         nodes=shell.mesh.geometry.index_map().size_global, dofs=shell.dofs())
-    ctx.result.fields.extend(h["series"].files)
-    if h["frames"] and ctx.rank0:
-        ctx.result.pictures += [p.name for p in h["frames"]]
-        gif = write_animation(h["frames"], ctx.out / "injection.gif")
+    ctx.result.fields.extend(h.series.files)
+    if h.frames and ctx.rank0:
+        ctx.result.pictures += [p.name for p in h.frames]
+        gif = write_animation(h.frames, ctx.out / "injection.gif")
         if gif:
             ctx.result.pictures.append(gif)
 

@@ -128,8 +128,15 @@ def test_fold_first_run_reuses_the_cached_fold(tmp_path, monkeypatch):
     def no_fold(*_args):
         raise AssertionError("folded again although a fold of these parameters was cached")
 
-    monkeypatch.setattr(iol_injection.iol_fold, "fold", no_fold)
-    monkeypatch.setattr(iol_injection, "inject", lambda _p, _ctx, shell: start.update(u=shell.u.x.array.copy()))
+    class NoInjection:
+        def __init__(self, _params, _ctx, shell):
+            start.update(u=shell.u.x.array.copy())
+
+        def run(self):
+            pass
+
+    monkeypatch.setattr(iol_injection, "fold", no_fold)
+    monkeypatch.setattr(iol_injection, "Injection", NoInjection)
     monkeypatch.setattr(iol_injection, "report", lambda *_args: None)
     result = iol_injection.run(params, options=RunOptions(fields=False, pictures=False, quiet=True))
     assert result.quantities["fold_cache"] == str(cached)
