@@ -8,8 +8,6 @@ import math
 
 import numpy as np
 from eyemech.problems.run.output import (
-    FieldWriter,
-    PyvistaSeries,
     gather_grid,
     render_png,
 )
@@ -20,7 +18,7 @@ STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing"}
 class Writer:
     def __init__(self, model, ctx):
         self.model, self.ctx = model, ctx
-        folder = ctx.out if ctx.options.fields else None
+        folder = ctx.field_dir
         model.u.name = "displacement"
         # a resumed run starts a new VTX file (the old one keeps the steps before the
         # checkpoint: VTX cannot append); the .pvd series continues (docs/restart.md)
@@ -28,9 +26,9 @@ class Writer:
         stem = "fields" if resumed is None else f"fields_from_{resumed.name}"
         self.earlier = sorted(p.name for p in folder.glob("fields*.bp")) \
             if resumed is not None and folder is not None else []
-        self.vtx = FieldWriter(folder, ctx.comm, [model.u], stem=stem)
-        self.series = PyvistaSeries(folder, ctx.comm)
-        self.pictures = ctx.options.pictures and ctx.out is not None
+        self.vtx = ctx.field_writer([model.u], stem=stem)
+        self.series = ctx.pyvista_series()
+        self.pictures = ctx.pictures
         ctx.checkpoints.value("pyvista_series", lambda: self.series.entries,
                               lambda saved: self.series.entries.__setitem__(
                                   slice(None), [tuple(e) for e in saved]))

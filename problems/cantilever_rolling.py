@@ -31,7 +31,6 @@ import dolfinx.fem
 from eyemech.forms.shell import Kinematics, end_rotation
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
@@ -98,7 +97,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                  options=newton_options(ctx, params.kinematics), timings=ctx.timings)
         rotation_form = dolfinx.fem.form(rotation * ds_end)
         tip = (L, b / 2, 0.0)
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [shell.u])
+        writer = ctx.field_writer([shell.u])
 
         def mean_end_rotation() -> float:
             local = dolfinx.fem.assemble_scalar(rotation_form)
@@ -129,7 +128,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                  tip_error=float(np.hypot(u_tip[0] - exact_u, u_tip[2] - exact_w) / L),
                  end_rotation=float(end_angle.value),
                  end_rotation_exact=2.0 * np.pi * params.moment_fraction, dofs=shell.dofs())
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 picture(shell.u, ctx, f"cantilever-rolling, M = {params.moment_fraction:g} M_max",
                         "|u| (mm)", lambda d: np.linalg.norm(d, axis=1), camera=(0.3, -1.0, 0.4))

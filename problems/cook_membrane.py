@@ -91,7 +91,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         q["tip_displacement_reference"] = REFERENCE_TIP_DISPLACEMENT
         q["dofs"] = global_dofs(*fields)
         q["jacobian_nonzeros"] = solver.jacobian_nonzeros()
-        if ctx.options.pictures and ctx.out is not None and len(fields) > 1:
+        if ctx.pictures and len(fields) > 1:
             with ctx.timings("output"):
                 path = pressure_picture(u, fields[1], ctx.out / "pressure.png",
                                         f"cook-membrane {params.element}, {params.elements_per_side}"

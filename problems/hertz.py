@@ -36,7 +36,6 @@ from eyemech.problems.contact.rigid import (
     surface_integral,
 )
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
@@ -127,7 +126,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                 values["radius_error"] = radius / values["hertz_radius"] - 1.0
             return values
 
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [u])
+        writer = ctx.field_writer([u])
         writer.write(0.0)
 
         def apply(load: float, _increment: float) -> None:
@@ -151,7 +150,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities["newton_iterations"] = sum(r.iterations for r in records)
         ctx.result.quantities["load_steps"] = len(records)
         ctx.result.quantities["dofs"] = global_dofs(u)
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 _picture(penetration, params.penalty_stiffness, ctx, params)
     return ctx.result

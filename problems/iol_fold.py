@@ -26,7 +26,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
         with ctx.timings("mesh"):
             shell = LensShell(params, ctx.comm)
-        pictures = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
+        pictures = ctx.out if ctx.pictures else None
         history = fold(params, ctx, shell, pictures)
         q = ctx.result.quantities
         distances = [d for d in history["self_distance"] if np.isfinite(d)]

@@ -343,10 +343,10 @@ class Injection:
         self.twist = np.radians(params.injector_twist) / self.motion.travel(self.push_time)  # rad/mm
         self.self_distance = self_distance_probe(shell.u) if self.self_contact is None else None
         self.strain = StrainProbe(shell)
-        self.frames_dir = ctx.out if (ctx.options.pictures and ctx.out is not None) else None
+        self.frames_dir = ctx.out if ctx.pictures else None
         # the frames as .vtu + injection.pvd for notebooks (with the PNGs, or alone under --no-pictures)
         self.history = InjectionHistory(
-            series=PyvistaSeries(ctx.out if ctx.options.fields else None, ctx.comm, stem="injection"))
+            series=ctx.pyvista_series(stem="injection"))
         self.last_frame = (0.0, 0)  # time and step of the last frame
 
     def _solver(self) -> NonlinearSolver:

@@ -268,7 +268,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             shown = intact
         q["cells"] = shown.tagged.mesh.topology.index_map(3).size_global
         q["dofs"] = global_dofs(shown.u, shown.p)
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 _picture(ctx, shown, params)
     return ctx.result

@@ -30,7 +30,7 @@ from eyemech.forms.contact import default_penalty
 from eyemech.meshes.contact_bodies import layered_caps
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.run.output import gather_grid, render_png
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs
@@ -107,7 +107,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         contact.allow_new_nonzeros(solver.problem.A)
         nonzeros_before = solver.jacobian_nonzeros()
 
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [u])
+        writer = ctx.field_writer([u])
         writer.write(0.0)
 
         def apply(load: float, _increment: float) -> None:
@@ -141,7 +141,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         q["contact_pairs_across_ranks"] = contact.pairs_across_ranks()
         q["jacobian_nonzeros_fe"] = nonzeros_before
         q["jacobian_nonzeros_with_contact"] = solver.jacobian_nonzeros()
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 _picture(u, ctx, params)
     return ctx.result

@@ -80,7 +80,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities.update(edge_deflection=deflection, edge_deflection_reference=REFERENCE,
                                      edge_deflection_error=deflection / REFERENCE - 1.0,
                                      dofs=shell.dofs())
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 picture(shell.u, ctx, "scordelis-lo", "-u_z", lambda d: -d[:, 2], scale=10.0)
     return ctx.result

@@ -37,7 +37,6 @@ from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
@@ -122,7 +121,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             options = dataclasses.replace(options, atol=max(options.atol, 1e-6 * total))
         solver = NonlinearSolver(residual, shell.u, shell.fix("clamped"), options=options,
                                  timings=ctx.timings, residual_hooks=[hook])
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [shell.u])
+        writer = ctx.field_writer([shell.u])
         loaded_edge = tagged.facets("loaded")
 
         def deflections() -> tuple[float, float]:
@@ -158,7 +157,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         if np.isfinite(ref_a):
             quantities.update(deflection_a_sze=ref_a, deflection_b_sze=ref_b,
                               deflection_a_error=w_a / ref_a - 1.0, deflection_b_error=w_b / ref_b - 1.0)
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 picture(shell.u, ctx, f"{SCENE.name}, q = {params.line_load:g} N/mm", "w (mm)",
                         lambda d: d[:, 2])

@@ -82,7 +82,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities["retardation_time"] = params.material.retardation_time
         sls = reference.sls_creep_strain(times, params.stress, params.mu_inf, params.mu_v, params.tau)
         ctx.result.quantities["max_relative_error_sls"] = float(np.max(np.abs(np.array(strains) / sls - 1)))
-        if ctx.options.pictures and ctx.out is not None and ctx.rank0:
+        if ctx.pictures and ctx.rank0:
             with ctx.timings("output"):
                 _picture(ctx, params, times, strains)
     return ctx.result

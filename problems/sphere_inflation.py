@@ -20,8 +20,6 @@ from eyemech.meshes import spherical_shell
 from eyemech.problems.reference import analytic
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import (
-    FieldWriter,
-    PyvistaSeries,
     gather_grid,
     render_png,
 )
@@ -106,11 +104,10 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     "cavity_volume": ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form))}
 
         u.name = "displacement"
-        field_dir = ctx.out if ctx.options.fields else None
-        writer = FieldWriter(field_dir, ctx.comm, [u])
+        writer = ctx.field_writer([u])
         pressure_out = [lagrange_view(fields[1], "pressure")] if len(fields) > 1 else []
-        writer_p = FieldWriter(field_dir, ctx.comm, [view for view, _ in pressure_out])
-        series = PyvistaSeries(field_dir, ctx.comm)
+        writer_p = ctx.field_writer([view for view, _ in pressure_out])
+        series = ctx.pyvista_series()
         # pressure on the displacement's nodes, for pyvista (one grid, one space)
         nodal_space = dolfinx.fem.functionspace(shell.mesh, ("Lagrange", family.displacement_degree))
         nodal_pressure = dolfinx.fem.Function(nodal_space, name="pressure")
@@ -121,7 +118,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     update()
                 writer.write(load)
                 writer_p.write(load)
-                if field_dir is not None:
+                if ctx.field_dir is not None:
                     extra = {}
                     for view, _ in pressure_out:
                         nodal_pressure.interpolate(view)
@@ -164,7 +161,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.result.quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
         except ValueError:
             pass
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 _picture(u, ctx, params)
     return ctx.result

@@ -329,7 +329,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                  apex_displacement_iop_mm=apex_iop, penalty_stiffness=params.penalty_stiffness,
                  cells=body.tagged.mesh.topology.index_map(3).size_global, dofs=global_dofs(body.u))
         q["reading_error_mmHg"] = q["iop_reading_mmHg"] - params.iop_mmHg
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 _picture(ctx, body, params)
     return ctx.result

@@ -87,7 +87,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities["dofs"] = sum(
             f.function_space.dofmap.index_map.size_global * f.function_space.dofmap.index_map_bs
             for f in (bar.u, bar.p))
-        if ctx.options.pictures and ctx.out is not None and ctx.rank0:
+        if ctx.pictures and ctx.rank0:
             with ctx.timings("output"):
                 _picture(ctx, params, times, stresses)
     return ctx.result

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
+from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import SceneParameters
 from eyemech.problems.run.results import (
     Result,
@@ -103,6 +104,25 @@ class RunContext:
 
     def path(self, name: str) -> Path | None:
         return None if self.out is None else self.out / name
+
+    # -- output the scenes share ------------------------------------------------------
+    @property
+    def field_dir(self) -> Path | None:
+        """Where fields go: the output folder, or None (nothing written) under ``--no-fields``."""
+        return self.out if self.options.fields else None
+
+    @property
+    def pictures(self) -> bool:
+        """Whether PNG pictures are drawn (an output folder and no ``--no-pictures``)."""
+        return self.options.pictures and self.out is not None
+
+    def field_writer(self, functions: list, stem: str = "fields") -> FieldWriter:
+        """ADIOS2 VTX output of ``functions`` (a no-op writer under ``--no-fields``)."""
+        return FieldWriter(self.field_dir, self.comm, functions, stem=stem)
+
+    def pyvista_series(self, stem: str = "state") -> PyvistaSeries:
+        """``<stem>.pvd`` + one gathered ``.vtu`` per frame for pyvista (no-op under ``--no-fields``)."""
+        return PyvistaSeries(self.field_dir, self.comm, stem=stem)
 
     def record_step(self, **values: Any) -> None:
         self.result.steps.append(values)

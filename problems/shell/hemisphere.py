@@ -17,7 +17,6 @@ import ufl
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import FieldWriter
 from eyemech.problems.run.parameters import SceneParameters, field
 from eyemech.problems.shell.model import (
     ShellDiscretisation,
@@ -86,7 +85,7 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
             options = dataclasses.replace(options, atol=max(options.atol, 1e-9 * abs(params.force)))
         solver = NonlinearSolver(residual, shell.u, bcs, options=options,
                                  timings=ctx.timings, residual_hooks=[hook])
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [shell.u])
+        writer = ctx.field_writer([shell.u])
 
         def radial() -> tuple[float, float]:
             return float(shell.value_at((R, 0, 0))[0]), -float(shell.value_at((0, R, 0))[1])
@@ -120,7 +119,7 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
             linear_reference = REFERENCE * params.force / 2.0  # 0.093 is for the load 2
             quantities.update(radial_displacement_reference=linear_reference,
                               radial_displacement_error=outward_x / linear_reference - 1.0)
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 scale = 1.0 if params.kinematics == "nonlinear" else 10.0
                 picture(shell.u, ctx, scene_name, "|u| (mm)", lambda d: np.linalg.norm(d, axis=1),

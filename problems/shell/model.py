@@ -24,7 +24,7 @@ from eyemech.meshes.surface import (
 )
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import FieldWriter, gather_grid, render_png
+from eyemech.problems.run.output import gather_grid, render_png
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.solve.driver import (
     NewtonOptions,
@@ -241,7 +241,7 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
                                  options=newton_options(ctx, params.kinematics),
                                  timings=ctx.timings)
         centre = (L / 2, L / 2, 0.0)
-        writer = FieldWriter(ctx.out if ctx.options.fields else None, ctx.comm, [shell.u])
+        writer = ctx.field_writer([shell.u])
 
         def apply(value: float, _increment: float) -> None:
             load.value = value * params.q
@@ -287,7 +287,7 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
             if np.isfinite(reference):
                 quantities["center_deflection_levy"] = float(np.sign(params.q) * reference)
                 quantities["center_deflection_levy_error"] = abs(deflection) / reference - 1.0
-        if ctx.options.pictures and ctx.out is not None:
+        if ctx.pictures:
             with ctx.timings("output"):
                 picture(shell.u, ctx, f"{scene_name}, q = {params.q:g} MPa", "w (mm)",
                         lambda d: d[:, 2], scale=0.2 * L / max(abs(deflection), 1e-30))
