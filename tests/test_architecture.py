@@ -100,3 +100,28 @@ def test_ruff():
         pytest.fail("ruff is not installed: it comes with the `test` extra")
     done = subprocess.run([ruff, "check", "--no-cache", "."], cwd=ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-1000:]
+
+
+def test_wheel_installs_and_runs_outside_the_checkout(tmp_path):
+    """A wheel built from the project carries every package: installed into a folder of
+    its own, imported from another working directory, it lists the scenes and runs one."""
+    python = sys.executable
+    build = subprocess.run([python, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                            "-w", str(tmp_path / "dist"), str(ROOT)], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr[-2000:]
+    (wheel,) = (tmp_path / "dist").glob("eyemech-*.whl")
+    target = tmp_path / "site"
+    install = subprocess.run([python, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target),
+                              str(wheel)], capture_output=True, text=True)
+    assert install.returncode == 0, install.stderr[-2000:]
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    env = {**__import__("os").environ, "PYTHONPATH": str(target)}
+    script = ("import eyemech.problems as p, sys; print(p.__file__); "
+              "from eyemech.scripts.cli import main; sys.exit(main())")
+    done = subprocess.run([python, "-c", script, "run", "sphere-inflation", "--set", "mesh_size=4",
+                           "--out", str(tmp_path / "out"), "--no-fields", "--no-pictures", "--json"],
+                          cwd=elsewhere, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.splitlines()[0].startswith(str(target)), "imported the checkout, not the wheel"
+    assert '"status": "ok"' in done.stdout.splitlines()[-1]
