@@ -125,3 +125,13 @@ def test_wheel_installs_and_runs_outside_the_checkout(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.splitlines()[0].startswith(str(target)), "imported the checkout, not the wheel"
     assert '"status": "ok"' in done.stdout.splitlines()[-1]
+
+
+def test_catalogue_read_from_source_is_the_registry():
+    """`eyemech list` reads names, kinds and summaries with ast (no DOLFINx import); they
+    must be the registry's."""
+    from eyemech.problems import scenes
+    from eyemech.scripts.catalogue import scene_catalogue
+
+    registry = sorted((s.name, s.kind, s.summary) for s in scenes().values())
+    assert [(e.name, e.kind, e.summary) for e in scene_catalogue()] == registry
