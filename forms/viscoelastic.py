@@ -72,16 +72,18 @@ TIME_SCHEMES: tuple[str, ...] = ("backward-euler", "forward-euler")
 @dataclasses.dataclass(frozen=True)
 class Viscoelastic:
     """μ∞ (equilibrium shear modulus, MPa), μv (viscous-branch shear modulus, MPa),
-    τ (relaxation time, s)."""
+    τ (relaxation time, s): numbers, or UFL constants (a sweep over them then compiles
+    the forms once; numbers are checked here, constants by the scene's parameters)."""
 
-    mu_inf: float
-    mu_v: float
-    tau: float
+    mu_inf: float | ufl.core.expr.Expr
+    mu_v: float | ufl.core.expr.Expr
+    tau: float | ufl.core.expr.Expr
 
     def __post_init__(self) -> None:
         for name in ("mu_inf", "mu_v", "tau"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+            value = getattr(self, name)
+            if isinstance(value, (int, float)) and not value > 0:
+                raise ValueError(f"{name} must be > 0, got {value!r}")
 
     @property
     def retardation_time(self) -> float:

@@ -121,7 +121,9 @@ class Cornea:
         (self.u, self.p), (v, q) = mixed_displacement_pressure(mesh, family)
         metadata = {"quadrature_degree": family.quadrature_degree, "quadrature_rule": "default"}
         dx, ds = self.tagged.dx(metadata), self.tagged.ds(metadata)
-        material = ve.Viscoelastic(params.mu_inf, params.mu_v, params.tau)
+        # Constants, not literals: a sweep over the moduli or τ compiles the forms once
+        material = ve.Viscoelastic(*(dolfinx.fem.Constant(mesh, value)
+                                     for value in (params.mu_inf, params.mu_v, params.tau)))
         self.history = ViscousHistory(self.u, material, "backward-euler", family.quadrature_degree)
         self.pressure = dolfinx.fem.Constant(mesh, 0.0)
         residual = (ve.residual(material, self.u, self.p, v, q, self.history.Cv, dx)

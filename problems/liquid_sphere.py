@@ -110,14 +110,21 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         initial_pressure = dolfinx.fem.Constant(shell.mesh, 0.0)
         external = dolfinx.fem.Constant(shell.mesh, 0.0)
+        # material and mesh-dependent numbers as Constants, not literals: a sweep over moduli
+        # or mesh sizes compiles the forms once
+        c10 = dolfinx.fem.Constant(shell.mesh, params.c10)
+        constant = {name: dolfinx.fem.Constant(shell.mesh, float(value)) for name, value in
+                    (("initial_volume", initial_volume), ("wall_area", wall_area),
+                     ("bulk_modulus", params.bulk_modulus))}
         bcs = symmetry_bcs(u.function_space, shell, SYMMETRY)
-        residual = (solid_residual(NeoHooke(params.c10), family, fields, tests, dx)
+        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx)
                     + follower_pressure(external, u, v, ds(shell.tag("outer"))))
         if real:
             P, qP = fields[-1], tests[-1]
             residual += (follower_pressure(P, u, v, wall)
-                         + liquid_law_residual(P, qP, u, wall, wall_area, initial_volume,
-                                               initial_pressure, params.bulk_modulus))
+                         + liquid_law_residual(P, qP, u, wall, constant["wall_area"],
+                                               constant["initial_volume"], initial_pressure,
+                                               constant["bulk_modulus"]))
             cavity = None
         else:
             cavity = SubstitutedCavity(u, v, wall, bcs, initial_volume, initial_pressure,
@@ -125,7 +132,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             residual += follower_pressure(cavity.pressure, u, v, wall)
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
-                                 iterative=params.linear_solver(2 * params.c10, dx))
+                                 iterative=params.linear_solver(2 * c10, dx))
         if cavity is not None:
             cavity.install(solver)
 

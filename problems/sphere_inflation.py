@@ -83,14 +83,16 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         metadata = {"quadrature_degree": family.quadrature_degree}
         ds, dx = shell.ds(metadata), shell.dx(metadata)
         pressure = dolfinx.fem.Constant(shell.mesh, 0.0)
-        residual = (solid_residual(NeoHooke(params.c10), family, fields, tests, dx,
-                                   params.bulk_modulus)
+        # material numbers as Constants, not literals: a sweep over them compiles the forms once
+        c10 = dolfinx.fem.Constant(shell.mesh, params.c10)
+        bulk_modulus = dolfinx.fem.Constant(shell.mesh, params.bulk_modulus)
+        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx, bulk_modulus)
                     + follower_pressure(pressure, u, v, ds(shell.tag("cavity_wall"))))
         bcs = symmetry_bcs(u.function_space, shell, {"symmetry_x": 0, "symmetry_y": 1,
                                                      "symmetry_z": 2})
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
-                                 iterative=params.linear_solver(2 * params.c10, dx))
+                                 iterative=params.linear_solver(2 * c10, dx))
 
         volume_form = dolfinx.fem.form(8.0 * enclosed_volume(u, ds(shell.tag("cavity_wall"))))
         x = ufl.SpatialCoordinate(shell.mesh) + u
@@ -172,7 +174,9 @@ def _displacement_error(u, shell, params: Parameters, a: float) -> float:
     r³ = R³ − A³ + a³ (incompressible radial map, :mod:`analytic`)."""
     X = ufl.SpatialCoordinate(shell.mesh)
     R = ufl.sqrt(ufl.dot(X, X))
-    r = (R**3 - params.inner_radius**3 + a**3) ** (1.0 / 3.0)
+    # A³ − a³ as a Constant: the error functional compiles once for every pressure and modulus
+    shift = dolfinx.fem.Constant(shell.mesh, params.inner_radius**3 - a**3)
+    r = (R**3 - shift) ** (1.0 / 3.0)
     exact = (r / R - 1.0) * X
     dx = shell.dx({"quadrature_degree": 2 * u.function_space.element.basix_element.degree + 2})
     comm = shell.mesh.comm

@@ -31,7 +31,8 @@ def limbus_support(params, u, v, tagged, ds):
     compliance in place of a rigid wall."""
     V = u.function_space
     if params.support == "elastic":
-        energy = spring_support_energy(u, params.limbus_stiffness, ds(tagged.tag("limbus")))
+        stiffness = dolfinx.fem.Constant(tagged.mesh, params.limbus_stiffness)  # compiled once
+        energy = spring_support_energy(u, stiffness, ds(tagged.tag("limbus")))
         return ufl.derivative(energy, u, v), []
     fdim = tagged.mesh.topology.dim - 1
     clamp = dolfinx.fem.dirichletbc(np.zeros(3), dolfinx.fem.locate_dofs_topological(

@@ -17,7 +17,7 @@ from eyemech.problems.solid.spaces import ElementFamily
 
 
 def solid_residual(material: Material | Mapping[int, Material], family: ElementFamily, fields,
-                   tests, dx, bulk_modulus: float | None = None):
+                   tests, dx, bulk_modulus=None):
     """Residual (sum over blocks) of the stored energy; ``fields``/``tests`` start with
     u (and p for mixed families) as returned by :func:`spaces.solid_fields`.
 
@@ -25,7 +25,7 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     ``dx(cell_tag)`` (``dx`` must then carry the cell tags as subdomain data)."""
     u, v = fields[0], tests[0]
     parts = material.items() if isinstance(material, Mapping) else [(None, material)]
-    if family.pressure_family is None and (bulk_modulus is None or not bulk_modulus > 0):
+    if family.pressure_family is None and (bulk_modulus is None or not _value(bulk_modulus) > 0):
         raise ValueError(f"{family.name} is displacement-only and needs a bulk modulus > 0")
     F = deformation_gradient(u)
     energy = 0
@@ -39,3 +39,9 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     if family.pressure_family is not None:
         residual += ufl.derivative(energy, fields[1], tests[1])
     return residual
+
+
+def _value(number) -> float:
+    """A float, or the value of a ``dolfinx.fem.Constant`` (material numbers enter the forms
+    as Constants so that changing them recompiles nothing)."""
+    return float(getattr(number, "value", number))

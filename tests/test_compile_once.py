@@ -1,0 +1,48 @@
+"""A parameter study compiles each form once: material numbers, loads and mesh-dependent
+numbers enter the forms as ``dolfinx.fem.Constant``s, so that a sweep over moduli and mesh
+sizes reuses the compiled kernels (FFCx compiles on a cache miss only; a literal baked into
+the form would make every new value a miss). Counted, not timed."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+from mpi4py import MPI
+
+from eyemech.problems import liquid_sphere, sphere_inflation
+from eyemech.problems.run.context import RunOptions
+
+QUIET = RunOptions(fields=False, pictures=False)
+
+
+@pytest.fixture
+def compilations(monkeypatch):
+    """Calls of FFCx's C compilation (its disk cache is consulted first)."""
+    import ffcx.codegeneration.jit as jit
+
+    calls = []
+    compile_objects = jit._compile_objects
+
+    def counted(*args, **kwargs):
+        calls.extend(str(form)[:300] for form in args[1])
+        return compile_objects(*args, **kwargs)
+
+    monkeypatch.setattr(jit, "_compile_objects", counted)
+    return calls
+
+
+# values never used before in this cache: a form with them baked in would have to compile
+MODULI = [0.05 * (1.0 + random.random()) for _ in range(3)]
+
+
+@pytest.mark.parametrize("scene, sizes", [(sphere_inflation, (4.0, 3.5, 3.0)),
+                                          (liquid_sphere, (4.0, 3.5, 3.0))],
+                         ids=["sphere-inflation", "liquid-sphere"])
+def test_a_sweep_over_modulus_and_mesh_size_compiles_nothing_after_its_first_case(scene, sizes,
+                                                                                   compilations):
+    scene.run(scene.Parameters(c10=MODULI[0], mesh_size=sizes[0]), comm=MPI.COMM_SELF, options=QUIET)
+    first = len(compilations)
+    for c10, size in zip(MODULI[1:], sizes[1:]):
+        scene.run(scene.Parameters(c10=c10, mesh_size=size), comm=MPI.COMM_SELF, options=QUIET)
+    assert compilations[first:] == []
