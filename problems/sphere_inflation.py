@@ -56,7 +56,7 @@ class Parameters(SceneParameters, SolverChoice):
     element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
     bulk_modulus: float = field(100.0, "bulk modulus of the displacement-only P1 family "
                                 "(U = K/4 (J² − 1 − 2 ln J)); unused by mixed families", "MPa")
-    load_steps: int = field(4, "initial number of load steps (cut and grown as needed)")
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "mesh_size", "load_steps", "bulk_modulus")

@@ -36,7 +36,7 @@ class SceneParameters:
     def __post_init__(self) -> None:
         for key, kind in _field_types(type(self)).items():
             if get_origin(kind) is Literal and getattr(self, key) not in get_args(kind):
-                raise ParameterError(key, f"must be one of {', '.join(map(repr, get_args(kind)))}, "
+                raise ParameterError(key, f"must be one of {', '.join(map(str, get_args(kind)))}, "
                                           f"got {getattr(self, key)!r}")
 
     def validate(self) -> None:
