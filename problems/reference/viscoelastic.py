@@ -18,7 +18,6 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 
 def axial_stress(stretch: float, a: float, mu_inf: float, mu_v: float) -> float:
@@ -29,6 +28,8 @@ def relaxation(times, stretch: Callable[[float], float], mu_inf: float, mu_v: fl
                breaks: tuple[float, ...] = (), rtol: float = 1e-11) -> np.ndarray:
     """σ11 at ``times`` for a prescribed stretch history λ(t), a(0) = 1; the ODE is
     integrated piecewise between ``breaks`` (kinks of λ(t))."""
+    from scipy.integrate import solve_ivp  # here, not at import: scipy costs 0.6 s of start-up
+
     times = np.asarray(times, dtype=float)
     rate = lambda t, y: [2.0 / 3.0 * (stretch(t) ** 2 - y[0] ** 1.5 / stretch(t)) / tau]
     edges = sorted({0.0, float(times.max()), *[b for b in breaks if 0 < b < times.max()]})

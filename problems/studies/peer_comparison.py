@@ -1,0 +1,105 @@
+"""eyemech against a plain DOLFINx script on the same problem: ``sphere-inflation`` at its
+defaults (P2P1 on tetrahedra, Q2P1 on hexahedra) timed side by side with
+:mod:`eyemech.problems.reference.plain_dolfinx_sphere`, which solves the same discrete
+problem (same mesh, same elements, Newton with MUMPS LU, relative residual 1e-9, the
+whole load in one step), so the errors match and the wall times compare.
+
+Wall time is that of the whole process, as a user meets it: ``eyemech run ... --no-fields
+--no-pictures`` against ``python -m ...plain_dolfinx_sphere``, start-up and imports
+included. Every case runs once untimed first (compiled forms in the cache, files in the
+page cache), then ``repeats`` times alternating the two, one process at a time; the
+median is reported.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from mpi4py import MPI
+
+from eyemech.problems.studies import Study
+from eyemech.problems.studies._common import save_chart, write_csv
+
+CASES = [("P2P1", 1.0), ("Q2P1", 1.0)]
+QUICK_CASES = [("P2P1", 3.0)]
+
+
+def _eyemech(element: str, mesh_size: float, out: Path) -> tuple[float, dict]:
+    command = [str(Path(sys.executable).parent / "eyemech"), "run", "sphere-inflation",
+               "--set", f"element={element}", "--set", f"mesh_size={mesh_size}", "--out", str(out),
+               "--no-fields", "--no-pictures", "--quiet", "--checkpoint-every", "0", "--json"]
+    start = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True, check=True)
+    wall = time.perf_counter() - start
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    return wall, {"error": result["quantities"]["inner_radius_error"],
+                  "newton": sum(step["newton_iterations"] for step in result["steps"])}
+
+
+def _plain(element: str, mesh_size: float) -> tuple[float, dict]:
+    command = [sys.executable, "-m", "eyemech.problems.reference.plain_dolfinx_sphere",
+               "--element", element, "--mesh-size", str(mesh_size)]
+    start = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True, check=True)
+    wall = time.perf_counter() - start
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    return wall, {"error": result["inner_radius_error"], "newton": result["newton_iterations"],
+                  "unknowns": result["unknowns"]}
+
+
+def compare(element: str, mesh_size: float, repeats: int) -> dict:
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(folder)
+        _eyemech(element, mesh_size, out / "warm")
+        _plain(element, mesh_size)
+        ours, theirs = [], []
+        for k in range(repeats):
+            ours.append(_eyemech(element, mesh_size, out / f"run{k}"))
+            theirs.append(_plain(element, mesh_size))
+    wall_ours = statistics.median(w for w, _ in ours)
+    wall_theirs = statistics.median(w for w, _ in theirs)
+    return {"element": element, "mesh_size": mesh_size, "unknowns": theirs[0][1]["unknowns"],
+            "error_eyemech": ours[0][1]["error"], "error_plain": theirs[0][1]["error"],
+            "newton_eyemech": ours[0][1]["newton"], "newton_plain": theirs[0][1]["newton"],
+            "wall_eyemech_s": round(wall_ours, 3), "wall_plain_s": round(wall_theirs, 3),
+            "ratio": round(wall_ours / wall_theirs, 3), "repeats": repeats}
+
+
+def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
+    if comm.size > 1:
+        raise ValueError("peer-comparison times single processes: run it on one rank")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cases, repeats = (QUICK_CASES, 1) if quick else (CASES, 5)
+    rows = [compare(element, h, repeats) for element, h in cases]
+    csv = write_csv(out / "peer_comparison.csv", rows,
+                    f"sphere-inflation vs plain DOLFINx, process wall time, median of {repeats}")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.2))
+    labels = [f"{r['element']} h={r['mesh_size']:g}" for r in rows]
+    x = range(len(rows))
+    ax.bar([i - 0.2 for i in x], [r["wall_eyemech_s"] for r in rows], 0.4, label="eyemech run")
+    ax.bar([i + 0.2 for i in x], [r["wall_plain_s"] for r in rows], 0.4, label="plain DOLFINx script")
+    ax.set_xticks(list(x), labels)
+    ax.set_ylabel("process wall time (s)")
+    ax.set_title("sphere-inflation, same mesh and error")
+    ax.legend(fontsize=8)
+    chart = out / "peer_comparison.png"
+    save_chart(fig, chart)
+    return [csv, chart]
+
+
+STUDY = Study(name="peer-comparison",
+              summary="sphere-inflation wall time against a plain DOLFINx script on the same "
+                      "mesh (matched error), P2P1 and Q2P1",
+              run=run)
