@@ -9,6 +9,13 @@ Design notes
 - A failed Newton solve restores the last converged unknowns before retrying, so
   the caller never sees a half-updated state; when cutting is exhausted
   :class:`SolveFailure` reports the step, the load and the residual history.
+- A solver's PETSc options are in PETSc's options database, under the solver's own
+  prefix, while it is set up and during each of its solves: PETSc objects read some of
+  them only when a solve sets them up (MUMPS reads its ICNTLs when PCSetUp creates the
+  factor matrix, at the first factorisation and again whenever the matrix pattern
+  changes, e.g. when contact pairs change; a fieldsplit's inner solvers and GAMG's
+  levels at their set-up). In between they are removed, so that they do not pile up over
+  a study's many solvers and options an override made moot are not reported as unused.
 """
 
 from __future__ import annotations
@@ -130,6 +137,7 @@ class NonlinearSolver:
         self._set_options(prefix)
         if iterative is not None:
             iterative.install(self)
+        self._forget_options()
         self.residual_history: list[float] = []
         self.linear_iterations = 0  # Krylov iterations of the last Newton solve (all its steps)
         self.snes.setMonitor(lambda _snes, _it, norm: self.residual_history.append(float(norm)))
@@ -183,28 +191,37 @@ class NonlinearSolver:
             raise
 
     def _set_options(self, prefix: str) -> None:
-        opts = PETSc.Options()
         linear = None if self.iterative is None else self.iterative.options(len(self.unknowns))
-        values = self.options.as_petsc(linear)
-        for key, value in values.items():
-            opts[f"{prefix}{key}"] = value
+        self._petsc_options = {f"{prefix}{key}": value
+                               for key, value in self.options.as_petsc(linear).items()}
+        self._insert_options()
         self.snes.setFromOptions()
         self.snes.getKSP().setFromOptions()
-        self._pending_options = [f"{prefix}{key}" for key in values]
-        if self.iterative is None:
-            self._forget_options()
-        # else kept until the first solve: the fieldsplit's inner solvers and GAMG's
-        # levels read theirs when PETSc sets them up
+
+    def _insert_options(self) -> None:
+        """Put this solver's options in PETSc's options database (under its own prefix:
+        no other solver reads them)."""
+        opts = PETSc.Options()
+        for name, value in self._petsc_options.items():
+            opts[name] = value
 
     def _forget_options(self) -> None:
-        """Remove this solver's entries from PETSc's global options database, so later
-        solvers do not inherit them and options an override made moot are not reported
-        as unused at exit."""
+        """Remove this solver's entries from PETSc's options database."""
         opts = PETSc.Options()
-        for name in self._pending_options:
+        for name in self._petsc_options:
             if opts.hasName(name):
                 opts.delValue(name)
-        self._pending_options = []
+
+    def factor_matrix(self) -> PETSc.Mat | None:
+        """The factored matrix of a direct solver's last factorisation (None before the
+        first solve, or when the preconditioner does not factor)."""
+        pc = self.snes.getKSP().getPC()
+        if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
+            return None
+        try:
+            return pc.getFactorMatrix()
+        except PETSc.Error:
+            return None
 
     # -- state ------------------------------------------------------------------
     def save_state(self) -> list[np.ndarray]:
@@ -227,6 +244,8 @@ class NonlinearSolver:
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
+        # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
+        self._insert_options()
         try:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
