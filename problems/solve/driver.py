@@ -107,14 +107,17 @@ SYMBOLIC_FACTORISATION_EVENTS = ("MatLUFactorSym", "MatCholFctrSym", "MatILUFact
                                  "MatICCFactorSym")
 
 
+# The log events count only while PETSc's logging is on: turned on here, at import, on
+# every rank alike (the default handler's bookkeeping costs microseconds per event)
+if not PETSc.Log.isActive():
+    PETSc.Log.begin()
+
+
 class FactorisationCounter:
     """Numeric and symbolic factorisations PETSc has performed in this process so far,
-    from its log events (which count only while logging is on: turned on here if it is
-    not; the default handler's bookkeeping costs microseconds per event)."""
+    from its log events."""
 
     def __init__(self) -> None:
-        if not PETSc.Log.isActive():
-            PETSc.Log.begin()
         self.numeric = [PETSc.Log.Event(name) for name in NUMERIC_FACTORISATION_EVENTS]
         self.symbolic = [PETSc.Log.Event(name) for name in SYMBOLIC_FACTORISATION_EVENTS]
 
