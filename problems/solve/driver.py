@@ -163,6 +163,7 @@ class NonlinearSolver:
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
+        self._jacobians = 0  # Jacobian assemblies so far
         self._wrap_callbacks()
         self._set_options(prefix)
         if iterative is not None:
@@ -186,7 +187,6 @@ class NonlinearSolver:
 
         raise_on = _test_raise_rank(self.unknowns[0].function_space.mesh.comm)
         calls = [0]
-        self._jacobians = 0
 
         def residual(snes, x, vec):
             start = time.perf_counter()
