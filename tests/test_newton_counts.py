@@ -157,6 +157,22 @@ def test_failed_attempts_are_counted():
     assert failed == 4 * work.failed_newton_solves
 
 
+def test_factorisations_are_counted_where_petsc_performs_them():
+    """With the preconditioner lagged (the LU of every second Jacobian preconditions
+    GMRES) PETSc factorises half as often as Newton iterates: the count follows PETSc,
+    not an assumption of one factorisation per iteration."""
+    problem = _nonlinear_poisson(NewtonOptions(petsc={"snes_lag_preconditioner": "2",
+                                                      "ksp_type": "gmres", "ksp_rtol": "1e-12"}))
+    solver = problem["solver"]
+    problem["load"].value = 1.0
+    converged, iterations = solver.solve()
+    assert converged and iterations >= 4
+    counts = solver.last_counts
+    assert counts.jacobians == counts.newton_iterations_all == iterations
+    assert counts.factorisations == (iterations + 1) // 2  # iterations 0, 2, 4, ...
+    assert counts.symbolic_factorisations == 1
+
+
 def test_results_json_reports_totals_of_a_scene_run():
     result = sphere_inflation.run(sphere_inflation.Parameters(**TINY),
                                   options=RunOptions(fields=False, pictures=False))
