@@ -364,6 +364,13 @@ class StepRecord:
     factorisations: int = 0           # numeric factorisations
     symbolic_factorisations: int = 0  # symbolic analyses
 
+    @staticmethod
+    def work(counts: SolverCounts) -> dict[str, int]:
+        """The fields above from the solver's counts over the step's attempts."""
+        return {"attempts": counts.newton_solves, "iterations_all": counts.newton_iterations_all,
+                "jacobians": counts.jacobians, "factorisations": counts.factorisations,
+                "symbolic_factorisations": counts.symbolic_factorisations}
+
     def counts(self) -> dict[str, int]:
         """The step's work under the names of ``results.json``'s step records:
         ``ctx.record_step(..., **record.counts())``."""
@@ -432,12 +439,9 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 apply(value, 0.0)
                 bar.close()
                 raise SolveFailure(step, target, value, history, solver.reason())
-        work = solver.counts - counts_before
         record = StepRecord(step, target, target - value, iterations, cuts,
                             list(solver.residual_history), solver.linear_iterations,
-                            attempts=work.newton_solves, iterations_all=work.newton_iterations_all,
-                            jacobians=work.jacobians, factorisations=work.factorisations,
-                            symbolic_factorisations=work.symbolic_factorisations)
+                            **StepRecord.work(solver.counts - counts_before))
         value = target
         records.append(record)
         if on_converged is not None:
