@@ -111,7 +111,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             u_tip = shell.value_at(tip)
             ctx.record_step(step=record.step, load_factor=record.load, tip_u=float(u_tip[0]),
                             tip_w=float(u_tip[2]), end_rotation=float(end_angle.value),
-                            newton_iterations=record.iterations, cuts=record.cuts)
+                            newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
             with ctx.timings("output"):
                 writer.write(record.load)
 

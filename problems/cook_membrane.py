@@ -81,7 +81,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         def converged(record) -> None:
             ctx.record_step(step=record.step, load_factor=record.load,
-                            newton_iterations=record.iterations, cuts=record.cuts,
+                            newton_iterations=record.iterations, cuts=record.cuts, **record.counts(),
                             tip_displacement=point_value(u, (*TIP, 0.0))[1])
 
         follow_path(solver, apply, Stepping(initial_step=1.0 / params.load_steps),

@@ -412,8 +412,8 @@ class Injection:
                 h.self_distance.append(distance)
                 h.intersecting.append(crossing)
         ctx.record_step(step=record.step, time=record.load, newton_iterations=record.iterations,
-                        cuts=record.cuts, plunger=self.plunger.position, max_penetration_mm=h.penetration[-1],
-                        kinetic_energy=self.dynamics.kinetic_energy())
+                        cuts=record.cuts, **record.counts(), plunger=self.plunger.position,
+                        max_penetration_mm=h.penetration[-1], kinetic_energy=self.dynamics.kinetic_energy())
         if frame:
             with ctx.timings("output"):
                 write_frame_grid(h.series, self.shell, record.load, self.strain)

@@ -231,7 +231,7 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> 
         record(step.load)  # before the update: the outputs read Cv_n of this step
         body.history.update()
         ctx.record_step(run=label, time=step.load, dt=step.increment,
-                        newton_iterations=step.iterations, cuts=step.cuts,
+                        newton_iterations=step.iterations, cuts=step.cuts, **step.counts(),
                         krylov_iterations=step.linear_iterations)
 
     follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, initial_step=1.0,

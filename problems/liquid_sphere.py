@@ -162,7 +162,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def converged(record) -> None:
             newton["iterations"] += record.iterations
             ctx.record_step(step=record.step, load_factor=record.load,
-                            newton_iterations=record.iterations, cuts=record.cuts,
+                            newton_iterations=record.iterations, cuts=record.cuts, **record.counts(),
                             krylov_iterations=record.linear_iterations,
                             residuals=record.residuals, **quantities())
 

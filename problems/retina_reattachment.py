@@ -116,7 +116,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def converged(record) -> None:
             contact.search()
             ctx.record_step(step=record.step, load_factor=record.load, newton_iterations=record.iterations,
-                            cuts=record.cuts, residuals=record.residuals, min_gap=contact.min_gap(),
+                            cuts=record.cuts, **record.counts(), residuals=record.residuals, min_gap=contact.min_gap(),
                             **contact.summary())
             with ctx.timings("output"):
                 writer.write(record.load)

@@ -249,7 +249,7 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
         model.couple_liquid()
     values = model.measure()
     ctx.record_step(step=record.step, load=record.load, stage=stage,
-                    newton_iterations=record.iterations, cuts=record.cuts,
+                    newton_iterations=record.iterations, cuts=record.cuts, **record.counts(),
                     krylov_iterations=record.linear_iterations,
                     residuals=record.residuals, **values)
     model.sutures.update_directions(model.u, model.suture_anchors())

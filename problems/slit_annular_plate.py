@@ -137,7 +137,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ref_a, ref_b = sze_reference(line_load)
             ctx.record_step(step=record.step, load_factor=record.load, line_load=line_load,
                             deflection_a=w_a, deflection_b=w_b, deflection_a_sze=ref_a,
-                            deflection_b_sze=ref_b, newton_iterations=record.iterations, cuts=record.cuts)
+                            deflection_b_sze=ref_b, newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
             with ctx.timings("output"):
                 writer.write(record.load)
 

@@ -137,7 +137,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.record_step(step=record.step, load_factor=record.load,
                             pressure=record.load * params.pressure, newton_iterations=record.iterations,
                             krylov_iterations=record.linear_iterations,
-                            cuts=record.cuts, residuals=record.residuals, **values)
+                            cuts=record.cuts, **record.counts(), residuals=record.residuals, **values)
             write_state(record.load)
 
         try:

@@ -265,7 +265,7 @@ def _push(body: Applanation, ctx: RunContext, params: Parameters, top: float) ->
                                "while the applanator advanced (the cap buckles)")
         visited.append((step.load, radius))
         ctx.record_step(stage="applanation", depth_mm=step.load, contact_radius_mm=radius,
-                        force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts)
+                        force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts, **step.counts())
         if radius >= target:
             raise Reached
 

@@ -133,7 +133,7 @@ def fold(params: FoldParameters, ctx: RunContext, shell: LensShell, frames_dir: 
                 history["self_distance"].append(distance)
                 history["intersecting"].append(crossing)
         ctx.record_step(step=record.step, time=record.load, newton_iterations=record.iterations,
-                        cuts=record.cuts, max_penetration_mm=history["penetration"][-1])
+                        cuts=record.cuts, **record.counts(), max_penetration_mm=history["penetration"][-1])
         if frame:
             with ctx.timings("output"):
                 write_frame_grid(history["series"], shell, record.load, strain)

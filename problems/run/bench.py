@@ -22,7 +22,13 @@ from mpi4py import MPI
 
 COLUMNS = ("date", "machine", "ranks", "dofs", "cells", "mesh", "form_compilation", "assembly",
            "solve", "contact_search", "output", "total", "peak_memory_mb", "newton_iterations",
-           "status")
+           "newton_iterations_all", "failed_newton_solves", "factorisations",
+           "symbolic_factorisations", "status")
+# what the counts mean (the table's notes)
+COUNTS = ("newton_iterations: of the converged solves (the steps' own); newton_iterations_all: "
+          "of all solves, the failed attempts of cut steps included (failed_newton_solves of "
+          "them); factorisations: numeric LU factorisations PETSc performed (its log events), "
+          "symbolic_factorisations: its symbolic analyses (one per new matrix pattern)")
 
 
 def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: RunOptions | None = None):
@@ -43,6 +49,9 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
            "peak_memory_mb": round(result.peak_memory_mb, 1),
            "newton_iterations": sum(s.get("newton_iterations", 0) for s in result.steps),
            "status": result.status}
+    counts = result.counts()
+    row.update({k: counts[k] for k in ("newton_iterations_all", "failed_newton_solves",
+                                       "factorisations", "symbolic_factorisations")})
     table = Path(out) / f"{scene.name}.csv"
     rows = list(csv.DictReader(table.open())) if table.exists() else []
     rows.append({k: row[k] for k in COLUMNS})
@@ -61,7 +70,9 @@ def _markdown(name: str, overrides: dict, rows: list[dict]) -> str:
              f"Settings: {', '.join(f'`{k}={val}`' for k, val in overrides.items()) or 'defaults'}; "
              f"SNES Newton with MUMPS LU; DOLFINx {v.get('dolfinx', '?')}, PETSc {v.get('petsc', '?')}. "
              "Seconds per phase (form compilation is a first-run cost: FFCx caches it); "
-             "peak memory is the largest resident set of any rank.", "",
+             "peak memory is the largest resident set of any rank. "
+             f"Counts: {COUNTS}; empty where a row predates them.", "",
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    lines += ["| " + " | ".join(str(r[c]) for c in COLUMNS) + " |" for r in rows]
+    lines += ["| " + " | ".join("" if r.get(c) is None else str(r[c]) for c in COLUMNS) + " |"
+              for r in rows]
     return "\n".join(lines) + "\n"

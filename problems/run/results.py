@@ -74,6 +74,48 @@ def peak_memory_mb() -> float:
 
 
 @dataclasses.dataclass
+class SolverCounts:
+    """Work of Newton solves, a cut step's failed attempts included. Factorisations are
+    counted where PETSc performs them (its log events ``MatLUFactorNum``/``MatCholFctrNum``
+    and the symbolic ``MatLUFactorSym``/``MatCholFctrSym``/``MatILUFactorSym``/
+    ``MatICCFactorSym``), whatever the preconditioner: MUMPS LU, or the sub-solvers of an
+    iterative one (e.g. GAMG's coarse-grid LU)."""
+
+    newton_solves: int = 0             # SNES solves started (attempts)
+    failed_newton_solves: int = 0      # of which did not converge (the step was cut)
+    newton_iterations: int = 0         # Newton iterations of the solves that converged
+    newton_iterations_all: int = 0     # Newton iterations of all solves, failed ones included
+    jacobians: int = 0                 # Jacobian assemblies
+    factorisations: int = 0            # numeric factorisations
+    symbolic_factorisations: int = 0   # symbolic analyses (a new matrix pattern needs one)
+
+    def copy(self) -> "SolverCounts":
+        return dataclasses.replace(self)
+
+    def __add__(self, other: "SolverCounts") -> "SolverCounts":
+        return SolverCounts(*(a + b for a, b in zip(self.values(), other.values())))
+
+    def __sub__(self, other: "SolverCounts") -> "SolverCounts":
+        return SolverCounts(*(a - b for a, b in zip(self.values(), other.values())))
+
+    def add(self, other: "SolverCounts") -> None:
+        """In place (the process-wide tally is one object that others hold)."""
+        for name, value in dataclasses.asdict(other).items():
+            setattr(self, name, getattr(self, name) + value)
+
+    def values(self) -> tuple[int, ...]:
+        return dataclasses.astuple(self)
+
+    def as_dict(self) -> dict[str, int]:
+        return dataclasses.asdict(self)
+
+
+# Every Newton solve of this process adds its work here (NonlinearSolver.solve); a Result
+# reports what was added while it ran.
+SOLVER_COUNTS = SolverCounts()
+
+
+@dataclasses.dataclass
 class Result:
     """The outcome of one scene run; ``as_json`` is what ``results.json`` holds."""
 
@@ -89,9 +131,31 @@ class Result:
     pictures: list[str] = dataclasses.field(default_factory=list)
     peak_memory_mb: float = 0.0
     checkpoints: dict[str, Any] = dataclasses.field(default_factory=dict)  # written, resumed_from
+    # totals of SolverCounts over the run (every Newton solve of this process while the
+    # run lasts, failed attempts included), fixed when the run ends (when its timings are
+    # set). A resumed run counts the work since the resume; its steps keep the counts
+    # they were converged with.
+    solver_counts: dict[str, int] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self._counts_at_start = SOLVER_COUNTS.copy()
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        super().__setattr__(name, value)
+        if name == "timings" and value and not self.solver_counts \
+                and hasattr(self, "_counts_at_start"):
+            super().__setattr__("solver_counts", self.counts())
+
+    def counts(self) -> dict[str, int]:
+        """The solver work of this run: at its end, or so far while it runs."""
+        if self.solver_counts:
+            return dict(self.solver_counts)
+        return (SOLVER_COUNTS - self._counts_at_start).as_dict()
 
     def as_json(self) -> dict[str, Any]:
+        counts = self.counts()
         data = dataclasses.asdict(self)
+        data["solver_counts"] = counts
         data["versions"] = versions()
         data["machine"] = machine()
         return to_jsonable(data)

@@ -97,7 +97,7 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
             outward_x, inward_y = radial()
             values = dict(step=record.step, load_factor=record.load, force=record.load * params.force,
                           radial_displacement_x=outward_x, radial_displacement_y=inward_y,
-                          newton_iterations=record.iterations, cuts=record.cuts)
+                          newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
             if on_step is not None:
                 on_step(values)
             ctx.record_step(**values)

@@ -256,7 +256,7 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
             values = dict(step=record.step, load_factor=record.load, q=record.load * params.q,
                           load_parameter=record.load * params.q * load_scale,
                           center_deflection=float(shell.value_at(centre)[2]),
-                          newton_iterations=record.iterations, cuts=record.cuts)
+                          newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
             reference = levy_center_deflection(abs(values["load_parameter"])) if levy else np.nan
             if np.isfinite(reference):
                 values["center_deflection_levy"] = float(np.sign(params.q) * reference * params.thickness)

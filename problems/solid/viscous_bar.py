@@ -245,7 +245,7 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
         record(step.load)
         smallest = bar.update_history()
         ctx.record_step(step=step.step, time=step.load, dt=step.increment,
-                        newton_iterations=step.iterations, cuts=step.cuts, residuals=step.residuals,
+                        newton_iterations=step.iterations, cuts=step.cuts, **step.counts(), residuals=step.residuals,
                         smallest_cv_eigenvalue=smallest)
         if not smallest > 0:
             raise UnstableIntegration(step.step, step.load, smallest, params.dt / params.tau)

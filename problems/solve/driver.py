@@ -9,6 +9,17 @@ Design notes
 - A failed Newton solve restores the last converged unknowns before retrying, so
   the caller never sees a half-updated state; when cutting is exhausted
   :class:`SolveFailure` reports the step, the load and the residual history.
+- Every solve counts its work (:class:`~eyemech.problems.run.results.SolverCounts`):
+  Newton iterations, Jacobians, numeric and symbolic factorisations, failed attempts
+  included; per solver (``counts``), per step (:class:`StepRecord`) and per process
+  (``results.SOLVER_COUNTS``, which ``results.json`` reports as ``solver_counts``).
+- A solver's PETSc options are in PETSc's options database, under the solver's own
+  prefix, while it is set up and during each of its solves: PETSc objects read some of
+  them only when a solve sets them up (MUMPS reads its ICNTLs when PCSetUp creates the
+  factor matrix, at the first factorisation and again whenever the matrix pattern
+  changes, e.g. when contact pairs change; a fieldsplit's inner solvers and GAMG's
+  levels at their set-up). In between they are removed, so that they do not pile up over
+  a study's many solvers and options an override made moot are not reported as unused.
 """
 
 from __future__ import annotations
@@ -24,7 +35,7 @@ import numpy as np
 
 import dolfinx
 import dolfinx.fem.petsc
-from eyemech.problems.run.results import Timings
+from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts, Timings
 from petsc4py import PETSc
 
 if TYPE_CHECKING:
@@ -89,6 +100,32 @@ class NewtonOptions:
         return {k: str(v) for k, v in options.items()}
 
 
+# PETSc log events of the factorisations, whatever preconditioner performs them (LU,
+# Cholesky, ILU/ICC, a sub-solver's or a coarse grid's LU); ILU's numeric is MatLUFactorNum
+NUMERIC_FACTORISATION_EVENTS = ("MatLUFactorNum", "MatCholFctrNum")
+SYMBOLIC_FACTORISATION_EVENTS = ("MatLUFactorSym", "MatCholFctrSym", "MatILUFactorSym",
+                                 "MatICCFactorSym")
+
+
+# The log events count only while PETSc's logging is on: turned on here, at import, on
+# every rank alike (the default handler's bookkeeping costs microseconds per event)
+if not PETSc.Log.isActive():
+    PETSc.Log.begin()
+
+
+class FactorisationCounter:
+    """Numeric and symbolic factorisations PETSc has performed in this process so far,
+    from its log events."""
+
+    def __init__(self) -> None:
+        self.numeric = [PETSc.Log.Event(name) for name in NUMERIC_FACTORISATION_EVENTS]
+        self.symbolic = [PETSc.Log.Event(name) for name in SYMBOLIC_FACTORISATION_EVENTS]
+
+    def __call__(self) -> tuple[int, int]:
+        count = lambda events: sum(int(e.getPerfInfo()["count"]) for e in events)
+        return count(self.numeric), count(self.symbolic)
+
+
 ResidualHook = Callable[[PETSc.Vec, PETSc.Vec], None]
 JacobianHook = Callable[[PETSc.Vec, PETSc.Mat], None]
 
@@ -126,12 +163,17 @@ class NonlinearSolver:
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
+        self._jacobians = 0  # Jacobian assemblies so far
         self._wrap_callbacks()
         self._set_options(prefix)
         if iterative is not None:
             iterative.install(self)
+        self._forget_options()
         self.residual_history: list[float] = []
         self.linear_iterations = 0  # Krylov iterations of the last Newton solve (all its steps)
+        self.counts = SolverCounts()       # work of all solves of this solver
+        self.last_counts = SolverCounts()  # work of the last solve
+        self._factorisations = FactorisationCounter()
         self.snes.setMonitor(lambda _snes, _it, norm: self.residual_history.append(float(norm)))
 
     # -- set-up -----------------------------------------------------------------
@@ -160,6 +202,7 @@ class NonlinearSolver:
 
         def jacobian(snes, x, mat, pmat):
             start = time.perf_counter()
+            self._jacobians += 1
             with self._remember_errors():
                 j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
                 for hook in self.jacobian_hooks:
@@ -183,28 +226,37 @@ class NonlinearSolver:
             raise
 
     def _set_options(self, prefix: str) -> None:
-        opts = PETSc.Options()
         linear = None if self.iterative is None else self.iterative.options(len(self.unknowns))
-        values = self.options.as_petsc(linear)
-        for key, value in values.items():
-            opts[f"{prefix}{key}"] = value
+        self._petsc_options = {f"{prefix}{key}": value
+                               for key, value in self.options.as_petsc(linear).items()}
+        self._insert_options()
         self.snes.setFromOptions()
         self.snes.getKSP().setFromOptions()
-        self._pending_options = [f"{prefix}{key}" for key in values]
-        if self.iterative is None:
-            self._forget_options()
-        # else kept until the first solve: the fieldsplit's inner solvers and GAMG's
-        # levels read theirs when PETSc sets them up
+
+    def _insert_options(self) -> None:
+        """Put this solver's options in PETSc's options database (under its own prefix:
+        no other solver reads them)."""
+        opts = PETSc.Options()
+        for name, value in self._petsc_options.items():
+            opts[name] = value
 
     def _forget_options(self) -> None:
-        """Remove this solver's entries from PETSc's global options database, so later
-        solvers do not inherit them and options an override made moot are not reported
-        as unused at exit."""
+        """Remove this solver's entries from PETSc's options database."""
         opts = PETSc.Options()
-        for name in self._pending_options:
+        for name in self._petsc_options:
             if opts.hasName(name):
                 opts.delValue(name)
-        self._pending_options = []
+
+    def factor_matrix(self) -> PETSc.Mat | None:
+        """The factored matrix of a direct solver's last factorisation (None before the
+        first solve, or when the preconditioner does not factor)."""
+        pc = self.snes.getKSP().getPC()
+        if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
+            return None
+        try:
+            return pc.getFactorMatrix()
+        except PETSc.Error:
+            return None
 
     # -- state ------------------------------------------------------------------
     def save_state(self) -> list[np.ndarray]:
@@ -222,20 +274,27 @@ class NonlinearSolver:
 
     # -- solve ------------------------------------------------------------------
     def solve(self) -> tuple[bool, int]:
-        """One Newton solve from the current unknowns; (converged, iterations)."""
+        """One Newton solve from the current unknowns; (converged, iterations). Its work,
+        converged or not, is added to ``counts`` and to the process's ``SOLVER_COUNTS``."""
         self.residual_history = []
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
+        numeric_before, symbolic_before = self._factorisations()
+        jacobians_before = self._jacobians
+        converged = False
+        # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
+        self._insert_options()
         try:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
+            converged = reason > 0 and all(np.isfinite(self.residual_history))
         except PETSc.Error:  # e.g. a zero pivot from an inverted element
             if self._callback_error is not None:
                 raise self._callback_error from None
-            reason = -1
         finally:
             self._forget_options()
+            self._tally(converged, numeric_before, symbolic_before, jacobians_before)
         elapsed = time.perf_counter() - start
         # assembly inside SNES is timed by the callbacks; "solve" is the rest
         # (factorisation, triangular solves, line search bookkeeping)
@@ -243,8 +302,22 @@ class NonlinearSolver:
         self.timings.add("solve", elapsed - assembly)
         iterations = self.snes.getIterationNumber()
         self.linear_iterations = self.snes.getLinearSolveIterations()
-        converged = reason > 0 and all(np.isfinite(self.residual_history))
         return converged, iterations
+
+    def _tally(self, converged: bool, numeric_before: int, symbolic_before: int,
+               jacobians_before: int) -> None:
+        """The last solve's work, also when it raised (a callback's error included)."""
+        numeric, symbolic = self._factorisations()
+        iterations = self.snes.getIterationNumber()
+        work = SolverCounts(newton_solves=1, failed_newton_solves=0 if converged else 1,
+                            newton_iterations=iterations if converged else 0,
+                            newton_iterations_all=iterations,
+                            jacobians=self._jacobians - jacobians_before,
+                            factorisations=numeric - numeric_before,
+                            symbolic_factorisations=symbolic - symbolic_before)
+        self.last_counts = work
+        self.counts.add(work)
+        SOLVER_COUNTS.add(work)
 
     def reason(self) -> str:
         code = self.snes.getConvergedReason()
@@ -280,10 +353,30 @@ class StepRecord:
     step: int
     load: float
     increment: float
-    iterations: int
+    iterations: int  # Newton iterations of the converged solve
     cuts: int
     residuals: list[float]
     linear_iterations: int = 0  # Krylov iterations of the converged solve
+    # the step's whole work, its failed (cut) attempts included
+    attempts: int = 1                 # Newton solves: cuts + 1
+    iterations_all: int = 0           # Newton iterations of all attempts
+    jacobians: int = 0                # Jacobian assemblies
+    factorisations: int = 0           # numeric factorisations
+    symbolic_factorisations: int = 0  # symbolic analyses
+
+    @staticmethod
+    def work(counts: SolverCounts) -> dict[str, int]:
+        """The fields above from the solver's counts over the step's attempts."""
+        return {"attempts": counts.newton_solves, "iterations_all": counts.newton_iterations_all,
+                "jacobians": counts.jacobians, "factorisations": counts.factorisations,
+                "symbolic_factorisations": counts.symbolic_factorisations}
+
+    def counts(self) -> dict[str, int]:
+        """The step's work under the names of ``results.json``'s step records:
+        ``ctx.record_step(..., **record.counts())``."""
+        return {"attempts": self.attempts, "newton_iterations_all": self.iterations_all,
+                "jacobians": self.jacobians, "factorisations": self.factorisations,
+                "symbolic_factorisations": self.symbolic_factorisations}
 
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
@@ -324,6 +417,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     while value < stepping.end - 1e-12 * span:
         step += 1
         state = solver.save_state()
+        counts_before = solver.counts.copy()
         if checkpoints is not None:
             checkpoints.watch_step(solver)
         cuts = 0
@@ -346,7 +440,8 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 bar.close()
                 raise SolveFailure(step, target, value, history, solver.reason())
         record = StepRecord(step, target, target - value, iterations, cuts,
-                            list(solver.residual_history), solver.linear_iterations)
+                            list(solver.residual_history), solver.linear_iterations,
+                            **StepRecord.work(solver.counts - counts_before))
         value = target
         records.append(record)
         if on_converged is not None:

@@ -1,0 +1,221 @@
+"""Newton's work counted and PETSc options that reach the objects that read them (issue 22,
+deliverables 1 and 2).
+
+- Every Newton iteration, Jacobian, numeric factorisation and symbolic analysis is counted,
+  a cut step's failed attempts included: per step (``attempts``, ``newton_iterations_all``,
+  ``jacobians``, ``factorisations``, ``symbolic_factorisations``) and per run
+  (``solver_counts`` at the top of ``results.json``). Factorisations are PETSc's own log
+  events, so they count what PETSc did, not what the driver expects it to do.
+- MUMPS reads its ICNTLs when PETSc sets up the factor matrix, during a solve (and again
+  on a new factor matrix when the matrix pattern changes): the options must still be in
+  PETSc's options database then. Before the fix ICNTL(14) read back 20 (MUMPS's default)
+  instead of the 100 the code sets, and ``--petsc mat_mumps_icntl_33=1`` read back 0.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+import dolfinx
+import dolfinx.fem
+import dolfinx.mesh
+from eyemech.problems import sphere_inflation
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.results import SOLVER_COUNTS
+from eyemech.problems.solve import driver
+from eyemech.problems.solve.driver import NewtonOptions, NonlinearSolver, Stepping, follow_path
+from petsc4py import PETSc
+
+TINY = {"mesh_size": 4.0}  # the thick sphere in 3 load steps, ~1 s
+STEP_KEYS = ("attempts", "newton_iterations_all", "jacobians", "factorisations",
+             "symbolic_factorisations")
+
+
+@pytest.fixture
+def solvers(monkeypatch):
+    """Every NonlinearSolver that solves while the test runs (to read its factor matrix)."""
+    seen: list[NonlinearSolver] = []
+    solve = NonlinearSolver.solve
+
+    def spy(self):
+        if all(s is not self for s in seen):
+            seen.append(self)
+        return solve(self)
+
+    monkeypatch.setattr(NonlinearSolver, "solve", spy)
+    return seen
+
+
+def code_icntl_14() -> int:
+    return int(NewtonOptions().as_petsc()["mat_mumps_icntl_14"])
+
+
+def test_mumps_options_of_the_code_and_of_petsc_reach_the_factor_matrix(solvers, tmp_path):
+    """A run through the command line's own entry point (``--petsc`` as a user gives it):
+    after the solve the factored matrix holds the code's ICNTL(14) and the user's ICNTL(33)
+    (MUMPS's defaults: 20 and 0)."""
+    from eyemech.scripts.cli import main
+
+    code = main(["run", "sphere-inflation", "--set", "mesh_size=4.0", "--petsc",
+                 "mat_mumps_icntl_33=1", "--out", str(tmp_path), "--no-fields", "--no-pictures",
+                 "--quiet"])
+    assert code == 0
+    assert len(solvers) == 1
+    factor = solvers[0].factor_matrix()
+    assert factor is not None and factor.getType() == "mumps"
+    assert code_icntl_14() == 100
+    assert factor.getMumpsIcntl(14) == code_icntl_14()
+    assert factor.getMumpsIcntl(33) == 1
+    # the run's numbers are counted in its results.json
+    saved = json.loads((tmp_path / "results.json").read_text())
+    check_counts(saved)
+
+
+def check_counts(saved: dict) -> None:
+    """The totals agree with the steps, and each step's counts with its cuts."""
+    totals, steps = saved["solver_counts"], saved["steps"]
+    for step in steps:
+        assert all(key in step for key in STEP_KEYS), step
+        assert step["attempts"] == step["cuts"] + 1
+        assert step["newton_iterations_all"] >= step["newton_iterations"]
+        # SNES Newton with LU: one Jacobian and one factorisation per iteration
+        assert step["factorisations"] == step["jacobians"] == step["newton_iterations_all"]
+    assert totals["newton_solves"] == sum(s["attempts"] for s in steps)
+    assert totals["failed_newton_solves"] == sum(s["cuts"] for s in steps)
+    assert totals["newton_iterations"] == sum(s["newton_iterations"] for s in steps)
+    for key in ("newton_iterations_all", "jacobians", "factorisations", "symbolic_factorisations"):
+        assert totals[key] == sum(s[key] for s in steps), key
+    # one pattern (no contact): one symbolic analysis, in the first step
+    assert totals["symbolic_factorisations"] == 1 == steps[0]["symbolic_factorisations"]
+
+
+
+def test_options_are_read_by_the_factor_matrix_made_for_a_new_pattern():
+    """A Jacobian hook that adds an entry outside the finite-element pattern (as contact
+    does when pairs change) makes PETSc analyse the matrix again on a new factor matrix;
+    that one reads the options too. Between solves the options are out of the database."""
+    problem = _nonlinear_poisson(NewtonOptions(petsc={"mat_mumps_icntl_33": "1"}))
+    solver, u = problem["solver"], problem["u"]
+    first, last = 0, problem["size"] - 1  # not coupled by a P1 Laplacian on this mesh
+    calls = [0]
+
+    def grow_pattern(_x, matrix):
+        calls[0] += 1
+        if calls[0] == 2:  # from the second Jacobian on
+            matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        if calls[0] >= 2:
+            matrix.setValue(first, last, 0.0, addv=PETSc.InsertMode.ADD_VALUES)
+            matrix.assemble()
+
+    solver.jacobian_hooks.append(grow_pattern)
+    problem["load"].value = 1.0
+    if not PETSc.Log.isActive():
+        PETSc.Log.begin()
+    symbolic = PETSc.Log.Event("MatLUFactorSym")
+    before = symbolic.getPerfInfo()["count"]
+    converged, iterations = solver.solve()
+    assert converged and iterations >= 3
+    # the first pattern, then the grown one on a new factor matrix
+    assert symbolic.getPerfInfo()["count"] - before == 2
+    assert solver.last_counts.symbolic_factorisations == 2
+    assert solver.last_counts.factorisations == iterations
+    factor = solver.factor_matrix()
+    assert factor.getMumpsIcntl(14) == code_icntl_14()
+    assert factor.getMumpsIcntl(33) == 1
+    assert np.isfinite(u.x.array).all()
+    prefix = solver.snes.getOptionsPrefix()
+    assert not PETSc.Options().hasName(f"{prefix}mat_mumps_icntl_14")
+
+
+def test_failed_attempts_are_counted():
+    """A first attempt that runs out of Newton iterations is cut: the step reports both
+    attempts, and the process's totals grow by the work of both."""
+    problem = _nonlinear_poisson(NewtonOptions(max_it=4))
+    solver = problem["solver"]
+    before = SOLVER_COUNTS.copy()
+    records = follow_path(solver, lambda value, _increment: setattr(problem["load"], "value", value),
+                          Stepping(0.0, 1.0, initial_step=1.0, max_step=1.0), quiet=True)
+    assert records[0].cuts >= 1, "the full load was meant to fail in 4 iterations"
+    first = records[0]
+    assert first.attempts == first.cuts + 1
+    assert first.iterations_all > first.iterations
+    assert first.factorisations == first.jacobians == first.iterations_all
+    work = SOLVER_COUNTS - before
+    assert work == solver.counts
+    assert work.newton_solves == sum(r.attempts for r in records)
+    assert work.failed_newton_solves == sum(r.cuts for r in records)
+    assert work.newton_iterations == sum(r.iterations for r in records)
+    assert work.newton_iterations_all == sum(r.iterations_all for r in records)
+    assert work.factorisations == sum(r.factorisations for r in records)
+    # failed attempts: max_it iterations each, all factorised
+    failed = work.newton_iterations_all - work.newton_iterations
+    assert failed == 4 * work.failed_newton_solves
+
+
+def test_factorisations_are_counted_where_petsc_performs_them():
+    """With the preconditioner lagged (the LU of every second Jacobian preconditions
+    GMRES) PETSc factorises half as often as Newton iterates: the count follows PETSc,
+    not an assumption of one factorisation per iteration."""
+    problem = _nonlinear_poisson(NewtonOptions(petsc={"snes_lag_preconditioner": "2",
+                                                      "ksp_type": "gmres", "ksp_rtol": "1e-12"}))
+    solver = problem["solver"]
+    problem["load"].value = 1.0
+    converged, iterations = solver.solve()
+    assert converged and iterations >= 4
+    counts = solver.last_counts
+    assert counts.jacobians == counts.newton_iterations_all == iterations
+    assert counts.factorisations == (iterations + 1) // 2  # iterations 0, 2, 4, ...
+    assert counts.symbolic_factorisations == 1
+
+
+def test_results_json_reports_totals_of_a_scene_run():
+    result = sphere_inflation.run(sphere_inflation.Parameters(**TINY),
+                                  options=RunOptions(fields=False, pictures=False))
+    data = result.as_json()
+    check_counts(data)
+    assert data["solver_counts"]["newton_iterations"] == \
+        sum(s["newton_iterations"] for s in data["steps"])
+    # frozen at the end of the run: later solves elsewhere do not change it
+    _nonlinear_poisson(NewtonOptions())["solver"].solve()
+    assert result.as_json()["solver_counts"] == data["solver_counts"]
+
+
+def _nonlinear_poisson(options: NewtonOptions) -> dict:
+    """-div((1 + u²) grad u) = 20·load on the unit square, u = 0 on its boundary (P1, 4×4)."""
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    load = dolfinx.fem.Constant(mesh, 0.0)
+    residual = ((1 + u**2) * ufl.inner(ufl.grad(u), ufl.grad(v)) - 20.0 * load * v) * ufl.dx
+    mesh.topology.create_connectivity(1, 2)
+    facets = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+    dofs = dolfinx.fem.locate_dofs_topological(V, 1, facets)
+    bc = dolfinx.fem.dirichletbc(0.0, dofs, V)
+    solver = driver.NonlinearSolver(residual, u, [bc], options=options)
+    return {"solver": solver, "u": u, "load": load, "size": V.dofmap.index_map.size_global}
+
+
+def test_bench_rows_carry_the_counts(tmp_path, monkeypatch):
+    """``eyemech bench`` adds the counts as columns; rows of an older table keep theirs
+    and show the new columns empty."""
+    from eyemech import problems
+    from eyemech.problems.run import bench
+
+    monkeypatch.setattr(sphere_inflation, "BENCHMARK", TINY, raising=False)
+    old = ("date,machine,ranks,dofs,cells,mesh,form_compilation,assembly,solve,contact_search,"
+           "output,total,peak_memory_mb,newton_iterations,status\n"
+           "2026-11-22,vm,1,39879,8120,0.2,0.3,113,230,2.4,0.0,344,502,205,ok\n")
+    (tmp_path / "sphere-inflation.csv").write_text(old)
+    row = bench.run_benchmark(problems.get("sphere-inflation"), tmp_path)
+    assert row["newton_iterations_all"] >= row["newton_iterations"] > 0
+    assert row["factorisations"] == row["newton_iterations_all"]
+    assert row["symbolic_factorisations"] == 1 and row["failed_newton_solves"] == 0
+    table = (tmp_path / "sphere-inflation.md").read_text().splitlines()
+    assert "| 205 |  |  |  |  | ok |" in table[-2]
+    assert table[-1].endswith(f"| {row['newton_iterations']} | {row['newton_iterations_all']} | 0 "
+                              f"| {row['factorisations']} | 1 | ok |")
