@@ -130,11 +130,9 @@ def main(argv: list[str] | None = None) -> int:
         if comm.size == 1:
             raise
         # an error on one rank would leave the others waiting in a collective call
-        import traceback
+        from eyemech.problems.run.faults import abort
 
-        print(f"eyemech: rank {comm.rank} of {comm.size} failed:\n{traceback.format_exc()}",
-              file=sys.stderr, flush=True)
-        comm.Abort(1)
+        abort(comm)
 
 
 def _only_rank_0_reports(rank: int, verbose: bool) -> None:

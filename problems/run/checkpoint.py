@@ -51,12 +51,10 @@ from typing import Any, Callable
 import numpy as np
 from mpi4py import MPI
 
+from eyemech.problems.run.faults import KILL_ENV, parse_kill  # noqa: F401  (test hook)
+
 FORMAT = "eyemech-checkpoint-1"
 NAME = re.compile(r"^ckpt_(\d{6,})$")
-# test hook: "step:N" (SIGKILL inside Newton of the N-th step of the run), "checkpoint:N"
-# (SIGKILL inside the N-th checkpoint write, before its commit), "sigterm:N[:RANK]"
-# (SIGTERM to this process -- or only to rank RANK -- inside Newton of step N)
-KILL_ENV = "EYEMECH_TEST_KILL"
 
 
 class Interrupted(Exception):
@@ -139,7 +137,7 @@ class Checkpoints:
         self._last_write = time.monotonic()
         self._stop_signal = 0
         self._handlers: dict[int, Any] = {}
-        self._kill = _parse_kill(os.environ.get(KILL_ENV, ""))
+        self._kill = parse_kill()
         self._watching: tuple[Any, Callable] | None = None  # (solver, hook) of the test hook
         self.resume_meta: dict[str, Any] | None = None
         self.resumed_from: Path | None = None
@@ -495,13 +493,6 @@ def _decode(value: Any) -> Any:
 def _canonical(value: Any) -> Any:
     """Parameters compared as JSON sees them (tuples and lists alike)."""
     return json.loads(json.dumps(value, default=_encode))
-
-
-def _parse_kill(spec: str) -> tuple[str, int, int | None]:
-    if not spec:
-        return "", 0, None
-    parts = spec.split(":")
-    return parts[0], int(parts[1]), (int(parts[2]) if len(parts) > 2 else None)
 
 
 def _main_thread() -> bool:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
+from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import SceneParameters
 from eyemech.problems.run.results import (
@@ -65,6 +66,8 @@ class RunContext:
         return self
 
     def __exit__(self, kind, error, tb) -> bool:
+        # an exception on this rank alone: the other ranks wait in a collective call
+        abort_if_stranding(self.comm, error)
         self.checkpoints.restore_signal_handlers()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"

@@ -22,6 +22,7 @@ class FieldWriter:
                  stem: str = "fields"):
         self.files: list[str] = []
         self._writers = []
+        self.comm = comm
         if out is None:
             return
         groups: dict[str, list] = {}
@@ -39,6 +40,11 @@ class FieldWriter:
             writer.write(time)
 
     def close(self) -> None:
+        """Collective. Called in a ``finally`` while an exception raised on this rank
+        alone propagates, it aborts the job instead: the other ranks are not here."""
+        from eyemech.problems.run.faults import abort_if_stranding
+
+        abort_if_stranding(self.comm)
         for writer in self._writers:
             writer.close()
         self._writers = []

@@ -14,6 +14,7 @@ from typing import Any
 
 from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.parameters import ParameterError, build
 from eyemech.problems.run.results import write_text_atomic
 from eyemech.problems.solve.driver import SolveFailure
@@ -75,7 +76,8 @@ def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path
             raise  # SIGINT/SIGTERM stop the whole sweep; --resume continues it
         except SolveFailure as err:
             row.update(status="failed", error=str(err))
-        except Exception as err:  # one case's error must not stop the others
+        except Exception as err:  # one case's error must not stop the others ...
+            abort_if_stranding(sub, err)  # ... unless the case's other ranks wait for this one
             row.update(status="error", error="".join(traceback.format_exception_only(err)).strip())
         if sub.rank == 0:
             rows.append(row)

@@ -24,6 +24,7 @@ import numpy as np
 
 import dolfinx
 import dolfinx.fem.petsc
+from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
 from eyemech.problems.run.results import Timings
 from petsc4py import PETSc
 
@@ -32,10 +33,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("eyemech")
 
-# Test hook: "R" makes rank R raise inside the residual assembly of the first Newton
-# solve (after Newton's first update), while the other ranks are inside collective
-# calls: the command line must still end the whole job with the message.
-RAISE_ENV = "EYEMECH_TEST_RAISE_ON_RANK"
 
 
 class SolveFailure(RuntimeError):
@@ -143,16 +140,15 @@ class NonlinearSolver:
         b, (f_call, f_args, f_kargs) = self.snes.getFunction()
         A, P, (j_call, j_args, j_kargs) = self.snes.getJacobian()
 
-        raise_on = _test_raise_rank(self.unknowns[0].function_space.mesh.comm)
+        raise_on = test_raise_rank(self.unknowns[0].function_space.mesh.comm)
         calls = [0]
 
         def residual(snes, x, vec):
             start = time.perf_counter()
             with self._remember_errors():
                 calls[0] += 1
-                if raise_on and calls[0] == 2:
-                    raise RuntimeError(f"{RAISE_ENV}: test error on rank "
-                                       f"{snes.comm.tompi4py().rank} inside the residual")
+                if raise_on and calls[0] == 2:  # test hook (problems/run/faults.py)
+                    raise_test_error(snes.comm.tompi4py().rank)
                 f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
                 for hook in self.residual_hooks:
                     hook(x, vec)
@@ -250,14 +246,6 @@ class NonlinearSolver:
         code = self.snes.getConvergedReason()
         names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
         return names.get(code, str(code))
-
-
-def _test_raise_rank(comm) -> bool:
-    """Whether this rank is the one the test hook ``EYEMECH_TEST_RAISE_ON_RANK`` names."""
-    import os
-
-    value = os.environ.get(RAISE_ENV, "")
-    return value.strip() != "" and int(value) == comm.rank
 
 
 @dataclasses.dataclass
