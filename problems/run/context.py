@@ -12,7 +12,7 @@ from typing import Any
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
-from eyemech.problems.run.parameters import SceneParameters
+from eyemech.problems.run.parameters import SceneParameters, check
 from eyemech.problems.run.results import (
     Result,
     Timings,
@@ -50,7 +50,7 @@ class RunContext:
 
     def __init__(self, scene: str, params: SceneParameters, comm: MPI.Comm | None,
                  out: str | Path | None, options: RunOptions | None):
-        params.validate()  # bad input stops here, before anything is created or solved
+        check(params)  # bad input stops here, before anything is created or solved
         self.comm = comm if comm is not None else MPI.COMM_WORLD
         self.out = Path(out) if out is not None else None
         self.options = options or RunOptions()

@@ -10,6 +10,8 @@ before any mesh is built or any form compiled.
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 import tomllib
 import typing
 from pathlib import Path
@@ -17,6 +19,11 @@ from typing import Any, Literal, get_args, get_origin
 
 MMHG = 1.33322e-4  # MPa per mmHg
 
+# Time-stepped scenes (a ``t_end`` with ``dt`` or ``first_dt`` and ``dt_growth``) are
+# refused when their time grid has more steps than this (or than their ``max_steps``
+# field, or than EYEMECH_MAX_STEPS): a typo must not run until the memory is gone.
+DEFAULT_MAX_STEPS = 10_000
+MAX_STEPS_ENV = "EYEMECH_MAX_STEPS"
 
 
 class ParameterError(ValueError):
@@ -57,9 +64,69 @@ class SceneParameters:
         return dataclasses.asdict(self)
 
 
-def field(default: Any, help: str, unit: str = "") -> Any:
-    """A dataclass field with documentation (shown by ``eyemech list -v``)."""
-    return dataclasses.field(default=default, metadata={"help": help, "unit": unit})
+def field(default: Any, help: str, unit: str = "", finite: bool = True) -> Any:
+    """A dataclass field with documentation (shown by ``eyemech list -v``).
+
+    Numbers must be finite (``inf`` and ``nan`` are refused) unless ``finite=False``."""
+    return dataclasses.field(default=default, metadata={"help": help, "unit": unit,
+                                                        "finite": finite})
+
+
+def check_finite(params: SceneParameters) -> None:
+    """Every float (and every float of a tuple) is finite unless its field says otherwise."""
+    for f in dataclasses.fields(params):
+        if not f.metadata.get("finite", True):
+            continue
+        value = getattr(params, f.name)
+        values = value if isinstance(value, (tuple, list)) else (value,)
+        for item in values:
+            if isinstance(item, float) and not math.isfinite(item):
+                raise ParameterError(f.name, f"must be a finite number, got {item!r}")
+
+
+def time_steps(params: SceneParameters) -> int | None:
+    """The number of time steps of a scene with ``t_end`` and ``dt`` or ``first_dt``
+    (growing by ``dt_growth``), or None for other scenes."""
+    t_end = getattr(params, "t_end", None)
+    dt = getattr(params, "first_dt", getattr(params, "dt", None))
+    if not isinstance(t_end, (int, float)) or not isinstance(dt, (int, float)):
+        return None
+    if not (math.isfinite(t_end) and math.isfinite(dt)) or t_end <= 0 or dt <= 0:
+        return None  # the finite and positive checks name the key
+    growth = getattr(params, "dt_growth", 1.0)
+    if not isinstance(growth, (int, float)) or not math.isfinite(growth) or growth < 1.0:
+        return None
+    if growth - 1.0 < 1e-12:
+        return math.ceil(t_end / dt * (1 - 1e-12))
+    # dt (1 + g + ... + g^(n-1)) >= t_end
+    return math.ceil(math.log1p(t_end / dt * (growth - 1.0)) / math.log(growth) * (1 - 1e-12))
+
+
+def max_steps(params: SceneParameters) -> int:
+    own = getattr(params, "max_steps", None)
+    if isinstance(own, int) and own > 0:
+        return own
+    env = os.environ.get(MAX_STEPS_ENV, "").strip()
+    return int(env) if env.isdigit() and int(env) > 0 else DEFAULT_MAX_STEPS
+
+
+def check_step_count(params: SceneParameters) -> None:
+    steps = time_steps(params)
+    limit = max_steps(params)
+    if steps is not None and steps > limit:
+        first = "first_dt" if hasattr(params, "first_dt") else "dt"
+        growth = f", dt_growth={params.dt_growth:g}" if hasattr(params, "dt_growth") else ""
+        raise ParameterError("t_end", f"t_end={params.t_end:g} with {first}="
+                             f"{getattr(params, first):g}{growth} takes {steps} time steps, "
+                             f"more than the limit of {limit} (raise it with "
+                             f"{'max_steps' if hasattr(params, 'max_steps') else MAX_STEPS_ENV})")
+
+
+def check(params: SceneParameters) -> None:
+    """The shared checks, then the scene's own ``validate``."""
+    check_finite(params)
+    params.validate()
+    check_step_count(params)
 
 
 def _field_types(cls: type) -> dict[str, Any]:
@@ -118,7 +185,7 @@ def _convert_value(kind: Any, raw: Any) -> Any:
     if kind is float:
         if isinstance(raw, bool):
             raise ValueError("expected a number")
-        return float(raw)
+        return float(raw)  # finite unless the field says otherwise: check_finite
     if kind is str:
         return str(raw)
     raise TypeError(f"unsupported parameter type {kind}")
@@ -136,21 +203,41 @@ def parse_assignments(pairs: list[str]) -> dict[str, str]:
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML config; a ``[parameters]`` table or top-level keys are accepted."""
+    """Read a TOML config: parameters as top-level keys or in a ``[parameters]`` table,
+    not both (keys beside the table would otherwise be dropped without a word)."""
+    path = Path(path)
     try:
-        data = tomllib.loads(Path(path).read_text())
+        text = path.read_bytes().decode("utf-8")
+        data = tomllib.loads(text)
     except FileNotFoundError:
         raise ParameterError("--config", f"file not found: {path}") from None
+    except IsADirectoryError:
+        raise ParameterError("--config", f"{path} is a folder, not a TOML file") from None
+    except OSError as err:
+        raise ParameterError("--config", f"cannot read {path}: {err.strerror or err}") from None
+    except UnicodeDecodeError as err:
+        raise ParameterError("--config", f"{path} is not UTF-8 text (byte {err.start})") from None
     except tomllib.TOMLDecodeError as err:
         raise ParameterError("--config", f"{path} is not valid TOML: {err}") from None
-    return dict(data.get("parameters", data))
+    if "parameters" not in data:
+        return dict(data)
+    table = data["parameters"]
+    if not isinstance(table, dict):
+        raise ParameterError("parameters", f"in {path} must be a table ([parameters]), "
+                             f"got {type(table).__name__}")
+    others = sorted(k for k in data if k != "parameters")
+    if others:
+        raise ParameterError(others[0], f"in {path} is a top-level key beside the "
+                             f"[parameters] table: put every parameter in the table "
+                             f"(top-level keys: {', '.join(others)})")
+    return dict(table)
 
 
 def build(cls: type[SceneParameters], overrides: dict[str, Any] | None = None) -> SceneParameters:
     """Defaults of ``cls`` updated by ``overrides`` (typed), then validated."""
     values = {key: convert(cls, key, raw) for key, raw in (overrides or {}).items()}
     params = cls(**values)
-    params.validate()
+    check(params)
     return params
 
 
