@@ -14,6 +14,7 @@ from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import SceneParameters, check
 from eyemech.problems.run.results import (
+    OutputFolder,
     Result,
     Timings,
     peak_memory_mb,
@@ -58,9 +59,9 @@ class RunContext:
         self.result = Result(scene=scene, parameters=params.as_dict(), mpi_size=self.comm.size)
         self.checkpoints = Checkpoints(scene, self.result.parameters, self.result, self.comm,
                                        self.out, self.options.checkpoint)
-        if self.out is not None and self.comm.rank == 0:
-            self.out.mkdir(parents=True, exist_ok=True)
-        self.comm.Barrier()
+        # the folder is made, checked and locked (all ranks raise alike when it cannot be)
+        self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
+            else None
 
     def __enter__(self) -> "RunContext":
         return self
@@ -94,7 +95,14 @@ class RunContext:
         collective = error is None or isinstance(error, (SolveFailure, Interrupted))
         memory = peak_memory_mb()
         self.result.peak_memory_mb = self.comm.allreduce(memory, op=MPI.MAX) if collective else memory
-        self.write()
+        try:
+            if not (error is not None and self.checkpoints.resume_meta is not None):
+                self.write()
+            # else a resume failed before it reached the checkpoint: the folder's
+            # results.json (say "interrupted") still describes the run: it is kept
+        finally:
+            if self.folder is not None:
+                self.folder.release()
         if self.result.status == "error" and error is None:
             from eyemech.problems.run.checkpoint import CheckpointError
 
