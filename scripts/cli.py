@@ -256,15 +256,14 @@ def _run(scene, overrides, args, options, comm, say) -> int:
 def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
     """The checkpoint's parameters; --set/--config may repeat them but not change them
     (the checkpoint then refuses). No checkpoint in ``folder``: a fresh start."""
-    from eyemech.problems.run.checkpoint import CheckpointError, latest, read_meta
+    from eyemech.problems.run.checkpoint import CheckpointError, newest_readable
 
     if folder.exists() and not folder.is_dir():
         raise CheckpointError(f"--resume {folder}: not a folder (give the run's output folder)")
     meta, error = None, None
     if comm.rank == 0:  # rank 0 reads; an unreadable checkpoint must not leave the others waiting
         try:
-            found = latest(folder)
-            meta = read_meta(found) if found is not None else None
+            meta = newest_readable(folder, warn=False)[1]  # the newest that reads whole
         except (OSError, ValueError) as err:
             error = f"cannot read the checkpoint in {folder}: {err}"
     meta, error = comm.bcast((meta, error), root=0)

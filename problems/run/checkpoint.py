@@ -40,11 +40,13 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import re
 import shutil
 import signal
 import time
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
@@ -52,6 +54,8 @@ import numpy as np
 from mpi4py import MPI
 
 from eyemech.problems.run.faults import KILL_ENV, parse_kill  # noqa: F401  (test hook)
+
+log = logging.getLogger("eyemech")
 
 FORMAT = "eyemech-checkpoint-1"
 NAME = re.compile(r"^ckpt_(\d{6,})$")
@@ -112,9 +116,54 @@ def latest(folder: str | Path) -> Path | None:
     return max(found)[1] if found else None
 
 
+def newest_readable(folder: str | Path, warn: bool = True) \
+        -> tuple[Path | None, dict[str, Any] | None]:
+    """The newest checkpoint under ``folder`` whose ``meta.json`` and rank files all read
+    whole, with its meta; older ones are tried when the newest is damaged (truncated by
+    a full disk, emptied by a crash of the file system), each skipped one logged. (None,
+    None) when there is no checkpoint; :class:`CheckpointError` when none is readable."""
+    folder = Path(folder)
+    if (folder / "checkpoints").is_dir():
+        folder = folder / "checkpoints"
+    if not folder.is_dir():
+        return None, None
+    found = sorted(((int(m.group(1)), p) for p in folder.iterdir()
+                    if (m := NAME.match(p.name)) and (p / "meta.json").is_file()), reverse=True)
+    problems = []
+    for _, candidate in found:
+        try:
+            meta = read_meta(candidate)
+            _check_rank_files(candidate, meta)
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as err:
+            problems.append(f"{candidate.name}: {err}")
+            if warn:
+                log.warning("checkpoint %s is unreadable (%s)%s", candidate, err,
+                            "" if candidate == found[-1][1] else "; trying the one before it")
+            continue
+        return candidate, meta
+    if problems:
+        raise CheckpointError(f"no readable checkpoint in {folder} ({'; '.join(problems)})")
+    return None, None
+
+
+def _check_rank_files(checkpoint: Path, meta: dict[str, Any]) -> None:
+    """Every rank file is there and every array in it reads whole."""
+    parts = sorted(checkpoint.glob("rank_*.npz"))
+    if len(parts) != meta.get("mpi_size"):
+        raise CheckpointError(f"{len(parts)} rank files of {meta.get('mpi_size')}")
+    for part in parts:
+        try:
+            with np.load(part) as arrays:
+                for key in arrays.files:
+                    arrays[key]
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+            raise CheckpointError(f"{part.name} is damaged ({type(err).__name__}: {err})") \
+                from None
+
+
 def read_meta(checkpoint: Path) -> dict[str, Any]:
-    meta = json.loads((checkpoint / "meta.json").read_text())
-    if meta.get("format") != FORMAT:
+    meta = json.loads((checkpoint / "meta.json").read_bytes().decode("utf-8"))
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(f"{checkpoint} is not an {FORMAT} checkpoint")
     return meta
 
@@ -303,9 +352,8 @@ class Checkpoints:
     def _load_meta(self, folder: Path) -> None:
         meta, error = None, None
         if self.comm.rank == 0:
-            found = latest(folder)
             try:
-                meta = read_meta(found) if found is not None else None
+                found, meta = newest_readable(folder)
                 if meta is not None:
                     meta["_folder"] = str(found)
             except (OSError, ValueError) as err:
