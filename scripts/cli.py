@@ -214,10 +214,15 @@ def _overrides(args) -> dict:
 def _options(args):
     from eyemech.problems.run.checkpoint import CheckpointOptions
     from eyemech.problems.run.context import RunOptions
-    from eyemech.problems.run.parameters import ParameterError, parse_assignments
+    from eyemech.problems.run.parameters import (
+        ParameterError,
+        check_petsc_options,
+        parse_assignments,
+    )
     from eyemech.problems.solve.driver import NewtonOptions
 
     newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()})
+    check_petsc_options(newton.petsc)  # unknown names and unreadable values: exit 2 now
     try:
         steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)
     except ValueError as err:

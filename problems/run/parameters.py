@@ -249,3 +249,98 @@ def describe(cls: type[SceneParameters]) -> list[tuple[str, str, Any, str, str]]
         rows.append((f.name, _type_name(types[f.name]), f.default, f.metadata.get("unit", ""),
                      f.metadata.get("help", "")))
     return rows
+
+
+# --petsc names under these prefixes configure parts of a solver that exist only on the
+# scene's real system (fieldsplit blocks, multigrid levels, block-Jacobi blocks): the
+# one-unknown trial solve below cannot read them, so their names are not checked there.
+PETSC_UNCHECKED_PREFIXES = ("fieldsplit_", "pc_fieldsplit_", "mg_", "pc_mg_", "pc_gamg_",
+                            "pc_hypre_", "sub_", "pc_bjacobi_", "pc_asm_", "mat_superlu_dist_")
+# preconditioners the trial solve sets up (others need the real operator's structure)
+_PETSC_TRIAL_PCS = ("lu", "cholesky", "ilu", "icc", "jacobi", "none", "sor", "bjacobi")
+
+
+def check_petsc_options(petsc: dict[str, str]) -> None:
+    """Refuse ``--petsc`` options that PETSc would not use or cannot read, before anything
+    is built: the Newton solver's options (:class:`NewtonOptions`, ``petsc`` on top) are
+    given to a SNES on one unknown (x - 1 = 0, MUMPS LU by default) that sets itself up
+    and solves, with its output hidden; then PETSc's options database tells which of the
+    given names were never read (a typo such as ``snes_linesearch_typ``), and a value
+    PETSc cannot read (``snes_linesearch_type=bogus``, ``snes_rtol=abc``) is an error of
+    that trial. Both are a ParameterError for ``--petsc``."""
+    if not petsc:
+        return
+    from mpi4py import MPI  # noqa: F401  (loads the MPI library petsc4py links to)
+    from petsc4py import PETSc
+
+    from eyemech.problems.solve.driver import NewtonOptions
+
+    prefix = "eyemechcheck_"
+    values = NewtonOptions(petsc=dict(petsc)).as_petsc()
+    if "ksp_type" not in petsc:
+        # a Krylov KSP reads the Krylov options (ksp_rtol, ksp_monitor, ...) that a
+        # scene's iterative linear solver (``solver=iterative``) uses; preonly would not
+        values["ksp_type"] = "gmres"
+    opts = PETSc.Options()
+    for key, value in values.items():
+        opts[prefix + key] = value
+    pc_type = values.get("pc_type", "lu")
+    snes = PETSc.SNES().create(PETSc.COMM_SELF)
+    A = PETSc.Mat().createAIJ([1, 1], nnz=1, comm=PETSc.COMM_SELF)
+    A.setValue(0, 0, 1.0)
+    A.assemble()
+    x, f = A.createVecs()
+    refused = None
+    try:
+        snes.setOptionsPrefix(prefix)
+        snes.setFunction(lambda _s, u, r: (u.copy(r), r.shift(-1.0)), f)
+        snes.setJacobian(lambda *_: None, A, A)
+        try:
+            with _quiet_stdout():
+                snes.setFromOptions()
+                snes.getKSP().setFromOptions()
+        except PETSc.Error as err:
+            refused = err
+        if refused is None:
+            try:
+                with _quiet_stdout():
+                    x.set(0.0)
+                    snes.solve(None, x)
+            except PETSc.Error as err:
+                if pc_type in _PETSC_TRIAL_PCS:
+                    refused = err
+        unused = sorted(key for key in petsc
+                        if not opts.used(prefix + key)
+                        and not key.startswith(PETSC_UNCHECKED_PREFIXES))
+    finally:
+        for key in values:
+            if opts.hasName(prefix + key):
+                opts.delValue(prefix + key)
+        for obj in (snes, A, x, f):
+            obj.destroy()
+    if refused is not None:
+        given = " ".join(f"{k}={v}" for k, v in petsc.items())
+        raise ParameterError("--petsc", f"PETSc cannot use {given} (PETSc error "
+                             f"{getattr(refused, 'ierr', refused)}: a value of the wrong kind "
+                             "or an unknown type name)")
+    if unused:
+        raise ParameterError("--petsc", f"PETSc does not use {', '.join(unused)}: not an "
+                             "option of the Newton solver, its line search, KSP or PC "
+                             "(a typo?)")
+
+
+class _quiet_stdout:
+    """Hide what PETSc prints to the C stdout (monitors, views) during the trial."""
+
+    def __enter__(self):
+        import sys
+
+        sys.stdout.flush()
+        self.saved = os.dup(1)
+        self.null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(self.null, 1)
+
+    def __exit__(self, *exc):
+        os.dup2(self.saved, 1)
+        os.close(self.saved)
+        os.close(self.null)
