@@ -39,14 +39,16 @@ class SolveFailure(RuntimeError):
     """Newton failed and step cutting is exhausted; the last converged state is kept."""
 
     def __init__(self, step: int, load: float, last_converged: float, residuals: list[float],
-                 reason: str):
+                 reason: str, quantity: str = "load factor", unit: str = ""):
         self.step, self.load, self.last_converged = step, load, last_converged
         self.residuals, self.reason = residuals, reason
+        self.quantity, self.unit = quantity, unit
         history = ", ".join(f"{r:.3e}" for r in residuals) or "none"
+        with_unit = f" {unit}" if unit else ""
         super().__init__(
-            f"Newton did not converge at step {step} trying load {load:.6g} "
+            f"Newton did not converge at step {step} trying {quantity} {load:.6g}{with_unit} "
             f"(SNES reason: {reason}); residual norms of the last attempt: [{history}]. "
-            f"Last converged load {last_converged:.6g} is kept.")
+            f"Last converged {quantity} {last_converged:.6g}{with_unit} is kept.")
 
 
 @dataclasses.dataclass
@@ -261,6 +263,17 @@ class Stepping:
     easy_iterations: int = 6
     max_cuts: int = 10
     stops: tuple[float, ...] = ()  # values the path must land on exactly (outputs, stages)
+    # what the path value is, for the failure message: "load factor", "time" (unit "s"),
+    # "depth" ("mm"); None: "load factor" on the default path 0 -> 1, else "path value"
+    quantity: str | None = None
+    unit: str = ""
+
+    def describe(self) -> tuple[str, str]:
+        if self.quantity is not None:
+            return self.quantity, self.unit
+        if (self.start, self.end) == (0.0, 1.0):
+            return "load factor", self.unit
+        return "path value", self.unit
 
 
 @dataclasses.dataclass
@@ -332,7 +345,8 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             if cuts > stepping.max_cuts or increment < stepping.min_step * span:
                 apply(value, 0.0)
                 bar.close()
-                raise SolveFailure(step, target, value, history, solver.reason())
+                raise SolveFailure(step, target, value, history, solver.reason(),
+                                   *stepping.describe())
         record = StepRecord(step, target, target - value, iterations, cuts,
                             list(solver.residual_history), solver.linear_iterations)
         value = target
