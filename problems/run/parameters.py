@@ -24,6 +24,10 @@ MMHG = 1.33322e-4  # MPa per mmHg
 # field, or than EYEMECH_MAX_STEPS): a typo must not run until the memory is gone.
 DEFAULT_MAX_STEPS = 10_000
 MAX_STEPS_ENV = "EYEMECH_MAX_STEPS"
+# Meshes are refused before meshing when their estimated cell count exceeds this (or
+# EYEMECH_MAX_CELLS): gmsh would otherwise mesh a typo (mesh_size=0.01) without end.
+DEFAULT_MAX_CELLS = 2_000_000
+MAX_CELLS_ENV = "EYEMECH_MAX_CELLS"
 
 
 class ParameterError(ValueError):
@@ -62,6 +66,24 @@ class SceneParameters:
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def domain_volume(self) -> float | None:
+        """Volume (mm³) meshed with ``mesh_size``, for the cell-count estimate; None when
+        unknown. Default: the full thick sphere of ``inner_radius`` and ``outer_radius``
+        (an upper bound for a sector of it). Scenes may override it."""
+        names = {f.name for f in dataclasses.fields(self)}
+        if {"inner_radius", "outer_radius", "mesh_size"} <= names:
+            return 4.0 / 3.0 * math.pi * (self.outer_radius ** 3 - self.inner_radius ** 3)
+        return None
+
+    def estimated_cells(self) -> int | None:
+        """Cells of a mesh of ``domain_volume`` with tetrahedra of edge ``mesh_size``
+        (regular tetrahedron: h³/(6√2)); None when the volume is unknown."""
+        volume = self.domain_volume()
+        size = getattr(self, "mesh_size", None)
+        if volume is None or not isinstance(size, (int, float)) or not size > 0:
+            return None
+        return int(volume / (size ** 3 / (6.0 * math.sqrt(2.0))))
 
 
 def field(default: Any, help: str, unit: str = "", finite: bool = True) -> Any:
@@ -122,11 +144,21 @@ def check_step_count(params: SceneParameters) -> None:
                              f"{'max_steps' if hasattr(params, 'max_steps') else MAX_STEPS_ENV})")
 
 
+def check_cell_count(params: SceneParameters) -> None:
+    cells = params.estimated_cells()
+    env = os.environ.get(MAX_CELLS_ENV, "").strip()
+    limit = int(env) if env.isdigit() and int(env) > 0 else DEFAULT_MAX_CELLS
+    if cells is not None and cells > limit:
+        raise ParameterError("mesh_size", f"{params.mesh_size:g} gives about {cells:,} cells, "
+                             f"more than the limit of {limit:,} (raise it with {MAX_CELLS_ENV})")
+
+
 def check(params: SceneParameters) -> None:
     """The shared checks, then the scene's own ``validate``."""
     check_finite(params)
     params.validate()
     check_step_count(params)
+    check_cell_count(params)
 
 
 def _field_types(cls: type) -> dict[str, Any]:
