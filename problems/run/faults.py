@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 import traceback
 
 RAISE_ENV = "EYEMECH_TEST_RAISE_ON_RANK"
@@ -34,6 +35,7 @@ KILL_ENV = "EYEMECH_TEST_KILL"
 
 # exit code of a job ended by MPI_Abort after an exception on one rank
 EXIT_RANK_FAILED = 1
+ABORT_GRACE_SECONDS = 0.5
 
 
 def test_raise_rank(comm) -> bool:
@@ -88,6 +90,9 @@ def abort(comm, error: BaseException | None = None) -> None:
     sys.stdout.flush()
     print(f"eyemech: rank {world.rank} of {world.size} failed:\n{text}", file=sys.stderr,
           flush=True)
+    # mpiexec forwards each rank's output through its proxies; MPI_Abort tears them down,
+    # and output still in transit is lost (seen: an empty stderr). Give it a moment.
+    time.sleep(ABORT_GRACE_SECONDS)
     (comm or world).Abort(EXIT_RANK_FAILED)
 
 
