@@ -142,6 +142,8 @@ BAD_INPUT = [
      ["mesh_size", "cells", "EYEMECH_MAX_CELLS"], None),
     ("mesh-too-fine-liquid", ["liquid-sphere", "--set", "mesh_size=0.02"],
      ["mesh_size", "cells"], None),
+    # found only after meshing: still no results.json, no folder
+    ("hertz-negative-gap", ["hertz", "--set", "initial_gap=-0.1"], ["initial_gap"], None),
 ]
 
 

@@ -11,8 +11,9 @@ from typing import Any
 
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
+from eyemech.meshes import MeshError
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
-from eyemech.problems.run.parameters import SceneParameters, check
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
 from eyemech.problems.run.results import (
     OutputFolder,
     Result,
@@ -95,14 +96,19 @@ class RunContext:
         collective = error is None or isinstance(error, (SolveFailure, Interrupted))
         memory = peak_memory_mb()
         self.result.peak_memory_mb = self.comm.allreduce(memory, op=MPI.MAX) if collective else memory
+        # bad input found only once the mesh exists (an obstacle inside the body, a mesh
+        # the scene cannot use) is bad input all the same: no results.json, and the
+        # folder goes again if this run made it and nothing else is in it (exit 2)
+        late_bad_input = isinstance(error, (ParameterError, MeshError))
         try:
-            if not (error is not None and self.checkpoints.resume_meta is not None):
+            if not late_bad_input and not (error is not None
+                                           and self.checkpoints.resume_meta is not None):
                 self.write()
-            # else a resume failed before it reached the checkpoint: the folder's
-            # results.json (say "interrupted") still describes the run: it is kept
+            # a resume that failed before it reached the checkpoint keeps the folder's
+            # results.json (say "interrupted"): it still describes the run
         finally:
             if self.folder is not None:
-                self.folder.release()
+                self.folder.release(remove_if_empty=late_bad_input)
         if self.result.status == "error" and error is None:
             from eyemech.problems.run.checkpoint import CheckpointError
 

@@ -179,6 +179,7 @@ class OutputFolder:
         self.folder, self.comm, self.key = Path(folder), comm, key
         self.lock = self.folder / LOCK_NAME
         self.held = False
+        self.created = False
 
     def acquire(self) -> "OutputFolder":
         from eyemech.problems.run.parameters import ParameterError
@@ -200,6 +201,7 @@ class OutputFolder:
             if parent.exists() and not parent.is_dir():
                 where = "is a file" if parent == folder else f"is under the file {parent}"
                 raise ValueError(f"{folder} {where}; the output goes to a folder")
+        self.created = not folder.exists()
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -229,11 +231,16 @@ class OutputFolder:
             return
         raise ValueError(f"cannot take the lock {self.lock}")
 
-    def release(self) -> None:
+    def release(self, remove_if_empty: bool = False) -> None:
+        """Remove the lock (rank 0); with ``remove_if_empty`` also the folder when
+        :meth:`acquire` made it and nothing else was written there."""
         if self.held and self.comm.rank == 0:
             with contextlib.suppress(OSError):
                 if _lock_owner(self.lock)[0] == os.getpid():
                     os.unlink(self.lock)
+            if remove_if_empty and self.created:
+                with contextlib.suppress(OSError):
+                    self.folder.rmdir()  # fails, as it should, when anything is in it
         self.held = False
 
 
