@@ -39,12 +39,13 @@ class FieldWriter:
         for writer in self._writers:
             writer.write(time)
 
-    def close(self) -> None:
-        """Collective. Called in a ``finally`` while an exception raised on this rank
-        alone propagates, it aborts the job instead: the other ranks are not here."""
+    def close(self, error: BaseException | None = None) -> None:
+        """Collective. Called in a ``finally`` (or ``__exit__``) while an exception raised
+        on this rank alone propagates, it aborts the job instead: the other ranks are
+        not here."""
         from eyemech.problems.run.faults import abort_if_stranding
 
-        abort_if_stranding(self.comm)
+        abort_if_stranding(self.comm, error)
         for writer in self._writers:
             writer.close()
         self._writers = []
@@ -52,8 +53,8 @@ class FieldWriter:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, kind, error, tb):
+        self.close(error)
 
 
 def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,
