@@ -9,9 +9,9 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from eyemech.meshes import MeshError
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
-from eyemech.meshes import MeshError
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
 from eyemech.problems.run.results import (
