@@ -42,13 +42,15 @@ class ParameterError(ValueError):
 class SceneParameters:
     """Base class: field metadata ``help`` and ``unit`` document each parameter. A choice
     is typed ``Literal[...]``: a value outside it is refused on construction, from the
-    command line, a TOML file or Python alike."""
+    command line, a TOML file or Python alike; so is a float that is not finite (unless
+    its field says ``finite=False``)."""
 
     def __post_init__(self) -> None:
         for key, kind in _field_types(type(self)).items():
             if get_origin(kind) is Literal and getattr(self, key) not in get_args(kind):
                 raise ParameterError(key, f"must be one of {', '.join(map(str, get_args(kind)))}, "
                                           f"got {getattr(self, key)!r}")
+        check_finite(self)  # inf and nan are refused on construction too
 
     def validate(self) -> None:
         """Check physical sense; subclasses extend and raise ParameterError."""
