@@ -249,7 +249,8 @@ def test_second_run_on_a_busy_folder_is_refused_and_the_first_finishes(tmp_path)
     assert first.returncode == 0, err[-3000:]
     saved = json.loads((out / "results.json").read_text())
     assert saved["scene"] == "keratotomy" and saved["status"] == "ok"
-    assert not list(out.glob("state_*.vtu")) or saved["fields"]  # only the first run's files
+    # only the first run's files (it writes no fields): none of the refused run's frames
+    assert not list(out.glob("state*")) and not list(out.glob("fields_*"))
 
 
 # -- item 8: sweep exit code and unreadable case results -----------------------------------
