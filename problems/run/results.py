@@ -215,6 +215,8 @@ class OutputFolder:
                 fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
             except FileExistsError:
                 pid, host, since = _lock_owner(self.lock)
+                if host == socket.gethostname() and pid == os.getpid():
+                    return  # this process holds it already (a run inside a run): not ours to remove
                 if host == socket.gethostname() and pid is not None and not _alive(pid):
                     with contextlib.suppress(FileNotFoundError):
                         os.unlink(self.lock)  # left by a run that was killed
