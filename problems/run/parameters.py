@@ -22,7 +22,7 @@ MMHG = 1.33322e-4  # MPa per mmHg
 # Time-stepped scenes (a ``t_end`` with ``dt`` or ``first_dt`` and ``dt_growth``) are
 # refused when their time grid has more steps than this (or than their ``max_steps``
 # field, or than EYEMECH_MAX_STEPS): a typo must not run until the memory is gone.
-DEFAULT_MAX_STEPS = 10_000
+DEFAULT_MAX_STEPS = 20_000  # as the viscoelastic bars (problems/solid/viscous_bar.py)
 MAX_STEPS_ENV = "EYEMECH_MAX_STEPS"
 # Meshes are refused before meshing when their estimated cell count exceeds this (or
 # EYEMECH_MAX_CELLS): gmsh would otherwise mesh a typo (mesh_size=0.01) without end.
