@@ -458,11 +458,20 @@ def _set_cell_values(f, cells: np.ndarray, values: np.ndarray, name: str) -> Non
     order = np.argsort(cells)
     cells, values = cells[order], values[order]
     at = np.minimum(np.searchsorted(cells, local), len(cells) - 1)
-    if not np.array_equal(cells[at], local):
-        raise CheckpointError(f"'{name}': the checkpoint lacks cells of this mesh")
     bs = V.dofmap.bs
     dofs = V.dofmap.list[:len(local)]
-    rows = values[at].reshape(len(local), dofs.shape[1], bs)
+    problem = None
+    if not np.array_equal(cells[at], local):
+        problem = f"'{name}': the checkpoint lacks cells of this mesh"
+    else:
+        try:
+            rows = values[at].reshape(len(local), dofs.shape[1], bs)
+        except ValueError as err:
+            problem = f"'{name}': the checkpoint's values do not fit this space ({err})"
+    # what one rank finds, every rank raises: none may be left in scatter_forward
+    problems = [p for p in mesh.comm.allgather(problem) if p is not None]
+    if problems:
+        raise CheckpointError(problems[0])
     f.x.array.reshape(-1, bs)[dofs] = rows
     f.x.scatter_forward()
 
