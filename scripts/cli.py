@@ -9,8 +9,10 @@
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
 failed (the last converged state and results.json with status "failed" are kept),
-130 / 143 stopped by SIGINT / SIGTERM after writing a checkpoint (128 + the signal
-number; continue with ``eyemech run NAME --resume DIR``).
+4 a sweep ended but some of its cases failed (sweep.csv says which), 130 / 143
+stopped by SIGINT / SIGTERM after writing a checkpoint (128 + the signal number;
+continue with ``eyemech run NAME --resume DIR``), 1 an unexpected error (under MPI
+on one rank: its traceback, then MPI_Abort ends the job).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_SOLVE_FAILED = 3
+EXIT_CASES_FAILED = 4  # a sweep ran to its end, but some cases failed or raised
 EXIT_INTERRUPTED_BASE = 128  # + the signal number, as a shell reports a signal
 
 
@@ -130,11 +133,9 @@ def main(argv: list[str] | None = None) -> int:
         if comm.size == 1:
             raise
         # an error on one rank would leave the others waiting in a collective call
-        import traceback
+        from eyemech.problems.run.faults import abort
 
-        print(f"eyemech: rank {comm.rank} of {comm.size} failed:\n{traceback.format_exc()}",
-              file=sys.stderr, flush=True)
-        comm.Abort(1)
+        abort(comm)
 
 
 def _only_rank_0_reports(rank: int, verbose: bool) -> None:
@@ -213,10 +214,15 @@ def _overrides(args) -> dict:
 def _options(args):
     from eyemech.problems.run.checkpoint import CheckpointOptions
     from eyemech.problems.run.context import RunOptions
-    from eyemech.problems.run.parameters import ParameterError, parse_assignments
+    from eyemech.problems.run.parameters import (
+        ParameterError,
+        check_petsc_options,
+        parse_assignments,
+    )
     from eyemech.problems.solve.driver import NewtonOptions
 
     newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()})
+    check_petsc_options(newton.petsc)  # unknown names and unreadable values: exit 2 now
     try:
         steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)
     except ValueError as err:
@@ -255,13 +261,14 @@ def _run(scene, overrides, args, options, comm, say) -> int:
 def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
     """The checkpoint's parameters; --set/--config may repeat them but not change them
     (the checkpoint then refuses). No checkpoint in ``folder``: a fresh start."""
-    from eyemech.problems.run.checkpoint import CheckpointError, latest, read_meta
+    from eyemech.problems.run.checkpoint import CheckpointError, newest_readable
 
+    if folder.exists() and not folder.is_dir():
+        raise CheckpointError(f"--resume {folder}: not a folder (give the run's output folder)")
     meta, error = None, None
     if comm.rank == 0:  # rank 0 reads; an unreadable checkpoint must not leave the others waiting
         try:
-            found = latest(folder)
-            meta = read_meta(found) if found is not None else None
+            meta = newest_readable(folder, warn=False)[1]  # the newest that reads whole
         except (OSError, ValueError) as err:
             error = f"cannot read the checkpoint in {folder}: {err}"
     meta, error = comm.bcast((meta, error), root=0)
@@ -298,7 +305,12 @@ def _sweep(scene, overrides, args, options, comm, say) -> int:
             say(json.dumps(rows))
         else:
             say(f"{len(rows)} cases, {len(failed)} failed; table in {Path(args.out) / 'sweep.csv'}")
-    return 0
+        if failed:
+            say(f"eyemech: {len(failed)} of {len(rows)} cases failed (cases "
+                f"{', '.join(str(r['case']) for r in failed)}; see sweep.csv)", file=sys.stderr)
+    failed_count = comm.bcast(len([r for r in rows if r.get("status") != "ok"])
+                              if comm.rank == 0 else None, root=0)
+    return EXIT_CASES_FAILED if failed_count else 0
 
 
 if __name__ == "__main__":

@@ -87,7 +87,8 @@ def test_sweep_records_a_failing_case_and_finishes_the_others(tmp_path):
                              "--set", "mesh_size=2", "--set", "load_steps=1", "--petsc",
                              "snes_max_it=6", "--out", str(tmp_path), "--no-pictures",
                              "--no-fields")
-    assert code == 0, err
+    assert code == 4, err  # the sweep ran to its end, a case failed: a job script can tell
+    assert "1 of 2 cases failed" in err
     rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
     assert [row["status"] for row in rows] == ["ok", "failed"]
     assert "did not converge" in rows[1]["error"]

@@ -211,7 +211,7 @@ def test_only_rank_0_prints(runs, name, ranks):
 @pytest.mark.mpi
 @pytest.mark.parametrize("rank", [0, 1])
 def test_an_exception_on_one_rank_ends_the_job(rank, tmp_path):
-    """EYEMECH_TEST_RAISE_ON_RANK (problems/solve/driver.py) raises inside the residual on one
+    """EYEMECH_TEST_RAISE_ON_RANK (problems/run/faults.py) raises inside the residual on one
     rank while the other waits in a collective call: the command line prints the
     traceback and calls MPI Abort, so mpiexec ends both with a non-zero code."""
     command = [str(BIN / "mpiexec"), "-n", "2", str(BIN / "eyemech"), "run", "plate-clamped",

@@ -40,23 +40,25 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import re
 import shutil
 import signal
 import time
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 from mpi4py import MPI
 
+from eyemech.problems.run.faults import KILL_ENV, parse_kill  # noqa: F401  (test hook)
+
+log = logging.getLogger("eyemech")
+
 FORMAT = "eyemech-checkpoint-1"
 NAME = re.compile(r"^ckpt_(\d{6,})$")
-# test hook: "step:N" (SIGKILL inside Newton of the N-th step of the run), "checkpoint:N"
-# (SIGKILL inside the N-th checkpoint write, before its commit), "sigterm:N[:RANK]"
-# (SIGTERM to this process -- or only to rank RANK -- inside Newton of step N)
-KILL_ENV = "EYEMECH_TEST_KILL"
 
 
 class Interrupted(Exception):
@@ -114,9 +116,54 @@ def latest(folder: str | Path) -> Path | None:
     return max(found)[1] if found else None
 
 
+def newest_readable(folder: str | Path, warn: bool = True) \
+        -> tuple[Path | None, dict[str, Any] | None]:
+    """The newest checkpoint under ``folder`` whose ``meta.json`` and rank files all read
+    whole, with its meta; older ones are tried when the newest is damaged (truncated by
+    a full disk, emptied by a crash of the file system), each skipped one logged. (None,
+    None) when there is no checkpoint; :class:`CheckpointError` when none is readable."""
+    folder = Path(folder)
+    if (folder / "checkpoints").is_dir():
+        folder = folder / "checkpoints"
+    if not folder.is_dir():
+        return None, None
+    found = sorted(((int(m.group(1)), p) for p in folder.iterdir()
+                    if (m := NAME.match(p.name)) and (p / "meta.json").is_file()), reverse=True)
+    problems = []
+    for _, candidate in found:
+        try:
+            meta = read_meta(candidate)
+            _check_rank_files(candidate, meta)
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as err:
+            problems.append(f"{candidate.name}: {err}")
+            if warn:
+                log.warning("checkpoint %s is unreadable (%s)%s", candidate, err,
+                            "" if candidate == found[-1][1] else "; trying the one before it")
+            continue
+        return candidate, meta
+    if problems:
+        raise CheckpointError(f"no readable checkpoint in {folder} ({'; '.join(problems)})")
+    return None, None
+
+
+def _check_rank_files(checkpoint: Path, meta: dict[str, Any]) -> None:
+    """Every rank file is there and every array in it reads whole."""
+    parts = sorted(checkpoint.glob("rank_*.npz"))
+    if len(parts) != meta.get("mpi_size"):
+        raise CheckpointError(f"{len(parts)} rank files of {meta.get('mpi_size')}")
+    for part in parts:
+        try:
+            with np.load(part) as arrays:
+                for key in arrays.files:
+                    arrays[key]
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+            raise CheckpointError(f"{part.name} is damaged ({type(err).__name__}: {err})") \
+                from None
+
+
 def read_meta(checkpoint: Path) -> dict[str, Any]:
-    meta = json.loads((checkpoint / "meta.json").read_text())
-    if meta.get("format") != FORMAT:
+    meta = json.loads((checkpoint / "meta.json").read_bytes().decode("utf-8"))
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(f"{checkpoint} is not an {FORMAT} checkpoint")
     return meta
 
@@ -139,7 +186,7 @@ class Checkpoints:
         self._last_write = time.monotonic()
         self._stop_signal = 0
         self._handlers: dict[int, Any] = {}
-        self._kill = _parse_kill(os.environ.get(KILL_ENV, ""))
+        self._kill = parse_kill()
         self._watching: tuple[Any, Callable] | None = None  # (solver, hook) of the test hook
         self.resume_meta: dict[str, Any] | None = None
         self.resumed_from: Path | None = None
@@ -305,9 +352,8 @@ class Checkpoints:
     def _load_meta(self, folder: Path) -> None:
         meta, error = None, None
         if self.comm.rank == 0:
-            found = latest(folder)
             try:
-                meta = read_meta(found) if found is not None else None
+                found, meta = newest_readable(folder)
                 if meta is not None:
                     meta["_folder"] = str(found)
             except (OSError, ValueError) as err:
@@ -412,11 +458,20 @@ def _set_cell_values(f, cells: np.ndarray, values: np.ndarray, name: str) -> Non
     order = np.argsort(cells)
     cells, values = cells[order], values[order]
     at = np.minimum(np.searchsorted(cells, local), len(cells) - 1)
-    if not np.array_equal(cells[at], local):
-        raise CheckpointError(f"'{name}': the checkpoint lacks cells of this mesh")
     bs = V.dofmap.bs
     dofs = V.dofmap.list[:len(local)]
-    rows = values[at].reshape(len(local), dofs.shape[1], bs)
+    problem = None
+    if not np.array_equal(cells[at], local):
+        problem = f"'{name}': the checkpoint lacks cells of this mesh"
+    else:
+        try:
+            rows = values[at].reshape(len(local), dofs.shape[1], bs)
+        except ValueError as err:
+            problem = f"'{name}': the checkpoint's values do not fit this space ({err})"
+    # what one rank finds, every rank raises: none may be left in scatter_forward
+    problems = [p for p in mesh.comm.allgather(problem) if p is not None]
+    if problems:
+        raise CheckpointError(problems[0])
     f.x.array.reshape(-1, bs)[dofs] = rows
     f.x.scatter_forward()
 
@@ -495,13 +550,6 @@ def _decode(value: Any) -> Any:
 def _canonical(value: Any) -> Any:
     """Parameters compared as JSON sees them (tuples and lists alike)."""
     return json.loads(json.dumps(value, default=_encode))
-
-
-def _parse_kill(spec: str) -> tuple[str, int, int | None]:
-    if not spec:
-        return "", 0, None
-    parts = spec.split(":")
-    return parts[0], int(parts[1]), (int(parts[2]) if len(parts) > 2 else None)
 
 
 def _main_thread() -> bool:

@@ -9,10 +9,13 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from eyemech.meshes import MeshError
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
+from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
-from eyemech.problems.run.parameters import SceneParameters
+from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
 from eyemech.problems.run.results import (
+    OutputFolder,
     Result,
     Timings,
     peak_memory_mb,
@@ -49,7 +52,7 @@ class RunContext:
 
     def __init__(self, scene: str, params: SceneParameters, comm: MPI.Comm | None,
                  out: str | Path | None, options: RunOptions | None):
-        params.validate()  # bad input stops here, before anything is created or solved
+        check(params)  # bad input stops here, before anything is created or solved
         self.comm = comm if comm is not None else MPI.COMM_WORLD
         self.out = Path(out) if out is not None else None
         self.options = options or RunOptions()
@@ -57,14 +60,16 @@ class RunContext:
         self.result = Result(scene=scene, parameters=params.as_dict(), mpi_size=self.comm.size)
         self.checkpoints = Checkpoints(scene, self.result.parameters, self.result, self.comm,
                                        self.out, self.options.checkpoint)
-        if self.out is not None and self.comm.rank == 0:
-            self.out.mkdir(parents=True, exist_ok=True)
-        self.comm.Barrier()
+        # the folder is made, checked and locked (all ranks raise alike when it cannot be)
+        self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
+            else None
 
     def __enter__(self) -> "RunContext":
         return self
 
     def __exit__(self, kind, error, tb) -> bool:
+        # an exception on this rank alone: the other ranks wait in a collective call
+        abort_if_stranding(self.comm, error)
         self.checkpoints.restore_signal_handlers()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"
@@ -91,7 +96,19 @@ class RunContext:
         collective = error is None or isinstance(error, (SolveFailure, Interrupted))
         memory = peak_memory_mb()
         self.result.peak_memory_mb = self.comm.allreduce(memory, op=MPI.MAX) if collective else memory
-        self.write()
+        # bad input found only once the mesh exists (an obstacle inside the body, a mesh
+        # the scene cannot use) is bad input all the same: no results.json, and the
+        # folder goes again if this run made it and nothing else is in it (exit 2)
+        late_bad_input = isinstance(error, (ParameterError, MeshError))
+        try:
+            if not late_bad_input and not (error is not None
+                                           and self.checkpoints.resume_meta is not None):
+                self.write()
+            # a resume that failed before it reached the checkpoint keeps the folder's
+            # results.json (say "interrupted"): it still describes the run
+        finally:
+            if self.folder is not None:
+                self.folder.release(remove_if_empty=late_bad_input)
         if self.result.status == "error" and error is None:
             from eyemech.problems.run.checkpoint import CheckpointError
 

@@ -22,6 +22,7 @@ class FieldWriter:
                  stem: str = "fields"):
         self.files: list[str] = []
         self._writers = []
+        self.comm = comm
         if out is None:
             return
         groups: dict[str, list] = {}
@@ -38,7 +39,13 @@ class FieldWriter:
         for writer in self._writers:
             writer.write(time)
 
-    def close(self) -> None:
+    def close(self, error: BaseException | None = None) -> None:
+        """Collective. Called in a ``finally`` (or ``__exit__``) while an exception raised
+        on this rank alone propagates, it aborts the job instead: the other ranks are
+        not here."""
+        from eyemech.problems.run.faults import abort_if_stranding
+
+        abort_if_stranding(self.comm, error)
         for writer in self._writers:
             writer.close()
         self._writers = []
@@ -46,8 +53,8 @@ class FieldWriter:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, kind, error, tb):
+        self.close(error)
 
 
 def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,

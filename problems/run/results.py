@@ -8,6 +8,7 @@ import json
 import os
 import platform
 import resource
+import socket
 import tempfile
 import time
 from collections import defaultdict
@@ -179,11 +180,25 @@ def to_jsonable(value: Any) -> Any:
     return value
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _temporary(path: Path) -> tuple[int, str]:
+    """A temporary file beside ``path`` with the permissions an ordinary ``open`` would
+    give it (``mkstemp`` makes it 0600: others of the group could not read the result)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.fchmod(fd, 0o666 & ~_umask())
+    return fd, tmp
+
+
 def write_json_atomic(path: str | Path, data: Any) -> None:
     """Write JSON so that readers see the old file or the whole new one, never a part."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = _temporary(path)
     try:
         with os.fdopen(fd, "w") as handle:
             json.dump(data, handle, indent=2)
@@ -199,8 +214,7 @@ def write_json_atomic(path: str | Path, data: Any) -> None:
 
 def write_text_atomic(path: str | Path, text: str) -> None:
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = _temporary(path)
     try:
         with os.fdopen(fd, "w") as handle:
             handle.write(text)
@@ -209,3 +223,107 @@ def write_text_atomic(path: str | Path, text: str) -> None:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+LOCK_NAME = ".eyemech.lock"
+
+
+class OutputFolder:
+    """A run's (or a sweep's) hold on its output folder.
+
+    :meth:`acquire` (collective) makes the folder, checks that it can be written, and
+    creates ``.eyemech.lock`` there holding the process id, the host and the start time;
+    a second run on the same folder is refused with exit code 2 (its files would mix
+    with the first one's, and its checkpoint writes would delete the first one's
+    temporary checkpoint). A lock left by a process that no longer runs on this host is
+    taken over; one from another host must be removed by hand. :meth:`release` on rank 0
+    removes it."""
+
+    def __init__(self, folder: str | Path, comm, key: str = "--out"):
+        self.folder, self.comm, self.key = Path(folder), comm, key
+        self.lock = self.folder / LOCK_NAME
+        self.held = False
+        self.created = False
+
+    def acquire(self) -> "OutputFolder":
+        from eyemech.problems.run.parameters import ParameterError
+
+        error = None
+        if self.comm.rank == 0:
+            try:
+                self._acquire()
+            except ValueError as err:
+                error = str(err)
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise ParameterError(self.key, error)
+        return self
+
+    def _acquire(self) -> None:
+        folder = self.folder
+        for parent in (folder, *folder.parents):
+            if parent.exists() and not parent.is_dir():
+                where = "is a file" if parent == folder else f"is under the file {parent}"
+                raise ValueError(f"{folder} {where}; the output goes to a folder")
+        self.created = not folder.exists()
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ValueError(f"cannot create {folder}: {err.strerror or err}") from None
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ValueError(f"cannot write in {folder} (permission denied)")
+        mine = f"{os.getpid()} {socket.gethostname()} " \
+            f"{time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}\n"
+        for _ in range(2):
+            try:
+                fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+            except FileExistsError:
+                pid, host, since = _lock_owner(self.lock)
+                if host == socket.gethostname() and pid == os.getpid():
+                    return  # this process holds it already (a run inside a run): not ours to remove
+                if host == socket.gethostname() and pid is not None and not _alive(pid):
+                    with contextlib.suppress(FileNotFoundError):
+                        os.unlink(self.lock)  # left by a run that was killed
+                    continue
+                raise ValueError(f"{folder} is in use by another eyemech run (process {pid} "
+                                 f"on {host} since {since}); wait for it to end or choose "
+                                 f"another folder (remove {self.lock} if no run uses it)") \
+                    from None
+            except OSError as err:
+                raise ValueError(f"cannot write in {folder}: {err.strerror or err}") from None
+            with os.fdopen(fd, "w") as handle:
+                handle.write(mine)
+            self.held = True
+            return
+        raise ValueError(f"cannot take the lock {self.lock}")
+
+    def release(self, remove_if_empty: bool = False) -> None:
+        """Remove the lock (rank 0); with ``remove_if_empty`` also the folder when
+        :meth:`acquire` made it and nothing else was written there."""
+        if self.held and self.comm.rank == 0:
+            with contextlib.suppress(OSError):
+                if _lock_owner(self.lock)[0] == os.getpid():
+                    os.unlink(self.lock)
+            if remove_if_empty and self.created:
+                with contextlib.suppress(OSError):
+                    self.folder.rmdir()  # fails, as it should, when anything is in it
+        self.held = False
+
+
+def _lock_owner(lock: Path) -> tuple[int | None, str, str]:
+    try:
+        words = lock.read_text().split()
+    except OSError:
+        return None, "?", "?"
+    pid = int(words[0]) if words and words[0].isdigit() else None
+    return pid, (words[1] if len(words) > 1 else "?"), (words[2] if len(words) > 2 else "?")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

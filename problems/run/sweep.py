@@ -8,17 +8,20 @@ import dataclasses
 import io
 import itertools
 import json
+import logging
 import traceback
 from pathlib import Path
 from typing import Any
 
 from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.parameters import ParameterError, build
-from eyemech.problems.run.results import write_text_atomic
+from eyemech.problems.run.results import OutputFolder, write_text_atomic
 from eyemech.problems.solve.driver import SolveFailure
 from mpi4py import MPI
 
+log = logging.getLogger("eyemech")
 
 def parse_grid(entries: list[str]) -> dict[str, list[str]]:
     grid: dict[str, list[str]] = {}
@@ -52,6 +55,16 @@ def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path
     all_cases = cases(scene, base, grid)
     if ranks_per_case < 1 or comm.size % ranks_per_case:
         raise ParameterError("--ranks-per-case", f"must divide the number of ranks ({comm.size})")
+    folder = OutputFolder(out, comm).acquire()  # made, writable, and this sweep's alone
+    try:
+        return _run_cases(scene, all_cases, grid, Path(out), ranks_per_case, options, resume,
+                          comm)
+    finally:
+        folder.release()
+
+
+def _run_cases(scene, all_cases, grid, out: Path, ranks_per_case: int,
+               options: RunOptions | None, resume: bool, comm: MPI.Comm) -> list[dict[str, Any]]:
     groups = comm.size // ranks_per_case
     color = comm.rank // ranks_per_case
     sub = comm.Split(color, comm.rank)
@@ -63,7 +76,8 @@ def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path
         row = {"case": index, **{k: overrides[k] for k in grid}}
         previous = _finished(case_dir) if resume else None
         if previous is not None:
-            rows.append({**row, **previous})
+            if sub.rank == 0:
+                rows.append({**row, **previous})
             continue
         params = build(scene.parameters, overrides)
         try:
@@ -75,7 +89,8 @@ def run_sweep(scene, base: dict[str, Any], grid: dict[str, list[str]], out: Path
             raise  # SIGINT/SIGTERM stop the whole sweep; --resume continues it
         except SolveFailure as err:
             row.update(status="failed", error=str(err))
-        except Exception as err:  # one case's error must not stop the others
+        except Exception as err:  # one case's error must not stop the others ...
+            abort_if_stranding(sub, err)  # ... unless the case's other ranks wait for this one
             row.update(status="error", error="".join(traceback.format_exception_only(err)).strip())
         if sub.rank == 0:
             rows.append(row)
@@ -98,11 +113,17 @@ def _case_options(options: RunOptions | None, case_dir: Path, resume: bool) -> R
 
 
 def _finished(case_dir: Path) -> dict[str, Any] | None:
+    """The row of a case whose results.json says ``ok``; None (run it again) for a
+    missing, unreadable or unfinished one."""
     path = case_dir / "results.json"
     if not path.exists():
         return None
-    data = json.loads(path.read_text())
-    if data.get("status") != "ok":
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except (OSError, ValueError) as err:
+        log.warning("%s is unreadable (%s): the case runs again", path, err)
+        return None
+    if not isinstance(data, dict) or data.get("status") != "ok":
         return None
     return {"status": "ok", **_scalars(data.get("quantities", {})),
             "wall_time_s": data.get("timings", {}).get("total")}

@@ -35,6 +35,7 @@ import numpy as np
 
 import dolfinx
 import dolfinx.fem.petsc
+from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
 from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts, Timings
 from petsc4py import PETSc
 
@@ -43,24 +44,22 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("eyemech")
 
-# Test hook: "R" makes rank R raise inside the residual assembly of the first Newton
-# solve (after Newton's first update), while the other ranks are inside collective
-# calls: the command line must still end the whole job with the message.
-RAISE_ENV = "EYEMECH_TEST_RAISE_ON_RANK"
 
 
 class SolveFailure(RuntimeError):
     """Newton failed and step cutting is exhausted; the last converged state is kept."""
 
     def __init__(self, step: int, load: float, last_converged: float, residuals: list[float],
-                 reason: str):
+                 reason: str, quantity: str = "load factor", unit: str = ""):
         self.step, self.load, self.last_converged = step, load, last_converged
         self.residuals, self.reason = residuals, reason
+        self.quantity, self.unit = quantity, unit
         history = ", ".join(f"{r:.3e}" for r in residuals) or "none"
+        with_unit = f" {unit}" if unit else ""
         super().__init__(
-            f"Newton did not converge at step {step} trying load {load:.6g} "
+            f"Newton did not converge at step {step} trying {quantity} {load:.6g}{with_unit} "
             f"(SNES reason: {reason}); residual norms of the last attempt: [{history}]. "
-            f"Last converged load {last_converged:.6g} is kept.")
+            f"Last converged {quantity} {last_converged:.6g}{with_unit} is kept.")
 
 
 @dataclasses.dataclass
@@ -185,16 +184,15 @@ class NonlinearSolver:
         b, (f_call, f_args, f_kargs) = self.snes.getFunction()
         A, P, (j_call, j_args, j_kargs) = self.snes.getJacobian()
 
-        raise_on = _test_raise_rank(self.unknowns[0].function_space.mesh.comm)
+        raise_on = test_raise_rank(self.unknowns[0].function_space.mesh.comm)
         calls = [0]
 
         def residual(snes, x, vec):
             start = time.perf_counter()
             with self._remember_errors():
                 calls[0] += 1
-                if raise_on and calls[0] == 2:
-                    raise RuntimeError(f"{RAISE_ENV}: test error on rank "
-                                       f"{snes.comm.tompi4py().rank} inside the residual")
+                if raise_on and calls[0] == 2:  # test hook (problems/run/faults.py)
+                    raise_test_error(snes.comm.tompi4py().rank)
                 f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
                 for hook in self.residual_hooks:
                     hook(x, vec)
@@ -325,14 +323,6 @@ class NonlinearSolver:
         return names.get(code, str(code))
 
 
-def _test_raise_rank(comm) -> bool:
-    """Whether this rank is the one the test hook ``EYEMECH_TEST_RAISE_ON_RANK`` names."""
-    import os
-
-    value = os.environ.get(RAISE_ENV, "")
-    return value.strip() != "" and int(value) == comm.rank
-
-
 @dataclasses.dataclass
 class Stepping:
     """Path following from ``start`` to ``end`` (a load factor or a time)."""
@@ -346,6 +336,17 @@ class Stepping:
     easy_iterations: int = 6
     max_cuts: int = 10
     stops: tuple[float, ...] = ()  # values the path must land on exactly (outputs, stages)
+    # what the path value is, for the failure message: "load factor", "time" (unit "s"),
+    # "depth" ("mm"); None: "load factor" on the default path 0 -> 1, else "path value"
+    quantity: str | None = None
+    unit: str = ""
+
+    def describe(self) -> tuple[str, str]:
+        if self.quantity is not None:
+            return self.quantity, self.unit
+        if (self.start, self.end) == (0.0, 1.0):
+            return "load factor", self.unit
+        return "path value", self.unit
 
 
 @dataclasses.dataclass
@@ -438,7 +439,8 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             if cuts > stepping.max_cuts or increment < stepping.min_step * span:
                 apply(value, 0.0)
                 bar.close()
-                raise SolveFailure(step, target, value, history, solver.reason())
+                raise SolveFailure(step, target, value, history, solver.reason(),
+                                   *stepping.describe())
         record = StepRecord(step, target, target - value, iterations, cuts,
                             list(solver.residual_history), solver.linear_iterations,
                             **StepRecord.work(solver.counts - counts_before))

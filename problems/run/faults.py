@@ -1,0 +1,105 @@
+"""Faults: the MPI error path and the test hooks that inject faults.
+
+The error path. Under MPI every rank runs the same code, and most library calls are
+collective: when one rank raises an exception that the other ranks do not raise, the
+others wait for it in some collective call (a vector norm inside SNES, an ADIOS2 close, a
+barrier) and the job never ends. Exceptions that every rank raises alike -- a failed
+Newton solve (the convergence test is global), a stop on SIGINT/SIGTERM (the ranks agree
+by an allreduce), bad input found by the shared validation -- are left to the normal
+path. Any other exception on a communicator of more than one rank is *stranding*: the
+first shared place that sees it (a collective writer's ``close``, ``RunContext.__exit__``,
+the command line) prints the rank's traceback and calls ``MPI_Abort``, so ``mpiexec``
+ends the whole job at once. Nothing collective may run between the exception and the
+abort: writers skip their collective ``close`` while such an exception propagates.
+
+The test hooks (environment variables, read where the fault is injected):
+
+- ``EYEMECH_TEST_RAISE_ON_RANK=R``: rank R raises inside the residual assembly of each
+  Newton solver's second residual evaluation (after Newton's first update), while the
+  other ranks are inside collective calls.
+- ``EYEMECH_TEST_KILL``: ``step:N`` (SIGKILL inside Newton of the N-th step of the run),
+  ``checkpoint:N`` (SIGKILL inside the N-th checkpoint write, before its commit),
+  ``sigterm:N[:RANK]`` (SIGTERM to this process -- or only to rank RANK -- inside Newton
+  of step N).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+import traceback
+
+RAISE_ENV = "EYEMECH_TEST_RAISE_ON_RANK"
+KILL_ENV = "EYEMECH_TEST_KILL"
+
+# exit code of a job ended by MPI_Abort after an exception on one rank
+EXIT_RANK_FAILED = 1
+ABORT_GRACE_SECONDS = 0.5
+
+
+def test_raise_rank(comm) -> bool:
+    """Whether this rank is the one ``EYEMECH_TEST_RAISE_ON_RANK`` names."""
+    value = os.environ.get(RAISE_ENV, "").strip()
+    return value != "" and int(value) == comm.rank
+
+
+def raise_test_error(rank: int) -> None:
+    raise RuntimeError(f"{RAISE_ENV}: test error on rank {rank} inside the residual")
+
+
+def parse_kill(spec: str | None = None) -> tuple[str, int, int | None]:
+    """``EYEMECH_TEST_KILL`` as (kind, number, rank or None); ("", 0, None) when unset."""
+    spec = os.environ.get(KILL_ENV, "") if spec is None else spec
+    if not spec:
+        return "", 0, None
+    parts = spec.split(":")
+    return parts[0], int(parts[1]), (int(parts[2]) if len(parts) > 2 else None)
+
+
+def collective_error(error: BaseException | None) -> bool:
+    """Whether ``error`` is raised on every rank alike (or is no error at all)."""
+    if error is None:
+        return True
+    from eyemech.meshes import MeshError
+    from eyemech.problems.run.checkpoint import CheckpointError, Interrupted
+    from eyemech.problems.run.parameters import ParameterError
+    from eyemech.problems.solve.driver import SolveFailure
+
+    return isinstance(error, (SolveFailure, Interrupted, ParameterError, MeshError,
+                              CheckpointError, KeyboardInterrupt, SystemExit))
+
+
+def propagating() -> BaseException | None:
+    """The exception being handled or propagating through a ``finally`` here, if any."""
+    return sys.exc_info()[1]
+
+
+def stranding(comm, error: BaseException | None) -> bool:
+    """Whether ``error`` on this rank may leave the other ranks of ``comm`` waiting."""
+    return comm is not None and comm.size > 1 and not collective_error(error)
+
+
+def abort(comm, error: BaseException | None = None) -> None:
+    """Print this rank's traceback and end the whole job with ``MPI_Abort``."""
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    text = "".join(traceback.format_exception(error)) if error is not None \
+        else traceback.format_exc()
+    sys.stdout.flush()
+    print(f"eyemech: rank {world.rank} of {world.size} failed:\n{text}", file=sys.stderr,
+          flush=True)
+    # mpiexec forwards each rank's output through its proxies; MPI_Abort tears them down,
+    # and output still in transit is lost (seen: an empty stderr). Give it a moment.
+    time.sleep(ABORT_GRACE_SECONDS)
+    (comm or world).Abort(EXIT_RANK_FAILED)
+
+
+def abort_if_stranding(comm, error: BaseException | None = None) -> None:
+    """Abort the job when ``error`` (default: the exception propagating here) would
+    leave other ranks of ``comm`` waiting; return otherwise. Call it before any
+    collective operation in ``finally`` blocks and ``__exit__`` methods."""
+    error = propagating() if error is None else error
+    if error is not None and stranding(comm, error):
+        abort(comm, error)

@@ -1,0 +1,378 @@
+"""The run contract under bad input, faults and shared folders (issue 25): a table of
+rows, each run through the real command line.
+
+- Bad input: exit 2, one line on stderr naming the key, no traceback, nothing written
+  (the output folder is not created, or an existing one is left as it was).
+- Damaged checkpoints: a resume falls back to the older intact checkpoint; with none
+  readable it stops with exit 2 and leaves the folder's results.json as it was.
+- Faults under MPI (``EYEMECH_TEST_RAISE_ON_RANK`` on each rank, fields on, 2 ranks): a
+  scene, a sweep and a resume each end within 30 s with the failing rank's traceback.
+- Shared folders: a folder in use by another run is refused (exit 2); files follow the
+  umask; a sweep with failed cases exits 4.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+BIN = Path(sys.executable).parent
+SPHERE = ("sphere-inflation", "--set", "mesh_size=3")
+# keratotomy in 6 steps: intact IOP (1), intact creep (2, 3), incised IOP (4), creep (5, 6)
+CORNEA = ("keratotomy", "--set", "mesh_size=1.5", "--set", "azimuthal_divisions=8",
+          "--set", "t_end=1800", "--set", "first_dt=900", "--set", "dt_growth=1",
+          "--set", "incisions=4")
+QUIET = ("--quiet", "--no-pictures")
+FAULT_TIMEOUT = 30.0  # seconds an MPI job with a fault on one rank may take to end
+
+
+def eyemech(*args: str, ranks: int = 1, env: dict | None = None, timeout: float = 60,
+            cwd: Path | None = None, umask: int | None = None) -> subprocess.CompletedProcess:
+    command = [str(BIN / "eyemech"), *args]
+    if ranks > 1:
+        command = [str(BIN / "mpiexec"), "-n", str(ranks), *command]
+    full = {k: v for k, v in os.environ.items()
+            if k not in ("EYEMECH_TEST_RAISE_ON_RANK", "EYEMECH_TEST_KILL")}
+    full.update(PYTHONUNBUFFERED="1", **(env or {}))
+    preexec = (lambda: os.umask(umask)) if umask is not None else None
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=full,
+                          cwd=cwd, preexec_fn=preexec)
+
+
+def listing(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` with its content (what 'left as it was' compares)."""
+    if not folder.exists():
+        return {}
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file()}
+
+
+# -- bad input: exit 2, one message naming the key, nothing written -----------------------
+def _toml(text: bytes):
+    def make(tmp: Path) -> list[str]:
+        path = tmp / "case.toml"
+        path.write_bytes(text)
+        return ["--config", str(path)]
+    return make
+
+
+def _file(tmp: Path) -> Path:
+    path = tmp / "a_file"
+    path.write_text("not a folder\n")
+    return path
+
+
+def _lock_held(tmp: Path) -> list[str]:
+    """The output folder is held by a live process on this host."""
+    folder = tmp / "out"
+    folder.mkdir()
+    holder = subprocess.Popen(["sleep", "60"])
+    _lock_held.holders.append(holder)
+    (folder / ".eyemech.lock").write_text(f"{holder.pid} {os.uname().nodename} now\n")
+    return []
+
+
+_lock_held.holders = []
+
+# (id, scene and arguments, words the one-line message must contain, set-up returning extra
+# arguments; "out" is where the run is pointed unless the set-up gives --out itself)
+BAD_INPUT = [
+    # earlier issues: unknown keys, types, non-physical values
+    ("unknown-key", [*SPHERE, "--set", "presure=0.01"], ["presure", "unknown key"], None),
+    ("not-a-number", [*SPHERE, "--set", "pressure=abc"], ["pressure", "cannot read"], None),
+    ("negative-modulus", [*SPHERE, "--set", "c10=-1"], ["c10"], None),
+    ("radius-order", [*SPHERE, "--set", "outer_radius=5"], ["outer_radius"], None),
+    ("negative-mesh-size", [*SPHERE, "--set", "mesh_size=-1"], ["mesh_size"], None),
+    ("unknown-scene", ["no-such-scene"], ["sphere-inflation"], None),
+    ("bad-literal", [*SPHERE, "--set", "element=P7"], ["element"], None),
+    ("missing-config", [*SPHERE, "--config", "/nonexistent/case.toml"], ["--config"], None),
+    ("bad-toml", [*SPHERE], ["--config", "not valid TOML"], _toml(b"mesh_size = = 3\n")),
+    ("checkpoint-every", [*SPHERE, "--checkpoint-every", "soon"], ["--checkpoint-every"], None),
+    # item 3: infinite and NaN values
+    ("inf-c10", [*SPHERE, "--set", "c10=inf"], ["c10", "finite"], None),
+    ("inf-bulk-modulus", [*SPHERE, "--set", "bulk_modulus=inf"], ["bulk_modulus", "finite"], None),
+    ("nan-bulk-modulus", [*SPHERE, "--set", "bulk_modulus=nan"], ["bulk_modulus", "finite"], None),
+    ("inf-outer-radius", [*SPHERE, "--set", "outer_radius=inf"], ["outer_radius", "finite"], None),
+    ("inf-pressure", [*SPHERE, "--set", "pressure=-inf"], ["pressure", "finite"], None),
+    ("inf-youngs-modulus", ["plate-clamped", "--set", "youngs_modulus=inf"],
+     ["youngs_modulus", "finite"], None),
+    ("inf-penalty", ["hertz", "--set", "penalty=inf"], ["penalty", "finite"], None),
+    ("inf-mu-inf", ["keratotomy", "--set", "mu_inf=inf"], ["mu_inf", "finite"], None),
+    ("inf-in-toml", [*SPHERE], ["c10", "finite"], _toml(b"[parameters]\nc10 = inf\n")),
+    # item 4: time-stepped scenes have a step-count cap
+    ("inf-t-end", ["keratotomy", "--set", "t_end=inf"], ["t_end", "finite"], None),
+    ("t-end-steps", ["keratotomy", "--set", "t_end=1e9", "--set", "dt_growth=1"],
+     ["t_end", "time steps", "EYEMECH_MAX_STEPS"], None),
+    ("t-end-steps-sls", ["sls-creep", "--set", "t_end=1e9"], ["steps"], None),  # its own cap
+    # item 5: --petsc names and values
+    ("petsc-typo", [*SPHERE, "--petsc", "snes_linesearch_typ=bt"],
+     ["--petsc", "snes_linesearch_typ"], None),
+    ("petsc-bad-type", [*SPHERE, "--petsc", "snes_linesearch_type=bogus"],
+     ["--petsc", "snes_linesearch_type=bogus"], None),
+    ("petsc-bad-number", [*SPHERE, "--petsc", "snes_max_it=many"], ["--petsc", "snes_max_it"],
+     None),
+    ("petsc-bad-pc", [*SPHERE, "--petsc", "pc_type=nonsense"], ["--petsc", "pc_type"], None),
+    # item 6: unusable paths and configs
+    ("out-is-file", [*SPHERE], ["--out", "is a file"], lambda tmp: ["--out", str(_file(tmp))]),
+    ("out-under-file", [*SPHERE], ["--out", "under the file"],
+     lambda tmp: ["--out", str(_file(tmp) / "sub")]),
+    ("out-unwritable", [*SPHERE], ["--out", "cannot"],
+     lambda tmp: ["--out", "/proc/eyemech-cannot-write-here"]),
+    ("resume-a-file", [*SPHERE], ["--resume", "not a folder"],
+     lambda tmp: ["--resume", str(_file(tmp))]),
+    ("config-folder", [*SPHERE], ["--config", "folder"], lambda tmp: ["--config", str(tmp)]),
+    ("config-not-utf8", [*SPHERE], ["--config", "UTF-8"], _toml(b"mesh_size = 3\n# \xff\xfe\n")),
+    ("parameters-not-table", [*SPHERE], ["parameters", "table"], _toml(b"parameters = 3\n")),
+    ("top-level-beside-table", [*SPHERE], ["pressure", "[parameters]"],
+     _toml(b"pressure = 0.02\n[parameters]\nmesh_size = 3.0\n")),
+    # item 9: a folder held by another run
+    ("out-locked", [*SPHERE], ["--out", "in use by another eyemech run"], _lock_held),
+    # item 11: a mesh too fine to build
+    ("mesh-too-fine", ["sphere-inflation", "--set", "mesh_size=0.01"],
+     ["mesh_size", "cells", "EYEMECH_MAX_CELLS"], None),
+    ("mesh-too-fine-liquid", ["liquid-sphere", "--set", "mesh_size=0.02"],
+     ["mesh_size", "cells"], None),
+    # found only after meshing: still no results.json, no folder
+    ("hertz-negative-gap", ["hertz", "--set", "initial_gap=-0.1"], ["initial_gap"], None),
+]
+
+
+@pytest.mark.parametrize("row", BAD_INPUT, ids=[r[0] for r in BAD_INPUT])
+def test_bad_input_exits_2_with_one_message_and_writes_nothing(tmp_path, row):
+    _, args, words, setup = row
+    out = tmp_path / "out"
+    extra = setup(tmp_path) if setup else []
+    if "--out" not in extra:
+        extra += ["--out", str(out)]
+    before = listing(tmp_path)
+    try:
+        done = eyemech("run", *args, *extra, *QUIET)
+    finally:
+        for holder in _lock_held.holders:
+            holder.kill()
+            holder.wait()
+        _lock_held.holders.clear()
+    assert done.returncode == 2, done.stderr[-3000:]
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
+    assert all(word in lines[0] for word in words), lines[0]
+    assert listing(tmp_path) == before  # nothing written, nothing removed
+    assert not out.exists() or out.is_dir() and {p.name for p in out.iterdir()} <= {".eyemech.lock"}
+
+
+# same for a sweep: every value is checked before the first case
+SWEEP_BAD = [
+    ("grid-inf", ["--grid", "c10=0.1,inf"], ["c10", "finite"]),
+    ("grid-petsc-typo", ["--grid", "pressure=0.01", "--petsc", "ksp_typ=cg"], ["ksp_typ"]),
+    ("grid-mesh-too-fine", ["--grid", "mesh_size=3,0.01"], ["mesh_size", "cells"]),
+]
+
+
+@pytest.mark.parametrize("row", SWEEP_BAD, ids=[r[0] for r in SWEEP_BAD])
+def test_bad_sweep_input_exits_2_before_any_case(tmp_path, row):
+    _, args, words = row
+    out = tmp_path / "sweep"
+    done = eyemech("sweep", *SPHERE, *args, "--out", str(out), *QUIET)
+    assert done.returncode == 2, done.stderr[-3000:]
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and all(w in lines[0] for w in words), done.stderr[-3000:]
+    assert not out.exists()
+
+
+def test_sweep_out_is_a_file_exits_2(tmp_path):
+    done = eyemech("sweep", *SPHERE, "--grid", "pressure=0.01", "--out", str(_file(tmp_path)),
+                   *QUIET)
+    assert done.returncode == 2 and "is a file" in done.stderr, done.stderr[-3000:]
+
+
+# -- item 12: the failure message names the quantity and its unit --------------------------
+def test_solve_failure_names_the_quantity_and_unit():
+    from eyemech.problems.solve.driver import SolveFailure, Stepping
+
+    text = str(SolveFailure(3, 14.06, 12.0, [1.0], "DIVERGED_LINE_SEARCH", *Stepping(
+        start=0.0, end=3600.0, quantity="time", unit="s").describe()))
+    assert "trying time 14.06 s" in text and "Last converged time 12 s" in text
+    assert "trying load factor 0.4505 " in str(SolveFailure(1, 0.4505, 0.4, [], "x",
+                                                            *Stepping().describe()))
+    assert "path value" in str(SolveFailure(1, 2.5, 2.0, [], "x",
+                                            *Stepping(0.0, 3.0).describe()))
+
+
+# -- items 9 and 10: the folder lock and file modes -----------------------------------------
+def test_stale_lock_is_taken_over_and_files_follow_the_umask(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    dead = subprocess.Popen(["true"])
+    dead.wait()  # its process id is free: the lock is stale
+    (out / ".eyemech.lock").write_text(f"{dead.pid} {os.uname().nodename} then\n")
+    done = eyemech("run", *SPHERE, "--out", str(out), *QUIET, umask=0o022)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert not (out / ".eyemech.lock").exists()  # released at the end
+    for name in ("results.json", "state.pvd", "state_0000.vtu"):
+        assert stat.S_IMODE((out / name).stat().st_mode) == 0o644, name
+    sweep = tmp_path / "sweep"
+    done = eyemech("sweep", *SPHERE, "--grid", "pressure=0.01", "--out", str(sweep), *QUIET,
+                   "--no-fields", umask=0o002)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert stat.S_IMODE((sweep / "sweep.csv").stat().st_mode) == 0o664
+    assert stat.S_IMODE((sweep / "case_0000" / "results.json").stat().st_mode) == 0o664
+
+
+def test_second_run_on_a_busy_folder_is_refused_and_the_first_finishes(tmp_path):
+    """Two real runs: the second starts while the first holds the folder."""
+    out = tmp_path / "out"
+    first = subprocess.Popen([str(BIN / "eyemech"), "run", *CORNEA, "--out", str(out), *QUIET,
+                              "--no-fields"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / ".eyemech.lock").exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert (out / ".eyemech.lock").exists()
+        second = eyemech("run", *SPHERE, "--out", str(out), *QUIET)
+        assert second.returncode == 2, second.stderr[-3000:]
+        assert "in use by another eyemech run" in second.stderr
+        assert str(first.pid) in second.stderr
+        _, err = first.communicate(timeout=120)
+    finally:
+        first.kill()
+    assert first.returncode == 0, err[-3000:]
+    saved = json.loads((out / "results.json").read_text())
+    assert saved["scene"] == "keratotomy" and saved["status"] == "ok"
+    # only the first run's files (it writes no fields): none of the refused run's frames
+    assert not list(out.glob("state*")) and not list(out.glob("fields_*"))
+
+
+# -- item 8: sweep exit code and unreadable case results -----------------------------------
+def test_sweep_with_failed_cases_exits_4_and_resume_reruns_unreadable_cases(tmp_path):
+    out = tmp_path / "sweep"
+    grid = ("--grid", "pressure=0.01,0.012")
+    done = eyemech("sweep", *SPHERE, *grid, "--out", str(out), *QUIET, "--no-fields",
+                   env={"EYEMECH_TEST_RAISE_ON_RANK": "0"})  # every case raises (1 rank)
+    assert done.returncode == 4, done.stderr[-3000:]
+    assert "2 of 2 cases failed" in done.stderr
+    rows = list(csv.DictReader((out / "sweep.csv").open()))
+    assert [r["status"] for r in rows] == ["error", "error"]
+    done = eyemech("sweep", *SPHERE, *grid, "--out", str(out), *QUIET, "--no-fields",
+                   "--resume")
+    assert done.returncode == 0, done.stderr[-3000:]
+    (out / "case_0001" / "results.json").write_bytes(b'{"status": "o')  # truncated
+    done = eyemech("sweep", *SPHERE, *grid, "--out", str(out), *QUIET, "--no-fields",
+                   "--resume")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "case_0001/results.json is unreadable" in done.stderr
+    rows = list(csv.DictReader((out / "sweep.csv").open()))
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    assert json.loads((out / "case_0001" / "results.json").read_text())["status"] == "ok"
+
+
+# -- item 7: damaged checkpoints --------------------------------------------------------------
+@pytest.fixture(scope="module")
+def interrupted(tmp_path_factory) -> Path:
+    """A keratotomy run stopped by SIGTERM in step 4: checkpoints after steps 3 and 4, and
+    results.json with status "interrupted"."""
+    folder = tmp_path_factory.mktemp("interrupted") / "run"
+    done = eyemech("run", *CORNEA, "--out", str(folder), *QUIET, "--no-fields",
+                   "--checkpoint-every", "1", env={"EYEMECH_TEST_KILL": "sigterm:4"}, timeout=300)
+    assert done.returncode == 128 + signal.SIGTERM, done.stderr[-3000:]
+    assert sorted(p.name for p in (folder / "checkpoints").iterdir()) == \
+        ["ckpt_000003", "ckpt_000004"]
+    return folder
+
+
+def _damage(folder: Path, how: str) -> None:
+    newest, older = folder / "checkpoints" / "ckpt_000004", folder / "checkpoints" / "ckpt_000003"
+    if how == "truncated-rank-file":
+        data = (newest / "rank_0000.npz").read_bytes()
+        (newest / "rank_0000.npz").write_bytes(data[: len(data) // 3])
+    elif how == "empty-rank-file":
+        (newest / "rank_0000.npz").write_bytes(b"")
+    elif how == "truncated-meta":
+        (newest / "meta.json").write_bytes((newest / "meta.json").read_bytes()[:100])
+    elif how == "missing-rank-file":
+        (newest / "rank_0000.npz").unlink()
+    elif how == "both-damaged":
+        (newest / "rank_0000.npz").write_bytes(b"")
+        (older / "meta.json").write_bytes(b"{")
+
+
+@pytest.mark.parametrize("how", ["truncated-rank-file", "empty-rank-file", "truncated-meta",
+                                 "missing-rank-file"])
+def test_damaged_checkpoint_falls_back_to_the_older_one(interrupted, tmp_path, how):
+    folder = tmp_path / "run"
+    shutil.copytree(interrupted, folder)
+    _damage(folder, how)
+    done = eyemech("run", "keratotomy", "--resume", str(folder), *QUIET, "--no-fields")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "ckpt_000004 is unreadable" in done.stderr
+    saved = json.loads((folder / "results.json").read_text())
+    assert saved["status"] == "ok"
+    assert saved["checkpoints"]["resumed_from"].endswith("ckpt_000003")
+
+
+def test_no_readable_checkpoint_exits_2_and_keeps_the_record(interrupted, tmp_path):
+    folder = tmp_path / "run"
+    shutil.copytree(interrupted, folder)
+    _damage(folder, "both-damaged")
+    before = listing(folder)
+    done = eyemech("run", "keratotomy", "--resume", str(folder), *QUIET, "--no-fields")
+    assert done.returncode == 2, done.stderr[-3000:]
+    last = done.stderr.strip().splitlines()[-1]
+    assert "no readable checkpoint" in last and "ckpt_000004" in last and "ckpt_000003" in last
+    assert "Traceback" not in done.stderr
+    assert listing(folder) == before
+    assert json.loads((folder / "results.json").read_text())["status"] == "interrupted"
+
+
+# -- items 1 and 2: a fault on one rank, fields on, 2 ranks: the job ends ------------------
+def _fault(rank: int, *args: str, cwd: Path | None = None) -> tuple[subprocess.CompletedProcess, float]:
+    start = time.monotonic()
+    try:
+        done = eyemech(*args, ranks=2, env={"EYEMECH_TEST_RAISE_ON_RANK": str(rank)},
+                       timeout=FAULT_TIMEOUT, cwd=cwd)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"hang: {' '.join(args)} with the fault on rank {rank} did not end within "
+                    f"{FAULT_TIMEOUT:.0f} s")
+    seconds = time.monotonic() - start
+    print(f"fault on rank {rank}: {' '.join(args[:2])} ended after {seconds:.1f} s")
+    assert done.returncode != 0
+    assert f"EYEMECH_TEST_RAISE_ON_RANK: test error on rank {rank} inside the residual" \
+        in done.stderr
+    assert f"eyemech: rank {rank} of 2 failed" in done.stderr
+    return done, seconds
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("rank", [0, 1])
+@pytest.mark.parametrize("kind", ["sphere-inflation", "plate-clamped", "sweep", "resume"])
+def test_a_fault_on_one_rank_ends_the_job(kind, rank, tmp_path, interrupted):
+    out = tmp_path / "out"
+    if kind == "sphere-inflation":
+        _fault(rank, "run", *SPHERE, "--out", str(out), "--quiet")
+    elif kind == "plate-clamped":
+        _fault(rank, "run", "plate-clamped", "--set", "divisions=4", "--out", str(out), "--quiet")
+    elif kind == "sweep":
+        args = ("sweep", *SPHERE, "--grid", "pressure=0.01,0.012", "--ranks-per-case", "2",
+                "--out", str(out), "--quiet")
+        _fault(rank, *args)
+        if rank == 1:  # the aborted sweep's stale locks are taken over; --resume finishes it
+            done = eyemech(*args, "--resume", "--no-pictures", ranks=2, timeout=120)
+            assert done.returncode == 0, done.stderr[-3000:]
+            rows = list(csv.DictReader((out / "sweep.csv").open()))
+            assert [r["status"] for r in rows] == ["ok", "ok"]
+            assert not (out / ".eyemech.lock").exists()
+    else:
+        shutil.copytree(interrupted, out)
+        _fault(rank, "run", "keratotomy", "--resume", str(out), "--quiet")
+        # the resume never reached a new step: the record of the run is kept
+        assert json.loads((out / "results.json").read_text())["status"] == "interrupted"
