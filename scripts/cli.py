@@ -84,7 +84,9 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    # Imported here so that `eyemech --help` is instant.
+    if args.command == "list" and not (args.verbose or args.markdown):
+        return _list_from_source()
+    # Imported here so that `eyemech --help` and `eyemech list` are instant.
     from mpi4py import MPI
 
     _only_rank_0_reports(MPI.COMM_WORLD.rank, args.verbose)
@@ -150,6 +152,20 @@ def _only_rank_0_reports(rank: int, verbose: bool) -> None:
         import warnings
 
         warnings.simplefilter("ignore")
+
+
+def _list_from_source() -> int:
+    """Names, kinds and summaries read with ast (:mod:`eyemech.scripts.catalogue`): no
+    DOLFINx, PETSc or MPI import. Under mpiexec only the first rank prints."""
+    import os
+
+    from eyemech.scripts.catalogue import scene_catalogue
+
+    rank = next((os.environ[k] for k in ("PMI_RANK", "OMPI_COMM_WORLD_RANK") if k in os.environ), "0")
+    if rank == "0":
+        for entry in scene_catalogue():
+            print(f"{entry.name:24s} {entry.kind:10s} {entry.summary}")
+    return 0
 
 
 def _list(problems, verbose: bool, say) -> int:
