@@ -432,7 +432,8 @@ class Injection:
         solver_before = ctx.timings.seconds["assembly"] + ctx.timings.seconds["solve"]
         with ctx.timings("time_stepping"):
             follow_path(self.solver, self.apply,
-                        Stepping(0.0, steps * self.params.time_step, initial_step=1.0 / steps,
+                        Stepping(0.0, steps * self.params.time_step, quantity="time", unit="s",
+                                 initial_step=1.0 / steps,
                                  max_step=1.0 / steps, grow=2.0, min_step=1e-3 / steps,
                                  stops=(self.push_time,), easy_iterations=EASY_ITERATIONS),
                         on_converged=self.converged, label=SCENE.name, quiet=ctx.options.quiet)

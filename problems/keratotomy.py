@@ -234,7 +234,7 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> 
                         newton_iterations=step.iterations, cuts=step.cuts, **step.counts(),
                         krylov_iterations=step.linear_iterations)
 
-    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, initial_step=1.0,
+    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=1.0,
                                         max_step=1.0, min_step=1e-6, stops=params.time_grid()),
                 on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet,
                 checkpoints=ctx.checkpoints)

@@ -271,7 +271,7 @@ def _push(body: Applanation, ctx: RunContext, params: Parameters, top: float) ->
 
     guess = params.anterior_radius - math.sqrt(params.anterior_radius**2 - target**2)  # sagitta
     try:
-        follow_path(body.solver, apply, Stepping(end=params.max_depth, initial_step=0.5 * guess / params.max_depth,
+        follow_path(body.solver, apply, Stepping(end=params.max_depth, quantity="applanator depth", unit="mm", initial_step=0.5 * guess / params.max_depth,
                                                  max_step=0.5 * guess / params.max_depth, min_step=1e-5),
                     on_converged=converged, label="applanation", quiet=ctx.options.quiet)
     except Reached:

@@ -146,7 +146,7 @@ def fold(params: FoldParameters, ctx: RunContext, shell: LensShell, frames_dir: 
 
     start = time.perf_counter()
     with ctx.timings("time_stepping"):
-        follow_path(solver, apply, Stepping(0.0, params.fold_time, initial_step=1.0 / steps,
+        follow_path(solver, apply, Stepping(0.0, params.fold_time, quantity="time", unit="s", initial_step=1.0 / steps,
                                             max_step=1.0 / steps, grow=2.0, min_step=1e-3 / steps,
                                             easy_iterations=EASY_ITERATIONS),
                     on_converged=converged, label="iol-fold", quiet=ctx.options.quiet)
