@@ -49,8 +49,7 @@ def solve(element: str, mesh_size: float, inner_radius: float = 10.0, outer_radi
     displacement = basix.ufl.element(u_family, cell, u_degree, shape=(3,))
     if p_family == "DPC":
         pressure_element = basix.ufl.element("DPC", cell, p_degree, discontinuous=True,
-                                             dpc_variant=basix.DPCVariant.legendre,
-                                             lagrange_variant=basix.LagrangeVariant.legendre)
+                                             dpc_variant=basix.DPCVariant.legendre)
     else:
         pressure_element = basix.ufl.element(p_family, cell, p_degree)
     W = dolfinx.fem.functionspace(mesh, basix.ufl.mixed_element([displacement, pressure_element]))
