@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Literal
 
 import dolfinx
 import dolfinx.fem
@@ -47,7 +48,10 @@ class Parameters(SceneParameters):
     master_size: float = field(0.25, "element size of the lower (master) block", "mm")
     slave_size: float = field(0.17, "element size of the upper (slave) block", "mm")
     degree: int = field(1, "displacement degree (1 or 2)")
-    passes: int = field(1, "1: slave nodes on master triangles; 2: also the reverse (two-pass)")
+    passes: int = field(1, "1: slave surface on master surface; 2: also the reverse (two-pass)")
+    method: Literal["segment-to-segment", "node-to-surface"] = field(
+        "segment-to-segment", "contact discretisation: pressure integrated over the slave "
+        "surface segmented by the master triangles (mortar integration), or at the slave nodes")
 
     def validate(self) -> None:
         self.require_positive("width", "youngs_modulus", "pressure", "penalty", "master_size",
@@ -78,12 +82,14 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         bcs = symmetry_bcs(V, blocks, {"symmetry_x": 0, "symmetry_y": 1, "bottom": 2})
         alpha = default_penalty(params.youngs_modulus, params.master_size, params.penalty)
         contact = NodeToSurfaceContact(u, blocks, "slave", "master", alpha, bcs,
-                                       search_depth=0.25 * w, timings=ctx.timings)
+                                       search_depth=0.25 * w, timings=ctx.timings,
+                                       method=params.method)
         contact.refuse_initial_penetration("width", tolerance=1e-9 * w)
         searches = [contact]
         if params.passes == 2:  # the reverse pass: the lower block's nodes on the upper's faces
             searches.append(NodeToSurfaceContact(u, blocks, "master", "slave", alpha, bcs,
-                                                 search_depth=0.25 * w, timings=ctx.timings))
+                                                 search_depth=0.25 * w, timings=ctx.timings,
+                                                 method=params.method))
         solver = NonlinearSolver(residual, u, bcs, options=ctx.options.newton, timings=ctx.timings,
                                  residual_hooks=[s.residual_hook for s in searches],
                                  jacobian_hooks=[s.jacobian_hook for s in searches])
@@ -92,9 +98,15 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def apply(value: float, _increment: float) -> None:
             load.value = value * params.pressure
 
-        records = follow_path(solver, apply, Stepping(initial_step=0.5), label=SCENE.name,
-                              quiet=ctx.options.quiet)
+        def converged(record) -> None:
+            ctx.record_step(step=record.step, load_factor=record.load,
+                            newton_iterations=record.iterations, cuts=record.cuts,
+                            **record.counts(), residuals=record.residuals)
+
+        records = follow_path(solver, apply, Stepping(initial_step=0.5), on_converged=converged,
+                              label=SCENE.name, quiet=ctx.options.quiet)
         contact.state = contact.search()
+        contact.segments = None
         _, pressures = contact.nodal_pressures()
         everything = np.concatenate(ctx.comm.allgather(pressures))
         slaves = ctx.comm.allreduce(len(contact.slave_blocks))
