@@ -106,10 +106,14 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         records = follow_path(solver, apply, Stepping(initial_step=0.5), on_converged=converged,
                               label=SCENE.name, quiet=ctx.options.quiet)
         contact.state = contact.search()
-        contact.segments = None
+        if params.method == "segment-to-segment":  # pressures at the segment quadrature points
+            contact.segments = contact.search_segments()
         _, pressures = contact.nodal_pressures()
         everything = np.concatenate(ctx.comm.allgather(pressures))
-        slaves = ctx.comm.allreduce(len(contact.slave_blocks))
+        if params.method == "segment-to-segment":
+            slaves = ctx.comm.allreduce(contact.segments.points)
+        else:
+            slaves = ctx.comm.allreduce(len(contact.slave_blocks))
         p = params.pressure
         q = ctx.result.quantities
         q.update({"pressure_mean": float(everything.mean()), "pressure_min": float(everything.min()),
