@@ -106,24 +106,23 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         records = follow_path(solver, apply, Stepping(initial_step=0.5), on_converged=converged,
                               label=SCENE.name, quiet=ctx.options.quiet)
         contact.state = contact.search()
-        if params.method == "segment-to-segment":  # pressures at the segment quadrature points
-            contact.segments = contact.search_segments()
+        summary = contact.summary()
         _, pressures = contact.nodal_pressures()
         everything = np.concatenate(ctx.comm.allgather(pressures))
-        if params.method == "segment-to-segment":
-            slaves = ctx.comm.allreduce(contact.segments.points)
+        if params.method == "segment-to-segment":  # over the segments and their points
+            touching = summary["active_nodes"] / ctx.comm.allreduce(contact.segments.segments)
         else:
-            slaves = ctx.comm.allreduce(len(contact.slave_blocks))
+            touching = len(everything) / ctx.comm.allreduce(len(contact.slave_blocks))
         p = params.pressure
         q = ctx.result.quantities
         q.update({"pressure_mean": float(everything.mean()), "pressure_min": float(everything.min()),
                   "pressure_max": float(everything.max()),
                   "pressure_spread": float((everything.max() - everything.min()) / p),
                   "pressure_rms_error": float(np.sqrt(np.mean((everything - p) ** 2)) / p),
-                  "touching_fraction": len(everything) / slaves,
+                  "touching_fraction": touching,
                   "penalty_stiffness": alpha, "newton_iterations": sum(r.iterations for r in records),
                   "dofs": global_dofs(u)})
-        q.update({f"contact_{k}": val for k, val in contact.summary().items()})
+        q.update({f"contact_{k}": val for k, val in summary.items()})
         q.update(_stress_spread(u, blocks, params))
     return ctx.result
 

@@ -63,13 +63,14 @@ class SegmentState:
     facets: np.ndarray          # slave facet (row of ``facet_nodes``) of each point
     shape: np.ndarray           # (n, k) slave shape functions N_i at the point
     triangles: np.ndarray       # master triangle of each point
-    master_shape: np.ndarray    # (n, 3) M_j
+    master_shape: np.ndarray    # (n, k_m) M_j of the master facet's nodes
     normals: np.ndarray         # (n, 3) master outward normal
     gaps: np.ndarray            # (n,)
     weights: np.ndarray         # (n,) reference area of the point
     reference: np.ndarray       # (n, 3) reference position of the point
+    segment: np.ndarray         # (n,) the point's segment (rank-local numbering)
     min_gap: float              # smallest gap of any segment point (rank-local)
-    points: int                 # all segment points, active or not (rank-local)
+    segments: int               # all segments, active or not (rank-local)
 
 
 class SegmentToSegmentContact(NodeToSurfaceContact):
@@ -105,6 +106,52 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
     SLIVER = 1e-9
 
     # -- set-up ---------------------------------------------------------------------------
+    def _master_setup(self, tagged: TaggedMesh, master: str) -> None:
+        """The base class's master triangles, and for each the nodes of its master facet
+        (the facet's closure: 3 for P1, 6 for P2, 4 / 9 for Q1 / Q2) with the cell
+        reference coordinates of the triangle's corners, so that the master side uses
+        the space's own basis M_i of the facet at the projected point."""
+        super()._master_setup(tagged, master)
+        mesh = tagged.mesh
+        tdim = mesh.topology.dim
+        f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
+        c_to_f = mesh.topology.connectivity(tdim, tdim - 1)
+        facets = tagged.facets(master)
+        facets = facets[facets < mesh.topology.index_map(tdim - 1).size_local]
+        cell_type = mesh.basix_cell()
+        degree = self.u.function_space.ufl_element().embedded_superdegree
+        points = basix.create_element(basix.ElementFamily.P, cell_type, degree,
+                                      basix.LagrangeVariant.gll_warped).points
+        dofmap = self.u.function_space.dofmap
+        layout = dofmap.dof_layout
+        nodes, index, corners = [], [], []
+        for facet in facets:  # the base class's loop: same triangles, same order and flips
+            cell = f_to_c.links(facet)[0]
+            local = int(np.flatnonzero(c_to_f.links(cell) == facet)[0])
+            cell_dofs = dofmap.cell_dofs(cell)
+            closure = np.asarray(layout.entity_closure_dofs(tdim - 1, local))
+            where = {int(d): i for i, d in enumerate(cell_dofs)}
+            centroid = self.reference[cell_dofs].mean(axis=0)
+            for tri in facet_triangles(cell_type, local, cell_dofs, layout, degree == 2):
+                x = self.reference[list(tri)]
+                if np.dot(np.cross(x[1] - x[0], x[2] - x[0]), x.mean(axis=0) - centroid) < 0:
+                    tri = (tri[0], tri[2], tri[1])
+                nodes.append(cell_dofs[closure])
+                index.append(closure)
+                corners.append(points[[where[d] for d in tri]])
+        k = len(layout.entity_closure_dofs(tdim - 1, 0))
+        nodes = np.asarray(nodes, dtype=np.int32).reshape(-1, k)
+        global_nodes = self.imap.local_to_global(nodes.ravel()).reshape(-1, k)
+        self.master_facet_nodes = np.vstack(self.comm.allgather(global_nodes))
+        self.master_facet_index = np.vstack(self.comm.allgather(
+            np.asarray(index, dtype=int).reshape(-1, k)))
+        self.master_corner_reference = np.vstack(self.comm.allgather(
+            np.asarray(corners, dtype=float).reshape(-1, 3, tdim)))
+        self.master_facet_rows = np.searchsorted(self.master_nodes, self.master_facet_nodes)
+        self.master_facet_id = np.unique(self.master_facet_nodes, axis=0, return_inverse=True)[1].ravel()
+        if not (self.triangles[:, :, None] == self.master_facet_nodes[:, None, :]).any(axis=2).all():
+            raise AssertionError("master facets out of step with the master triangles")
+
     def _segment_setup(self, tagged: TaggedMesh, slave: str, degree: int) -> None:
         mesh = tagged.mesh
         tdim = mesh.topology.dim
@@ -164,9 +211,22 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
     # -- segmentation and gaps --------------------------------------------------------------
     def search_segments(self) -> SegmentState:
         """Segment the slave sub-triangles by the facing master triangles at the current
-        ``u`` and evaluate the gap at every segment quadrature point."""
+        ``u`` and evaluate the gap at every segment quadrature point. The Jacobian at the
+        iterate whose residual was just evaluated reuses that segmentation (compared by
+        the local values of u, owned and ghosts: the same on every rank or recomputed)."""
+        values = self.u.x.array
+        cached = getattr(self, "_cache", None)
+        same = cached is not None and np.array_equal(cached[0], values)
+        if self.comm.allreduce(same, op=MPI.LAND):
+            return cached[1]
+        state = self._segment()
+        self._cache = (values.copy(), state)
+        return state
+
+    def _segment(self) -> SegmentState:
         with self.timings("contact_search"):
-            corners = self._master_positions()[self.triangle_nodes]      # (T, 3, 3)
+            positions = self._master_positions()
+            corners = positions[self.triangle_nodes]                     # (T, 3, 3)
             if len(self.facet_nodes) == 0:
                 return _empty_state(self.facet_nodes.shape[1])
             m = self.sub_nodes.shape[1]
@@ -179,23 +239,41 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
             centre_s = slave_tris.mean(axis=1)
             size_s = np.linalg.norm(slave_tris - centre_s[:, None], axis=2).max(axis=1)
             reach = size_s + size_m.max()
-            depth = min(self.search_depth, 2.0 * reach.max())
+            depth = min(self.search_depth, reach.max())
             tree = cKDTree(corners.mean(axis=1))
             near = tree.query_ball_point(centre_s, reach + depth + self.smoothing)
-            pairs = np.array([(s, t) for s, ts in enumerate(near) for t in ts], dtype=int).reshape(-1, 2)
+            lengths = np.fromiter((len(ts) for ts in near), dtype=int, count=len(near))
+            pairs = np.column_stack([np.repeat(np.arange(len(near)), lengths),
+                                     np.fromiter((t for ts in near for t in ts), dtype=int,
+                                                 count=lengths.sum())])
             if len(pairs):
                 facing = np.einsum("ij,ij->i", normal_s[pairs[:, 0]], normal_m[pairs[:, 1]]) < -self.facing
                 pairs = pairs[facing]
+            # heights of the master corners over the slave plane (≈ the gap): pairs entirely
+            # beyond the search depth or above the active band cannot contribute
+            height = np.einsum("njd,nd->nj", corners[pairs[:, 1]] - slave_tris[pairs[:, 0], :1],
+                               normal_s[pairs[:, 0]])
+            margin = 0.1 * reach[pairs[:, 0]]
+            pairs = pairs[(height.min(axis=1) < self.smoothing + margin)
+                          & (height.max(axis=1) > -self.search_depth - margin)]
             # master corners in the barycentric (s, t) coordinates of the slave sub-triangle
             st = np.stack([plane_barycentric(corners[pairs[:, 1], j], slave_tris[pairs[:, 0]])[:, 1:]
                            for j in range(3)], axis=1) if len(pairs) else np.zeros((0, 3, 2))
+            # only those whose (s, t) bounding box meets the unit triangle are clipped
+            meets = ((st[..., 0].max(axis=1) > 0) & (st[..., 1].max(axis=1) > 0)
+                     & (st.sum(axis=2).min(axis=1) < 1))
+            pairs, st = pairs[meets], st[meets]
             polygons, counts = clip_triangles(st)
             fans = [(polygons[:, 0], polygons[:, i], polygons[:, i + 1], counts > i + 1)
                     for i in range(1, polygons.shape[1] - 1)]
-            sub_index, tri_index, bary, weight = [], [], [], []
-            for a, b, c, valid in fans:
-                area2 = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-                rows = np.flatnonzero(valid & (area2 > self.SLIVER))
+            areas = [(b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+                     for a, b, c, _ in fans]
+            # a segment (polygon) is kept when its area is not a round-off sliver; inside
+            # it, fan triangles of zero area (repeated vertices) carry no points
+            segment = sum(np.where(valid, area, 0.0) for area, (*_, valid) in zip(areas, fans)) > self.SLIVER
+            sub_index, tri_index, bary, weight, segment_id = [], [], [], [], []
+            for area2, (a, b, c, valid) in zip(areas, fans):
+                rows = np.flatnonzero(valid & segment & (area2 > 1e-3 * self.SLIVER))
                 if len(rows) == 0:
                     continue
                 a, b, c = a[rows, None], b[rows, None], c[rows, None]
@@ -206,8 +284,10 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
                 tri_index.append(np.repeat(pairs[rows, 1], nq))
                 bary.append(np.column_stack([1 - q.sum(axis=1), q]))
                 weight.append((2.0 * area2[rows, None] * self.rule_weights[None]).ravel())
+                segment_id.append(np.repeat(rows, nq))
             if not sub_index:
                 return _empty_state(self.facet_nodes.shape[1])
+            segment_id = np.concatenate(segment_id)
             sub_index, tri_index = np.concatenate(sub_index), np.concatenate(tri_index)
             bary, weight = np.vstack(bary), np.concatenate(weight)
             facet, sub = np.divmod(sub_index, m)
@@ -219,20 +299,27 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
             x = np.einsum("nk,nkd->nd", shape, self._positions(self.facet_nodes[facet].ravel())
                           .reshape(len(facet), -1, 3))
             X = np.einsum("nk,nkd->nd", shape, self.reference[self.facet_nodes[facet]])
-            tris = corners[tri_index]
-            master_shape = plane_barycentric(x, tris)
+            # master side: the projection on the flat triangle, mapped to the master cell's
+            # reference coordinates, where the facet's own basis M_i is evaluated
+            linear = plane_barycentric(x, corners[tri_index])
+            master_ref = np.einsum("nj,njd->nd", linear, self.master_corner_reference[tri_index])
+            master_table = self.basis.tabulate(0, master_ref)[0, :, :, 0]
+            master_shape = np.take_along_axis(master_table, self.master_facet_index[tri_index], axis=1)
+            x_master = np.einsum("nk,nkd->nd", master_shape, positions[self.master_facet_rows[tri_index]])
             normal = normal_m[tri_index]
-            gaps = np.einsum("ij,ij->i", x - tris[:, 0], normal)
+            gaps = np.einsum("ij,ij->i", x - x_master, normal)
             paired = gaps > -self.search_depth
             active = np.flatnonzero(paired & (gaps < self.smoothing))
             min_gap = float(np.min(gaps[paired], initial=np.inf))
             return SegmentState(facet[active], shape[active], tri_index[active],
                                 master_shape[active], normal[active], gaps[active],
-                                weight[active], X[active], min_gap, len(gaps))
+                                weight[active], X[active], segment_id[active], min_gap,
+                                len(np.unique(segment_id)))
 
     # -- assembly hooks ---------------------------------------------------------------------
     def _segment_dofs(self, state: SegmentState) -> np.ndarray:
-        nodes = np.column_stack([self.facet_global[state.facets], self.triangles[state.triangles]])
+        nodes = np.column_stack([self.facet_global[state.facets],
+                                 self.master_facet_nodes[state.triangles]])
         base = self.layout.base(nodes.ravel()).reshape(nodes.shape)
         return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), -1)
 
@@ -254,25 +341,28 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
 
     def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
         """K += −∫ p'(g) D Dᵀ dA (frozen normal, M and segmentation), summed per
-        (slave facet, master triangle) pair before insertion."""
+        (slave facet, master facet) pair before insertion."""
         state = self.search_segments()
         _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
         stiffness = -state.weights * slope
         D = self._segment_vectors(state)
         dofs = self._segment_dofs(state)
-        constrained = self._constrained
+        constrained = np.isin(dofs, list(self._constrained)) if self._constrained else np.zeros(dofs.shape, bool)
         with self.timings("contact_jacobian"):
-            pair = state.facets.astype(np.int64) * len(self.triangles) + state.triangles
-            groups, first, inverse = np.unique(pair, return_index=True, return_inverse=True)
-            for g in range(len(groups)):
-                rows = np.flatnonzero(inverse == g)
-                if not np.any(stiffness[rows]):
+            # one block per (slave facet, master facet): the same dofs for all its points
+            pair = state.facets.astype(np.int64) * (self.master_facet_id.max() + 1) \
+                + self.master_facet_id[state.triangles]
+            order = np.argsort(pair, kind="stable")
+            groups, starts = np.unique(pair[order], return_index=True)
+            for rows, first in zip(np.split(order, starts[1:]), order[starts]):
+                if len(rows) == 0 or not np.any(stiffness[rows]):
                     continue
-                index = dofs[first[g]]
-                keep = np.array([d not in constrained for d in index])
-                block = np.einsum("n,ni,nj->ij", stiffness[rows], D[rows][:, keep], D[rows][:, keep])
-                index = index[keep].astype(PETSc.IntType)
-                A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
+                index = dofs[first]
+                keep = ~constrained[first]
+                Dk = D[rows][:, keep]
+                block = (Dk * stiffness[rows, None]).T @ Dk
+                A.setValues(index[keep].astype(PETSc.IntType), index[keep].astype(PETSc.IntType),
+                            block, addv=PETSc.InsertMode.ADD)
             A.assemble()
 
     # -- diagnostics ------------------------------------------------------------------------
@@ -280,12 +370,13 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
         return self.segments or self.search_segments()
 
     def summary(self) -> dict[str, float]:
-        """Collective: touching quadrature points (``active_nodes``, the key of the base
-        class), contact area, normal force and max penetration over the segment points."""
+        """Collective: touching segments (under the base class's key ``active_nodes``;
+        segments, unlike their quadrature points, do not depend on how the partition
+        numbers the nodes), contact area, normal force and max penetration."""
         state = self._current()
         pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
         touching = state.gaps < 0
-        local = np.array([touching.sum(), state.weights[touching].sum(),
+        local = np.array([len(np.unique(state.segment[touching])), state.weights[touching].sum(),
                           (state.weights * pressure).sum()])
         total = self.comm.allreduce(local, op=MPI.SUM)
         depth = self.comm.allreduce(float(np.max(-state.gaps, initial=0.0)), op=MPI.MAX)
@@ -295,7 +386,7 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
     def pairs_across_ranks(self) -> int:
         state = self._current()
         first, last = self.imap.local_range
-        nodes = self.triangles[state.triangles[state.gaps < 0]]
+        nodes = self.master_facet_nodes[state.triangles[state.gaps < 0]]
         remote = ((nodes < first) | (nodes >= last)).any(axis=1)
         return int(self.comm.allreduce(int(remote.sum()), op=MPI.SUM))
 
@@ -315,8 +406,8 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
 
 def _empty_state(k: int) -> SegmentState:
     return SegmentState(np.zeros(0, dtype=int), np.zeros((0, k)), np.zeros(0, dtype=int),
-                        np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
-                        np.zeros((0, 3)), np.inf, 0)
+                        np.zeros((0, k)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
+                        np.zeros((0, 3)), np.zeros(0, dtype=int), np.inf, 0)
 
 
 def clip_triangles(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
