@@ -367,7 +367,8 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
 
     # -- diagnostics ------------------------------------------------------------------------
     def _current(self) -> SegmentState:
-        return self.segments or self.search_segments()
+        """The segments at the current u (collective; reused when u has not changed)."""
+        return self.search_segments()
 
     def summary(self) -> dict[str, float]:
         """Collective: touching segments (under the base class's key ``active_nodes``;
