@@ -321,12 +321,12 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
         nodes = np.column_stack([self.facet_global[state.facets],
                                  self.master_facet_nodes[state.triangles]])
         base = self.layout.base(nodes.ravel()).reshape(nodes.shape)
-        return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), -1)
+        return (base[:, :, None] + np.arange(self.bs)).reshape(len(nodes), nodes.shape[1] * self.bs)
 
     @staticmethod
     def _segment_vectors(state: SegmentState) -> np.ndarray:
         factors = np.column_stack([state.shape, -state.master_shape])
-        return (factors[:, :, None] * state.normals[:, None, :]).reshape(len(factors), -1)
+        return (factors[:, :, None] * state.normals[:, None, :]).reshape(len(factors), 3 * factors.shape[1])
 
     def residual_hook(self, _x: PETSc.Vec, b: PETSc.Vec) -> None:
         """F += −∫ p(g) D dA over the segments (u already holds the iterate)."""
