@@ -350,6 +350,29 @@ def test_segment_to_segment_is_an_option_of_the_node_to_surface_class():
         NodeToSurfaceContact(u, blocks, "slave", "master", 10.0, method="mortar")
 
 
+@pytest.mark.parametrize("degree", [1, 2])
+def test_segment_to_segment_on_hexahedra(degree):
+    """Q1 and Q2 faces (tests/test_eye_contact.py's non-matching 2×2 / 3×3 blocks), the
+    upper block moved rigidly δ into the flat master and sideways by (a, b): the
+    segments cover exactly the overlap (1 − a)(1 − b) and every point is δ deep."""
+    from test_eye_contact import GAP, two_blocks
+
+    from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
+
+    blocks = two_blocks()
+    V = dolfinx.fem.functionspace(blocks.mesh, ("Lagrange", degree, (3,)))
+    u = dolfinx.fem.Function(V)
+    delta, a, b = 0.02, 0.1, 0.05
+    upper = dolfinx.fem.locate_dofs_topological(V, 3, blocks.cells("upper"))
+    u.x.array.reshape(-1, 3)[upper] = [a, b, -(GAP + delta)]
+    contact = NodeToSurfaceContact(u, blocks, "slave", "master", 1.0, search_depth=0.5, method=STS)
+    summary = contact.summary()
+    overlap = (1 - a) * (1 - b)
+    assert summary["contact_area"] == pytest.approx(overlap, rel=1e-10)
+    assert summary["contact_normal_force"] == pytest.approx(delta * overlap, rel=1e-10)
+    assert summary["max_penetration"] == pytest.approx(delta, rel=1e-10)
+
+
 def test_clip_triangles_matches_the_scalar_clipping():
     from eyemech.problems.contact.segment_to_segment import clip_convex, clip_triangles
 
