@@ -118,7 +118,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         _, pressures = contact.nodal_pressures()
         everything = np.concatenate(ctx.comm.allgather(pressures))
         if params.method == "segment-to-segment":  # over the segments and their points
-            touching = summary["active_nodes"] / ctx.comm.allreduce(contact.segments.segments)
+            touching = summary["active_nodes"] / ctx.comm.allreduce(contact.search_segments().segments)
         else:
             touching = len(everything) / ctx.comm.allreduce(len(contact.slave_blocks))
         p = params.pressure
