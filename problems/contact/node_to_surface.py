@@ -81,12 +81,28 @@ class NodeToSurfaceContact:
     over which the penalty pressure is rounded off (:func:`penalty_pressure`; 0 =
     the plain ⟨−g⟩ law), ``block_spaces`` the spaces of a blocked system
     (``kind="mpi"``, displacement first) when ``u`` is one block of it.
+
+    ``method``: "node-to-surface" (this class, the default) or "segment-to-segment",
+    which makes a :class:`~eyemech.problems.contact.segment_to_segment.SegmentToSegmentContact`
+    (the pressure integrated over the slave surface segmented by the master
+    triangles; passes the patch test, docs/contact.md §4).
     """
+
+    METHODS = ("node-to-surface", "segment-to-segment")
+
+    def __new__(cls, *args, method: str = "node-to-surface", **kwargs):
+        if method not in cls.METHODS:
+            raise ValueError(f"contact method must be one of {', '.join(cls.METHODS)}, got {method!r}")
+        if cls is NodeToSurfaceContact and method == "segment-to-segment":
+            from eyemech.problems.contact.segment_to_segment import SegmentToSegmentContact
+
+            return super().__new__(SegmentToSegmentContact)
+        return super().__new__(cls)
 
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
                  penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
                  smoothing: float = 0.0, timings: Timings | None = None,
-                 block_spaces=None):
+                 block_spaces=None, method: str = "node-to-surface"):
         if not penalty > 0:
             raise ValueError(f"the penalty must be > 0, got {penalty}")
         if not smoothing >= 0:
