@@ -1,0 +1,811 @@
+r"""A rotation-free triangle shell (vertex positions the only unknowns): the fast lens model.
+
+Same mechanics as ``forms/shell.py`` (geometrically nonlinear Kirchhoff–Love, total
+Lagrangian, plane-stress St Venant–Kirchhoff, a thickness per triangle), discretised on
+the P1 triangles of the same gmsh meshes with compiled (numba) kernels instead of UFL.
+
+**Frames.** Every triangle T (vertices 0, 1, 2 in the mesh's consistent orientation)
+gets an orthonormal reference frame: e₁ along X₁ − X₀, N = (X₁−X₀)×(X₂−X₀)/|·|,
+e₂ = N × e₁; ξ = (ξ¹, ξ²) are the coordinates in that plane (the reference metric is the
+identity in them).
+
+**Membrane: constant-strain triangle.** With the P1 shape-function gradients d_i = ∂φ_i/∂ξ
+and a_α = Σ_i x_i d_iα (the deformed tangent vectors),
+
+    E_αβ = ½ (a_α·a_β − δ_αβ),
+    W_m = ½ h A C(E):E,   C(E):E = λ̄ (tr E)² + 2μ E:E,  λ̄ = E_Y ν/(1−ν²), μ = E_Y/(2(1+ν))
+
+— the plane-stress St Venant–Kirchhoff law of ``ShellMaterial.plane_stress`` (C(A)
+= E_Y/(1−ν²)((1−ν)A + ν tr A P)).
+
+**Bending: quadratic patch interpolation (Phaal & Calladine 1992; the BST family of Oñate &
+Zárate 2000 with the quadratic patch of the EBST, Flores & Oñate 2005).** The patch of T is
+T's 3 vertices and the 3 vertices opposite T across its edges. A quadratic
+q(ξ) = c₀ + c₁ξ¹ + c₂ξ² + c₃(ξ¹)² + c₄ξ¹ξ² + c₅(ξ²)² (each Cartesian component of the
+position) is fitted to the patch: interpolation at the 6 nodes; on a boundary edge without
+opposite node, one condition instead:
+
+- ``free`` (and ``simply`` supported — its displacement is fixed separately): the
+  natural condition M_νν = 0, i.e. q,_νν + ν q,_ττ = 0 (ν, τ the edge's in-plane
+  co-normal and tangent, ν Poisson's ratio);
+- ``clamped``: the slope across the edge at its midpoint m is the reference one,
+  q,_ν(m) = ν (the 3D reference co-normal).
+
+The fit is linear in the nodal positions, so its (constant) second derivatives are
+H_αβ(x) = Σ_i B^i_αβ x_i + b_αβ (B, b computed once per triangle from the reference:
+the inverse of the 6×6 fit matrix), and with n = (x₁−x₀)×(x₂−x₀)/|·| the deformed normal of T,
+
+    K_αβ = n · H_αβ(x),   κ = K(x) − K(X),
+    W_b = ½ D A [ν (tr κ)² + (1−ν) κ:κ],   D = E_Y h³/(12(1−ν²))
+
+— ½ (h³/12) C(κ):κ, the bending energy of ``forms/shell.py``. The fit reproduces every
+quadratic field exactly (patch test: any constant curvature is represented exactly, on any
+mesh where the 6 nodes do not lie on one conic), so the bending energy is consistent on
+unstructured meshes and independent of the mesh direction for a uniform curvature; rigid
+motions give κ = 0 (the fit commutes with rotations, n rotates with x).
+
+**Total energy, dynamics.** Π(x) = Σ_T (W_m + W_b) − f_ext·u; consistent P1 mass
+M = Σ_T ρ h A/12 (1 + δ_ij) I₃ (the P2 model's ∫ ρ h u·v dA on P1). Backward Euler with the
+scene's mass-proportional damping c (as ``ImplicitDynamics``):
+
+    R(u) = ∇Π(u) + M [(1/Δt² + c/Δt)(u − u_n) − v_n/Δt],   J = ∇²Π(u) + (1/Δt² + c/Δt) M.
+
+**Kernels.** Energy, gradient and the exact Hessian of both element energies are written out
+(numba, ``@njit(cache=True)``): with C_i = ∂c/∂x_i (c = (x₁−x₀)×(x₂−x₀)), N_i = P C_i/|c|,
+P = I − nnᵀ, the second derivative of K = n·H is
+B_i N_j + B_j N_iᵀ + C_iᵀ S C_j + G_ij with S = −(H nᵀ + n Hᵀ + (n·H)(I − 3nnᵀ))/|c|² and
+G the bilinear part of c contracted with PH/|c|. They are assembled straight into a CSR
+matrix whose pattern (and every element entry's position in it) is computed once; the
+Newton systems are factorised by MUMPS as symmetric LDLᵀ (PETSc Cholesky, sym = 2), the
+symbolic analysis done once and reused while the pattern stays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from numba import njit
+
+FREE, CLAMPED = 0, 1
+BOUNDARY_KINDS = {"free": FREE, "simply": FREE, "clamped": CLAMPED}
+
+
+class MeshInputError(ValueError):
+    """A mesh the rotation-free shell cannot use (non-manifold, inverted, degenerate)."""
+
+
+# --------------------------------------------------------------------------------------------
+# topology and the patch operators (numpy, once per mesh)
+# --------------------------------------------------------------------------------------------
+def orient(points: np.ndarray, triangles: np.ndarray, up=None) -> np.ndarray:
+    """The triangles with their vertex order flipped where the normal points against
+    ``up(centroids)`` (a callable returning one vector per triangle), as the P2 model's
+    orientation field does; without ``up`` the order is kept as given."""
+    triangles = np.array(triangles, dtype=np.int64)
+    if up is None:
+        return triangles
+    p = points[triangles]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", normal, up(p.mean(axis=1))) < 0
+    triangles[flip] = triangles[flip][:, [0, 2, 1]]
+    return triangles
+
+
+def edge_topology(points: np.ndarray, triangles: np.ndarray):
+    """Per triangle and local edge k (opposite vertex k): the vertex across that edge
+    (−1 on the boundary) and the boundary edges (as sorted vertex pairs). Refuses
+    degenerate triangles, edges shared by more than two triangles and neighbours whose
+    orientations disagree (an inverted triangle)."""
+    n_tri = len(triangles)
+    if n_tri == 0:
+        raise MeshInputError("the mesh has no triangles")
+    if triangles.min() < 0 or triangles.max() >= len(points):
+        raise MeshInputError("triangle vertex indices out of range")
+    p = points[triangles]
+    area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    scale = max(float(np.ptp(points, axis=0).max()), 1e-300)
+    bad = np.flatnonzero(area2 <= 1e-12 * scale ** 2)
+    if len(bad):
+        raise MeshInputError(f"{len(bad)} degenerate (zero-area) triangles, e.g. triangle {bad[0]}")
+    a = triangles[:, [1, 2, 0]].ravel()  # edge k of triangle t: (v[k+1], v[k+2])
+    b = triangles[:, [2, 0, 1]].ravel()
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo * len(points) + hi
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    unique, start, counts = np.unique(sorted_key, return_index=True, return_counts=True)
+    if counts.max() > 2:
+        i = int(np.argmax(counts > 2))
+        e = unique[i]
+        raise MeshInputError(f"non-manifold mesh: edge ({e // len(points)}, {e % len(points)}) is shared "
+                             f"by {counts[i]} triangles")
+    opposite = -np.ones(3 * n_tri, dtype=np.int64)
+    pairs = start[counts == 2]
+    first, second = order[pairs], order[pairs + 1]
+    if np.any(a[first] == a[second]):
+        i = first[np.flatnonzero(a[first] == a[second])[0]] // 3
+        raise MeshInputError(f"inverted triangle: triangle {i} and its neighbour traverse their "
+                             "common edge in the same direction (inconsistent orientation)")
+    flat = triangles.ravel()
+    opposite[first] = flat[second]
+    opposite[second] = flat[first]
+    return opposite.reshape(n_tri, 3)
+
+
+def patch_operators(points: np.ndarray, triangles: np.ndarray, opposite: np.ndarray,
+                    boundary_kind: np.ndarray, poisson_ratio: float):
+    """Per triangle: the patch nodes (6; a boundary slot repeats vertex 0 with weight 0), the
+    second-derivative operator B (3 components × 6 nodes: ∂₁₁, ∂₂₂, ∂₁₂), its constant part b
+    (3 × 3, from clamped edges), the reference curvature K(X), the P1 gradients d (3 × 2), the
+    area and the condition number of the fit. ``boundary_kind[t, k]``: FREE or CLAMPED for a
+    boundary edge k of triangle t."""
+    n_tri = len(triangles)
+    nodes = np.empty((n_tri, 6), dtype=np.int64)
+    B = np.zeros((n_tri, 3, 6))
+    b = np.zeros((n_tri, 3, 3))
+    d = np.empty((n_tri, 3, 2))
+    area = np.empty(n_tri)
+    condition = np.empty(n_tri)
+    nu = poisson_ratio
+    for t in range(n_tri):
+        v = triangles[t]
+        X = points[v]
+        e1 = X[1] - X[0]
+        c = np.cross(e1, X[2] - X[0])
+        area[t] = 0.5 * np.linalg.norm(c)
+        N = c / np.linalg.norm(c)
+        e1 = e1 / np.linalg.norm(e1)
+        e2 = np.cross(N, e1)
+        frame = np.array([e1, e2])  # 2 × 3
+        xi = (X - X[0]) @ frame.T  # 3 × 2
+        # P1 gradients: [1 ξ¹ ξ²] coefficients
+        V1 = np.column_stack([np.ones(3), xi])
+        d[t] = np.linalg.inv(V1)[1:].T
+        rows = np.zeros((6, 6))
+        rhs = np.zeros((6, 3))
+        nodes[t, :3] = v
+        for k in range(3):
+            rows[k] = _basis(xi[k])
+        for k in range(3):
+            j = opposite[t, k]
+            i, i2 = (k + 1) % 3, (k + 2) % 3
+            if j >= 0:
+                nodes[t, 3 + k] = j
+                rows[3 + k] = _basis((points[j] - X[0]) @ frame.T)
+                continue
+            nodes[t, 3 + k] = v[0]
+            tau = xi[i2] - xi[i]
+            tau /= np.linalg.norm(tau)
+            con = np.array([tau[1], -tau[0]])  # outward: triangles are counter-clockwise in ξ
+            if boundary_kind[t, k] == CLAMPED:
+                m = 0.5 * (xi[i] + xi[i2])
+                rows[3 + k] = [0.0, con[0], con[1], 2 * m[0] * con[0], m[1] * con[0] + m[0] * con[1],
+                               2 * m[1] * con[1]]
+                rhs[3 + k] = con @ frame
+            else:
+                rows[3 + k] = [0.0, 0.0, 0.0, 2 * (con[0] ** 2 + nu * tau[0] ** 2),
+                               2 * (con[0] * con[1] + nu * tau[0] * tau[1]), 2 * (con[1] ** 2 + nu * tau[1] ** 2)]
+        # scale ξ to O(1) for the conditioning estimate
+        condition[t] = np.linalg.cond(rows @ np.diag(_scaling(xi)))
+        inverse = np.linalg.inv(rows)
+        # second derivatives: ∂₁₁ = 2c₃, ∂₂₂ = 2c₅, ∂₁₂ = c₄
+        second = np.array([2.0 * inverse[3], 2.0 * inverse[5], inverse[4]])  # 3 × 6 (over fit rows)
+        B[t] = second
+        B[t][:, 3:][:, opposite[t] < 0] = 0.0
+        b[t] = second @ rhs
+    return nodes, B, b, d, area, condition
+
+
+def _basis(p):
+    return np.array([1.0, p[0], p[1], p[0] ** 2, p[0] * p[1], p[1] ** 2])
+
+
+def _scaling(xi):
+    h = max(np.abs(xi).max(), 1e-300)
+    return np.array([1.0, h, h, h * h, h * h, h * h])
+
+
+# --------------------------------------------------------------------------------------------
+# element kernels (numba)
+# --------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=False)
+def _skew(v, out):
+    out[0, 0] = 0.0
+    out[0, 1] = -v[2]
+    out[0, 2] = v[1]
+    out[1, 0] = v[2]
+    out[1, 1] = 0.0
+    out[1, 2] = -v[0]
+    out[2, 0] = -v[1]
+    out[2, 1] = v[0]
+    out[2, 2] = 0.0
+
+
+@njit(cache=True)
+def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess):
+    """CST energy ½ h A C(E):E; adds its gradient (9) and Hessian (9 × 9) to grad/hess."""
+    a1 = np.zeros(3)
+    a2 = np.zeros(3)
+    for i in range(3):
+        for c in range(3):
+            a1[c] += x[i, c] * d[i, 0]
+            a2[c] += x[i, c] * d[i, 1]
+    E11 = 0.5 * (a1 @ a1 - 1.0)
+    E22 = 0.5 * (a2 @ a2 - 1.0)
+    E12 = 0.5 * (a1 @ a2)
+    k = h * area
+    C11 = lam + 2.0 * mu
+    S11 = C11 * E11 + lam * E22
+    S22 = lam * E11 + C11 * E22
+    S12 = 4.0 * mu * E12
+    energy = 0.5 * k * (E11 * S11 + E22 * S22 + E12 * S12)
+    dE = np.zeros((3, 9))
+    for i in range(3):
+        for c in range(3):
+            dE[0, 3 * i + c] = d[i, 0] * a1[c]
+            dE[1, 3 * i + c] = d[i, 1] * a2[c]
+            dE[2, 3 * i + c] = 0.5 * (d[i, 0] * a2[c] + d[i, 1] * a1[c])
+    for p in range(9):
+        grad[p] += k * (S11 * dE[0, p] + S22 * dE[1, p] + S12 * dE[2, p])
+    if want_hess:
+        for p in range(9):
+            g0 = C11 * dE[0, p] + lam * dE[1, p]
+            g1 = lam * dE[0, p] + C11 * dE[1, p]
+            g2 = 4.0 * mu * dE[2, p]
+            for q in range(9):
+                hess[p, q] += k * (g0 * dE[0, q] + g1 * dE[1, q] + g2 * dE[2, q])
+        for i in range(3):
+            for j in range(3):
+                s = k * (S11 * d[i, 0] * d[j, 0] + S22 * d[i, 1] * d[j, 1]
+                         + S12 * 0.5 * (d[i, 0] * d[j, 1] + d[i, 1] * d[j, 0]))
+                for c in range(3):
+                    hess[3 * i + c, 3 * j + c] += s
+    return energy
+
+
+@njit(cache=True)
+def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess):
+    """Patch bending energy ½ D A [ν (tr κ)² + (1−ν) κ:κ] of one triangle (x: 6 × 3 patch
+    positions, vertices 0–2 first); adds its gradient (18) and Hessian (18 × 18)."""
+    e1 = x[1] - x[0]
+    e2 = x[2] - x[0]
+    c = np.cross(e1, e2)
+    L = np.sqrt(c @ c)
+    n = c / L
+    P = np.eye(3) - np.outer(n, n)
+    Cs = np.zeros((3, 3, 3))
+    _skew(e2 - e1, Cs[0])
+    tmp = np.zeros((3, 3))
+    _skew(e2, tmp)
+    Cs[1] = -tmp
+    _skew(e1, Cs[2])
+    Nn = np.zeros((3, 3, 3))
+    for i in range(3):
+        Nn[i] = (P @ Cs[i]) / L
+    H = np.zeros((3, 3))  # component (11, 22, 12) × xyz
+    for k in range(3):
+        for i in range(6):
+            for cc in range(3):
+                H[k, cc] += B[k, i] * x[i, cc]
+        for cc in range(3):
+            H[k, cc] += b[k, cc]
+    kappa = np.zeros(3)
+    for k in range(3):
+        kappa[k] = n @ H[k] - K0[k]
+    m = np.zeros(3)
+    m[0] = kappa[0] + nu * kappa[1]
+    m[1] = nu * kappa[0] + kappa[1]
+    m[2] = 2.0 * (1.0 - nu) * kappa[2]
+    k_b = D * area
+    energy = 0.5 * k_b * (kappa[0] * m[0] + kappa[1] * m[1] + kappa[2] * m[2])
+    dk = np.zeros((3, 18))
+    for k in range(3):
+        for i in range(6):
+            for cc in range(3):
+                dk[k, 3 * i + cc] = B[k, i] * n[cc]
+        for i in range(3):
+            gi = Nn[i].T @ H[k]
+            for cc in range(3):
+                dk[k, 3 * i + cc] += gi[cc]
+    for p in range(18):
+        grad[p] += k_b * (m[0] * dk[0, p] + m[1] * dk[1, p] + m[2] * dk[2, p])
+    if not want_hess:
+        return energy
+    # Gauss–Newton part
+    for p in range(18):
+        g0 = dk[0, p] + nu * dk[1, p]
+        g1 = nu * dk[0, p] + dk[1, p]
+        g2 = 2.0 * (1.0 - nu) * dk[2, p]
+        for q in range(18):
+            hess[p, q] += k_b * (g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q])
+    # curvature part: Σ_k m_k ∇²κ_k, with y = Σ_k m_k H_k (∇²κ is linear in H)
+    y = k_b * (m[0] * H[0] + m[1] * H[1] + m[2] * H[2])
+    w = k_b * m  # weights of the B_i N_j terms
+    ny = n @ y
+    S = -(np.outer(y, n) + np.outer(n, y) + ny * (np.eye(3) - 3.0 * np.outer(n, n))) / (L * L)
+    g = (P @ y) / L
+    M = np.zeros((3, 3))
+    _skew(g, tmp)
+    M[:, :] = -tmp
+    alpha = (-1.0, 1.0, 0.0)
+    beta = (-1.0, 0.0, 1.0)
+    for i in range(6):
+        for j in range(6):
+            block = np.zeros((3, 3))
+            wi = w[0] * B[0, i] + w[1] * B[1, i] + w[2] * B[2, i]
+            wj = w[0] * B[0, j] + w[1] * B[1, j] + w[2] * B[2, j]
+            if j < 3:
+                block += wi * Nn[j]
+            if i < 3:
+                block += wj * Nn[i].T
+            if i < 3 and j < 3:
+                block += Cs[i].T @ S @ Cs[j]
+                block += alpha[i] * beta[j] * M + beta[i] * alpha[j] * M.T
+            for a in range(3):
+                for bb in range(3):
+                    hess[3 * i + a, 3 * j + bb] += block[a, bb]
+    return energy
+
+
+@njit(cache=True)
+def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad, data, want_hess,
+             bending_only):
+    """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``
+    (``positions[t]``: the 18 × 18 element entries' places in it)."""
+    lam = E * nu / (1.0 - nu * nu)
+    mu = 0.5 * E / (1.0 + nu)
+    energy = 0.0
+    xe = np.zeros((6, 3))
+    gb = np.zeros(18)
+    hb = np.zeros((18, 18))
+    for t in range(tri.shape[0]):
+        h = thickness[t]
+        for i in range(6):
+            xe[i] = x[nodes[t, i]]
+        gb[:] = 0.0
+        if want_hess:
+            hb[:, :] = 0.0
+        D = E * h ** 3 / (12.0 * (1.0 - nu * nu))
+        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess)
+        if not bending_only:
+            gm = np.zeros(9)
+            hm = np.zeros((9, 9))
+            energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gm, hm, want_hess)
+            for p in range(9):
+                gb[p] += gm[p]
+                if want_hess:
+                    for q in range(9):
+                        hb[p, q] += hm[p, q]
+        for i in range(6):
+            for cc in range(3):
+                grad[3 * nodes[t, i] + cc] += gb[3 * i + cc]
+        if want_hess:
+            pos = positions[t]
+            for p in range(18):
+                for q in range(18):
+                    data[pos[p, q]] += hb[p, q]
+    return energy
+
+
+@njit(cache=True)
+def reference_curvature(X, nodes, B, b):
+    K0 = np.zeros((nodes.shape[0], 3))
+    for t in range(nodes.shape[0]):
+        e1 = X[nodes[t, 1]] - X[nodes[t, 0]]
+        e2 = X[nodes[t, 2]] - X[nodes[t, 0]]
+        c = np.cross(e1, e2)
+        n = c / np.sqrt(c @ c)
+        for k in range(3):
+            Hk = b[t, k].copy()
+            for i in range(6):
+                Hk += B[t, k, i] * X[nodes[t, i]]
+            K0[t, k] = n @ Hk
+    return K0
+
+
+# --------------------------------------------------------------------------------------------
+# the shell
+# --------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Material:
+    youngs_modulus: float
+    poisson_ratio: float
+    density: float = 0.0
+
+
+class RotationFreeShell:
+    """The rotation-free shell on (points, triangles): energy, gradient, exact Hessian in a
+    CSR matrix with a fixed pattern, consistent mass.
+
+    ``thickness``: a number or one value per triangle. ``boundary``: a callable
+    (edge midpoints (m, 3) → kind per edge, "free" | "simply" | "clamped") for the bending
+    condition on boundary edges; default free everywhere. Displacement supports are the
+    solver's (``fixed`` dofs)."""
+
+    def __init__(self, points, triangles, thickness, material: Material, boundary=None, up=None):
+        import scipy.sparse
+
+        points = np.ascontiguousarray(points, dtype=float)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise MeshInputError("points must be an (n, 3) array")
+        self.X = points
+        self.tri = orient(points, triangles, up)
+        self.opposite = edge_topology(points, self.tri)
+        self.material = material
+        thickness = np.broadcast_to(np.asarray(thickness, dtype=float), (len(self.tri),)).copy()
+        if not np.all(thickness > 0):
+            raise ValueError("thickness must be > 0 on every triangle")
+        self.thickness = thickness
+        kind = np.full((len(self.tri), 3), FREE, dtype=np.int64)
+        t_b, k_b = np.nonzero(self.opposite < 0)
+        if boundary is not None and len(t_b):
+            mid = 0.5 * (points[self.tri[t_b, (k_b + 1) % 3]] + points[self.tri[t_b, (k_b + 2) % 3]])
+            kinds = boundary(mid)
+            kind[t_b, k_b] = [BOUNDARY_KINDS[k] for k in kinds]
+        self.boundary_kind = kind
+        (self.nodes, self.B, self.b, self.d, self.area,
+         self.condition) = patch_operators(points, self.tri, self.opposite, kind, material.poisson_ratio)
+        if not np.all(np.isfinite(self.condition)) or self.condition.max() > 1e10:
+            t = int(np.argmax(self.condition))
+            raise MeshInputError(f"the quadratic patch of triangle {t} is singular (its 6 nodes on one conic)")
+        self.K0 = reference_curvature(points, self.nodes, self.B, self.b)
+        n = len(points)
+        self.n_dofs = 3 * n
+        # CSR pattern and the element entries' positions, once
+        dofs = (3 * self.nodes[:, :, None] + np.arange(3)).reshape(len(self.tri), 18)
+        rows = np.repeat(dofs, 18, axis=1).ravel()
+        cols = np.tile(dofs, (1, 18)).ravel()
+        key = rows * self.n_dofs + cols
+        unique, inverse = np.unique(key, return_inverse=True)
+        self.positions = inverse.reshape(len(self.tri), 18, 18).astype(np.int64)
+        r, c = unique // self.n_dofs, unique % self.n_dofs
+        indptr = np.zeros(self.n_dofs + 1, dtype=np.int64)
+        np.add.at(indptr, r + 1, 1)
+        self.indptr, self.indices = np.cumsum(indptr), c.astype(np.int64)
+        self.diagonal = np.searchsorted(unique, np.arange(self.n_dofs) * (self.n_dofs + 1))
+        self._scipy = scipy.sparse
+        self.mass_data = self._mass()
+
+    # -- assembly --------------------------------------------------------------------------
+    def new_data(self) -> np.ndarray:
+        return np.zeros(len(self.indices))
+
+    def evaluate(self, u: np.ndarray, grad: np.ndarray, data: np.ndarray | None = None,
+                 bending_only: bool = False) -> float:
+        """Strain energy at displacement u (3n); adds the gradient to ``grad`` and, when
+        ``data`` is given, the Hessian into the CSR values ``data``."""
+        x = self.X + u.reshape(-1, 3)
+        want = data is not None
+        return assemble(x, self.tri, self.nodes, self.B, self.b, self.K0, self.d, self.area, self.thickness,
+                        float(self.material.youngs_modulus), float(self.material.poisson_ratio),
+                        self.positions, grad, data if want else np.zeros(1), want, bending_only)
+
+    def energy(self, u: np.ndarray, bending_only: bool = False) -> float:
+        return self.evaluate(u, np.zeros(self.n_dofs), bending_only=bending_only)
+
+    def matrix(self, data: np.ndarray):
+        return self._scipy.csr_matrix((data, self.indices, self.indptr), shape=(self.n_dofs,) * 2)
+
+    def _mass(self) -> np.ndarray:
+        """Consistent P1 mass ρ h A/12 (1 + δ_ij) I₃ in the CSR values."""
+        data = self.new_data()
+        m = self.material.density * self.thickness * self.area / 12.0
+        local = np.kron(np.ones((3, 3)) + np.eye(3), np.eye(3))  # 9 × 9
+        pos = self.positions[:, :9, :9]
+        np.add.at(data, pos.ravel(), (m[:, None, None] * local).ravel())
+        return data
+
+    def lumped_mass(self) -> np.ndarray:
+        return np.asarray(self.matrix(self.mass_data).sum(axis=1)).ravel()
+
+    def pressure_load(self, q: float, direction=(0.0, 0.0, 1.0)) -> np.ndarray:
+        """Consistent nodal forces of a dead load q per unit reference area along ``direction``."""
+        f = np.zeros((len(self.X), 3))
+        np.add.at(f, self.tri.ravel(), np.repeat(q * self.area / 3.0, 3)[:, None] * np.asarray(direction))
+        return f.ravel()
+
+
+# --------------------------------------------------------------------------------------------
+# linear solver: MUMPS LDLᵀ through PETSc, symbolic analysis reused
+# --------------------------------------------------------------------------------------------
+class SymmetricSolver:
+    """The CSR system factorised by MUMPS as symmetric (PETSc Cholesky → LDLᵀ, sym = 2);
+    Dirichlet dofs become identity rows and columns. The symbolic analysis is done at the
+    first factorisation and reused (same nonzero pattern)."""
+
+    def __init__(self, shell: RotationFreeShell, fixed: np.ndarray | None = None):
+        from petsc4py import PETSc
+
+        self.PETSc = PETSc
+        self.shell = shell
+        n = shell.n_dofs
+        fixed = np.zeros(0, dtype=np.int64) if fixed is None else np.unique(np.asarray(fixed, dtype=np.int64))
+        self.fixed = fixed
+        mask = np.zeros(n, dtype=bool)
+        mask[fixed] = True
+        rows = np.repeat(np.arange(n), np.diff(shell.indptr))
+        self.zero = np.flatnonzero(mask[rows] | mask[shell.indices])
+        self.fixed_diagonal = shell.diagonal[fixed]
+        self.A = PETSc.Mat().createAIJ((n, n), csr=(shell.indptr.astype(PETSc.IntType),
+                                                    shell.indices.astype(PETSc.IntType),
+                                                    np.zeros(len(shell.indices))),
+                                       comm=PETSc.COMM_SELF)
+        self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
+        self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("cholesky")
+        pc.setFactorSolverType("mumps")
+        self.ksp.setOperators(self.A)
+        self.b = self.A.createVecRight()
+        self.x = self.A.createVecRight()
+        self._indptr = shell.indptr.astype(PETSc.IntType)
+        self._indices = shell.indices.astype(PETSc.IntType)
+        self.factorisations = 0
+
+    def factor(self, data: np.ndarray) -> None:
+        data[self.zero] = 0.0
+        data[self.fixed_diagonal] = 1.0
+        self.A.setValuesCSR(self._indptr, self._indices, data)
+        self.A.assemble()
+        self.ksp.setOperators(self.A)
+        self.ksp.setUp()
+        self.factorisations += 1
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        rhs = rhs.copy()
+        rhs[self.fixed] = 0.0
+        self.b.array[:] = rhs
+        self.ksp.solve(self.b, self.x)
+        return self.x.array.copy()
+
+
+# --------------------------------------------------------------------------------------------
+# statics and backward-Euler dynamics
+# --------------------------------------------------------------------------------------------
+def solve_linear(shell: RotationFreeShell, force: np.ndarray, fixed) -> np.ndarray:
+    """The linear (small-displacement) response: ∇²Π(0) u = f (the exact second variation
+    at the reference is the linear shell's stiffness)."""
+    data = shell.new_data()
+    shell.evaluate(np.zeros(shell.n_dofs), np.zeros(shell.n_dofs), data)
+    solver = SymmetricSolver(shell, fixed)
+    solver.factor(data)
+    return solver.solve(force)
+
+
+class Dynamics:
+    """Backward Euler with mass-proportional damping c (as ``ImplicitDynamics``), Newton on
+    R(u) = ∇Π(u) − f + M[(1/Δt² + c/Δt)(u − u_n) − v_n/Δt] with the exact Hessian.
+    ``extra``: callables (u, grad, data or None) → energy adding more terms (contact)."""
+
+    def __init__(self, shell: RotationFreeShell, time_step: float, damping: float, fixed=None,
+                 rtol: float = 1e-6, atol: float = 1e-11, max_iterations: int = 25):
+        if not time_step > 0 or not np.isfinite(time_step):
+            raise ValueError(f"time_step must be > 0, got {time_step!r}")
+        self.shell = shell
+        self.dt, self.c = time_step, damping
+        self.solver = SymmetricSolver(shell, fixed)
+        self.rtol, self.atol, self.max_iterations = rtol, atol, max_iterations
+        self.u = np.zeros(shell.n_dofs)
+        self.v = np.zeros(shell.n_dofs)
+        self.force = np.zeros(shell.n_dofs)
+        self.M = shell.matrix(shell.mass_data)
+        self.data = shell.new_data()
+        self.grad = np.zeros(shell.n_dofs)
+        self.extra = []
+        self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "other"), 0.0)
+        self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations"), 0)
+
+    def reset(self, u0: np.ndarray, v0: np.ndarray | None = None) -> None:
+        self.u = np.array(u0, dtype=float)
+        self.v = np.zeros_like(self.u) if v0 is None else np.array(v0, dtype=float)
+        self.clock = dict.fromkeys(self.clock, 0.0)
+        self.counts = dict.fromkeys(self.counts, 0)
+
+    def _system(self, u, u_n, v_n, with_jacobian: bool) -> np.ndarray:
+        coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
+        t0 = time.process_time()
+        self.grad[:] = 0.0
+        if with_jacobian:
+            self.data[:] = 0.0
+            self.shell.evaluate(u, self.grad, self.data)
+            for term in self.extra:
+                term(u, self.grad, self.data)
+            self.data += coefficient * self.shell.mass_data
+            self.clock["jacobian"] += time.process_time() - t0
+            self.counts["jacobians"] += 1
+        else:
+            self.shell.evaluate(u, self.grad)
+            for term in self.extra:
+                term(u, self.grad, None)
+            self.clock["residual"] += time.process_time() - t0
+        self.counts["residuals"] += 1
+        r = self.grad - self.force + self.M @ (coefficient * (u - u_n) - v_n / self.dt)
+        r[self.solver.fixed] = 0.0
+        return r
+
+    def step(self) -> int:
+        """One step from (u, v); returns the Newton iterations. Raises RuntimeError when Newton
+        does not converge (the state is then left at the last converged step)."""
+        u_n, v_n = self.u.copy(), self.v.copy()
+        u = u_n.copy()
+        r = self._system(u, u_n, v_n, True)
+        norm0 = np.linalg.norm(r)
+        tolerance = max(self.rtol * norm0, self.atol)
+        norm, iterations = norm0, 0
+        while norm > tolerance:
+            if iterations >= self.max_iterations or not np.isfinite(norm):
+                raise RuntimeError(f"rotation-free Newton: no convergence in {iterations} iterations "
+                                   f"(residual {norm:.3e} of {norm0:.3e}) at Δt = {self.dt:g} s")
+            t0 = time.process_time()
+            self.solver.factor(self.data)
+            t1 = time.process_time()
+            du = self.solver.solve(r)
+            self.clock["factorisation"] += t1 - t0
+            self.clock["solve"] += time.process_time() - t1
+            self.counts["factorisations"] += 1
+            u -= du
+            iterations += 1
+            r = self._system(u, u_n, v_n, True)
+            norm = np.linalg.norm(r)
+        self.counts["iterations"] += iterations
+        self.u = u
+        self.v = (u - u_n) / self.dt
+        return iterations
+
+
+# --------------------------------------------------------------------------------------------
+# benchmark meshes and runs (the shell benchmarks of docs/shell.md on this element)
+# --------------------------------------------------------------------------------------------
+def rectangle_mesh(length: float, width: float, nx: int, ny: int, kind: str = "structured",
+                   seed: int = 0):
+    """Points and triangles of [0, length] × [0, width] (z = 0): ``structured`` (each square
+    cut along the same diagonal — direction-biased on purpose), ``crossed`` (alternating
+    diagonals) or ``unstructured`` (gmsh frontal-Delaunay, size length/nx)."""
+    if kind == "unstructured":
+        return _gmsh_rectangle(length, width, length / nx, seed)
+    xs, ys = np.linspace(0.0, length, nx + 1), np.linspace(0.0, width, ny + 1)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    points = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    tris = []
+    for i in range(nx):
+        for j in range(ny):
+            a, b, c, d = i * (ny + 1) + j, (i + 1) * (ny + 1) + j, (i + 1) * (ny + 1) + j + 1, i * (ny + 1) + j + 1
+            if kind == "structured" or (i + j) % 2 == 0:
+                tris += [[a, b, c], [a, c, d]]
+            else:
+                tris += [[a, b, d], [b, c, d]]
+    return points, np.array(tris, dtype=np.int64)
+
+
+def _gmsh_rectangle(length, width, size, seed):
+    import gmsh
+
+    initialised = gmsh.isInitialized()
+    if not initialised:
+        gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add("rectangle")
+    try:
+        gmsh.model.occ.addRectangle(0, 0, 0, length, width)
+        gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.option.setNumber("Mesh.RandomSeed", 1 + seed)
+        gmsh.model.mesh.generate(2)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        points = coords.reshape(-1, 3)
+        index = {int(t): i for i, t in enumerate(tags)}
+        _, elements = gmsh.model.mesh.getElementsByType(2)
+        tris = np.array([index[int(t)] for t in elements], dtype=np.int64).reshape(-1, 3)
+    finally:
+        gmsh.model.remove()
+        if not initialised:
+            gmsh.finalize()
+    used = np.unique(tris)
+    remap = -np.ones(len(points), dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return points[used], orient(points[used], remap[tris], lambda c: np.tile([0, 0, 1.0], (len(c), 1)))
+
+
+# Timoshenko & Woinowsky-Krieger, Theory of plates and shells (1959), Tables 8 and 35:
+# centre deflection of a square plate under uniform load q, in q L⁴ / D
+PLATE_REFERENCE = {"simply": 0.00406235, "clamped": 0.00126532}
+
+
+def plate_centre_deflection(support: str, divisions: int, kind: str = "structured",
+                            poisson_ratio: float = 0.3) -> float:
+    """Linear centre deflection of the square plate (L = 10, h = 0.1, E = 1.092e6: D = 1 at
+    ν = 0.3) under q = 1, in units of q L⁴ / D, with all edges ``support`` (simply: w = 0 and
+    M_νν = 0; clamped: u = 0 and zero slope). All displacement components of boundary nodes
+    are held (the in-plane ones do not enter a linear plate's bending)."""
+    L, h, E = 10.0, 0.1, 1.092e6
+    points, tris = rectangle_mesh(L, L, divisions, divisions, kind)
+    shell = RotationFreeShell(points, tris, h, Material(E, poisson_ratio),
+                              boundary=lambda m: [support] * len(m))
+    D = E * h ** 3 / (12 * (1 - poisson_ratio ** 2))
+    on_edge = np.flatnonzero(np.isclose(points[:, 0], 0) | np.isclose(points[:, 0], L)
+                             | np.isclose(points[:, 1], 0) | np.isclose(points[:, 1], L))
+    fixed = (3 * on_edge[:, None] + np.arange(3)).ravel()
+    u = solve_linear(shell, shell.pressure_load(1.0), fixed).reshape(-1, 3)
+    centre = np.argmin(np.linalg.norm(points[:, :2] - 0.5 * L, axis=1))
+    if np.linalg.norm(points[centre, :2] - 0.5 * L) > 1e-9 * L:
+        # no node at the centre (unstructured): the linear interpolant on the triangle holding it
+        return _value_at(points, tris, u[:, 2], np.array([0.5 * L, 0.5 * L])) * D / L ** 4
+    return u[centre, 2] * D / L ** 4
+
+
+def _value_at(points, tris, values, p):
+    for t in tris:
+        a, b, c = points[t, :2]
+        T = np.column_stack([b - a, c - a])
+        lam = np.linalg.solve(T, p - a)
+        if lam.min() >= -1e-12 and lam.sum() <= 1 + 1e-12:
+            return values[t[0]] * (1 - lam.sum()) + values[t[1]] * lam[0] + values[t[2]] * lam[1]
+    raise ValueError("point outside the mesh")
+
+
+# --------------------------------------------------------------------------------------------
+# the lens
+# --------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class FastLens:
+    """The lens of ``LensParameters`` on the P1 triangles of its gmsh mesh (the P2 model's
+    vertices), thickness per triangle (optic / haptics), free edges."""
+
+    shell: RotationFreeShell
+    optic_nodes: np.ndarray
+    tip_nodes: np.ndarray  # the vertices of the first haptic's tip edge
+
+    @classmethod
+    def build(cls, params) -> "FastLens":
+        from mpi4py import MPI
+
+        import dolfinx.mesh
+        from eyemech.meshes.iol import intraocular_lens
+
+        tagged = intraocular_lens(params.geometry(), MPI.COMM_SELF)
+        mesh = tagged.mesh
+        points = np.array(mesh.geometry.x, dtype=float)
+        triangles = np.array(mesh.geometry.dofmap, dtype=np.int64)
+        optic = tagged.cells("optic")
+        thickness = np.full(len(triangles), params.haptic_thickness)
+        thickness[optic] = params.optic_thickness
+        shell = RotationFreeShell(points, triangles, thickness,
+                                  Material(params.youngs_modulus, params.poisson_ratio, params.density),
+                                  up=lambda c: np.tile([0.0, 0.0, 1.0], (len(c), 1)))
+        mesh.topology.create_connectivity(1, 0)
+        tip = dolfinx.mesh.entities_to_geometry(mesh, 1, tagged.facets("tip_1"))
+        return cls(shell, np.unique(triangles[optic]), np.unique(np.asarray(tip)))
+
+    def rolled_displacement(self, radius: float) -> np.ndarray:
+        from eyemech.problems.lens.model import rolled
+
+        X = self.shell.X
+        return (rolled(X, 1.0 / radius) - X).ravel()
+
+
+def release(params, steps: int | None = None, lens: FastLens | None = None) -> dict:
+    """The released rolled lens of ``iol-speed`` on the rotation-free model: per step the tip
+    and optic-centre mean displacements, Newton iterations, and the CPU/wall time per phase."""
+    lens = lens or FastLens.build(params)
+    dyn = Dynamics(lens.shell, params.time_step, params.damping, rtol=params.rtol, atol=params.atol,
+                   max_iterations=params.max_iterations)
+    steps = params.steps if steps is None else steps
+    dyn.reset(lens.rolled_displacement(params.roll_radius))
+    history = {"tip": [], "optic": [], "iterations": []}
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        history["iterations"].append(dyn.step())
+        u = dyn.u.reshape(-1, 3)
+        history["tip"].append(u[lens.tip_nodes].mean(axis=0).tolist())
+        history["optic"].append(u[lens.optic_nodes].mean(axis=0).tolist())
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    clock = dict(dyn.clock)
+    clock["other"] = cpu - sum(v for k, v in clock.items() if k != "other")
+    return {"wall": wall, "cpu": cpu, "phases_cpu": clock, "counts": dict(dyn.counts), "history": history,
+            "dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri), "nodes": len(lens.shell.X)}
