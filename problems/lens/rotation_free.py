@@ -210,24 +210,12 @@ def _scaling(xi):
 # --------------------------------------------------------------------------------------------
 # element kernels (numba)
 # --------------------------------------------------------------------------------------------
-@njit(cache=True, fastmath=False)
-def _skew(v, out):
-    out[0, 0] = 0.0
-    out[0, 1] = -v[2]
-    out[0, 2] = v[1]
-    out[1, 0] = v[2]
-    out[1, 1] = 0.0
-    out[1, 2] = -v[0]
-    out[2, 0] = -v[1]
-    out[2, 1] = v[0]
-    out[2, 2] = 0.0
-
-
 @njit(cache=True)
-def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess):
-    """CST energy ½ h A C(E):E; adds its gradient (9) and Hessian (9 × 9) to grad/hess."""
-    a1 = np.zeros(3)
-    a2 = np.zeros(3)
+def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
+    """CST energy ½ h A C(E):E; adds its gradient (9) and Hessian (9 × 9) to grad/hess
+    (a1, a2: scratch 3-vectors, dE: 3 × 9)."""
+    a1[:] = 0.0
+    a2[:] = 0.0
     for i in range(3):
         for c in range(3):
             a1[c] += x[i, c] * d[i, 0]
@@ -241,7 +229,6 @@ def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess):
     S22 = lam * E11 + C11 * E22
     S12 = 4.0 * mu * E12
     energy = 0.5 * k * (E11 * S11 + E22 * S22 + E12 * S12)
-    dE = np.zeros((3, 9))
     for i in range(3):
         for c in range(3):
             dE[0, 3 * i + c] = d[i, 0] * a1[c]
@@ -266,87 +253,119 @@ def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess):
 
 
 @njit(cache=True)
-def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess):
+def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     """Patch bending energy ½ D A [ν (tr κ)² + (1−ν) κ:κ] of one triangle (x: 6 × 3 patch
-    positions, vertices 0–2 first); adds its gradient (18) and Hessian (18 × 18)."""
-    e1 = x[1] - x[0]
-    e2 = x[2] - x[0]
-    c = np.cross(e1, e2)
-    L = np.sqrt(c @ c)
-    n = c / L
-    P = np.eye(3) - np.outer(n, n)
-    Cs = np.zeros((3, 3, 3))
-    _skew(e2 - e1, Cs[0])
-    tmp = np.zeros((3, 3))
-    _skew(e2, tmp)
-    Cs[1] = -tmp
-    _skew(e1, Cs[2])
-    Nn = np.zeros((3, 3, 3))
-    for i in range(3):
-        Nn[i] = (P @ Cs[i]) / L
-    H = np.zeros((3, 3))  # component (11, 22, 12) × xyz
+    positions, vertices 0–2 first); adds its gradient (18) and Hessian (18 × 18). ``work``:
+    scratch (``bending_scratch()``), so the element loop allocates nothing."""
+    Cs, Nn, H, dk, SC, S, M = work
+    e1x, e1y, e1z = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
+    e2x, e2y, e2z = x[2, 0] - x[0, 0], x[2, 1] - x[0, 1], x[2, 2] - x[0, 2]
+    cx, cy, cz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    L = np.sqrt(cx * cx + cy * cy + cz * cz)
+    n0, n1, n2 = cx / L, cy / L, cz / L
+    n = (n0, n1, n2)
+    # C_i = ∂c/∂x_i: skew(e2 − e1), −skew(e2), skew(e1)
+    _skew3(e2x - e1x, e2y - e1y, e2z - e1z, 1.0, Cs[0])
+    _skew3(e2x, e2y, e2z, -1.0, Cs[1])
+    _skew3(e1x, e1y, e1z, 1.0, Cs[2])
+    for i in range(3):  # N_i = P C_i / L
+        for col in range(3):
+            dot = n0 * Cs[i, 0, col] + n1 * Cs[i, 1, col] + n2 * Cs[i, 2, col]
+            for a in range(3):
+                Nn[i, a, col] = (Cs[i, a, col] - n[a] * dot) / L
+    kappa0 = 0.0
+    kappa1 = 0.0
+    kappa2 = 0.0
     for k in range(3):
-        for i in range(6):
-            for cc in range(3):
-                H[k, cc] += B[k, i] * x[i, cc]
         for cc in range(3):
-            H[k, cc] += b[k, cc]
-    kappa = np.zeros(3)
-    for k in range(3):
-        kappa[k] = n @ H[k] - K0[k]
-    m = np.zeros(3)
-    m[0] = kappa[0] + nu * kappa[1]
-    m[1] = nu * kappa[0] + kappa[1]
-    m[2] = 2.0 * (1.0 - nu) * kappa[2]
+            acc = b[k, cc]
+            for i in range(6):
+                acc += B[k, i] * x[i, cc]
+            H[k, cc] = acc
+    kappa0 = n0 * H[0, 0] + n1 * H[0, 1] + n2 * H[0, 2] - K0[0]
+    kappa1 = n0 * H[1, 0] + n1 * H[1, 1] + n2 * H[1, 2] - K0[1]
+    kappa2 = n0 * H[2, 0] + n1 * H[2, 1] + n2 * H[2, 2] - K0[2]
+    m0 = kappa0 + nu * kappa1
+    m1 = nu * kappa0 + kappa1
+    m2 = 2.0 * (1.0 - nu) * kappa2
     k_b = D * area
-    energy = 0.5 * k_b * (kappa[0] * m[0] + kappa[1] * m[1] + kappa[2] * m[2])
-    dk = np.zeros((3, 18))
+    energy = 0.5 * k_b * (kappa0 * m0 + kappa1 * m1 + kappa2 * m2)
     for k in range(3):
         for i in range(6):
             for cc in range(3):
                 dk[k, 3 * i + cc] = B[k, i] * n[cc]
         for i in range(3):
-            gi = Nn[i].T @ H[k]
             for cc in range(3):
-                dk[k, 3 * i + cc] += gi[cc]
+                dk[k, 3 * i + cc] += Nn[i, 0, cc] * H[k, 0] + Nn[i, 1, cc] * H[k, 1] + Nn[i, 2, cc] * H[k, 2]
     for p in range(18):
-        grad[p] += k_b * (m[0] * dk[0, p] + m[1] * dk[1, p] + m[2] * dk[2, p])
+        grad[p] += k_b * (m0 * dk[0, p] + m1 * dk[1, p] + m2 * dk[2, p])
     if not want_hess:
         return energy
-    # Gauss–Newton part
+    c1 = 2.0 * (1.0 - nu)
     for p in range(18):
-        g0 = dk[0, p] + nu * dk[1, p]
-        g1 = nu * dk[0, p] + dk[1, p]
-        g2 = 2.0 * (1.0 - nu) * dk[2, p]
-        for q in range(18):
-            hess[p, q] += k_b * (g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q])
-    # curvature part: Σ_k m_k ∇²κ_k, with y = Σ_k m_k H_k (∇²κ is linear in H)
-    y = k_b * (m[0] * H[0] + m[1] * H[1] + m[2] * H[2])
-    w = k_b * m  # weights of the B_i N_j terms
-    ny = n @ y
-    S = -(np.outer(y, n) + np.outer(n, y) + ny * (np.eye(3) - 3.0 * np.outer(n, n))) / (L * L)
-    g = (P @ y) / L
-    M = np.zeros((3, 3))
-    _skew(g, tmp)
-    M[:, :] = -tmp
+        g0 = k_b * (dk[0, p] + nu * dk[1, p])
+        g1 = k_b * (nu * dk[0, p] + dk[1, p])
+        g2 = k_b * c1 * dk[2, p]
+        for q in range(p, 18):
+            v = g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q]
+            hess[p, q] += v
+            if q != p:
+                hess[q, p] += v
+    # Σ_k m_k ∇²κ_k with y = k_b Σ_k m_k H_k (∇²κ is linear in H)
+    y0 = k_b * (m0 * H[0, 0] + m1 * H[1, 0] + m2 * H[2, 0])
+    y1 = k_b * (m0 * H[0, 1] + m1 * H[1, 1] + m2 * H[2, 1])
+    y2 = k_b * (m0 * H[0, 2] + m1 * H[1, 2] + m2 * H[2, 2])
+    y = (y0, y1, y2)
+    ny = n0 * y0 + n1 * y1 + n2 * y2
+    inv = 1.0 / (L * L)
+    for a in range(3):
+        for c in range(3):
+            S[a, c] = -(y[a] * n[c] + n[a] * y[c] - 3.0 * ny * n[a] * n[c]) * inv
+        S[a, a] -= ny * inv
+    g0, g1, g2 = (y0 - n0 * ny) / L, (y1 - n1 * ny) / L, (y2 - n2 * ny) / L
+    _skew3(g0, g1, g2, -1.0, M)  # −skew(g)
+    for j in range(3):  # SC_j = S C_j
+        for a in range(3):
+            for c in range(3):
+                SC[j, a, c] = S[a, 0] * Cs[j, 0, c] + S[a, 1] * Cs[j, 1, c] + S[a, 2] * Cs[j, 2, c]
     alpha = (-1.0, 1.0, 0.0)
     beta = (-1.0, 0.0, 1.0)
+    wk0, wk1, wk2 = k_b * m0, k_b * m1, k_b * m2
     for i in range(6):
+        wi = wk0 * B[0, i] + wk1 * B[1, i] + wk2 * B[2, i]
         for j in range(6):
-            block = np.zeros((3, 3))
-            wi = w[0] * B[0, i] + w[1] * B[1, i] + w[2] * B[2, i]
-            wj = w[0] * B[0, j] + w[1] * B[1, j] + w[2] * B[2, j]
-            if j < 3:
-                block += wi * Nn[j]
-            if i < 3:
-                block += wj * Nn[i].T
-            if i < 3 and j < 3:
-                block += Cs[i].T @ S @ Cs[j]
-                block += alpha[i] * beta[j] * M + beta[i] * alpha[j] * M.T
+            wj = wk0 * B[0, j] + wk1 * B[1, j] + wk2 * B[2, j]
             for a in range(3):
-                for bb in range(3):
-                    hess[3 * i + a, 3 * j + bb] += block[a, bb]
+                for c in range(3):
+                    v = 0.0
+                    if j < 3:
+                        v += wi * Nn[j, a, c]
+                    if i < 3:
+                        v += wj * Nn[i, c, a]
+                    if i < 3 and j < 3:
+                        v += Cs[i, 0, a] * SC[j, 0, c] + Cs[i, 1, a] * SC[j, 1, c] + Cs[i, 2, a] * SC[j, 2, c]
+                        v += alpha[i] * beta[j] * M[a, c] + beta[i] * alpha[j] * M[c, a]
+                    hess[3 * i + a, 3 * j + c] += v
     return energy
+
+
+@njit(cache=True)
+def _skew3(vx, vy, vz, s, out):
+    out[0, 0] = 0.0
+    out[0, 1] = -s * vz
+    out[0, 2] = s * vy
+    out[1, 0] = s * vz
+    out[1, 1] = 0.0
+    out[1, 2] = -s * vx
+    out[2, 0] = -s * vy
+    out[2, 1] = s * vx
+    out[2, 2] = 0.0
+
+
+@njit(cache=True)
+def bending_scratch():
+    return (np.zeros((3, 3, 3)), np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 18)),
+            np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 3)))
 
 
 @njit(cache=True)
@@ -360,6 +379,8 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad
     xe = np.zeros((6, 3))
     gb = np.zeros(18)
     hb = np.zeros((18, 18))
+    work = bending_scratch()
+    a1, a2, dE = np.zeros(3), np.zeros(3), np.zeros((3, 9))
     for t in range(tri.shape[0]):
         h = thickness[t]
         for i in range(6):
@@ -368,16 +389,10 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad
         if want_hess:
             hb[:, :] = 0.0
         D = E * h ** 3 / (12.0 * (1.0 - nu * nu))
-        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess)
+        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work)
         if not bending_only:
-            gm = np.zeros(9)
-            hm = np.zeros((9, 9))
-            energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gm, hm, want_hess)
-            for p in range(9):
-                gb[p] += gm[p]
-                if want_hess:
-                    for q in range(9):
-                        hb[p, q] += hm[p, q]
+            energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gb[:9], hb[:9, :9], want_hess,
+                                       a1, a2, dE)
         for i in range(6):
             for cc in range(3):
                 grad[3 * nodes[t, i] + cc] += gb[3 * i + cc]
@@ -516,6 +531,7 @@ class SymmetricSolver:
     first factorisation and reused (same nonzero pattern)."""
 
     def __init__(self, shell: RotationFreeShell, fixed: np.ndarray | None = None):
+        import eyemech.meshes  # noqa: F401  (orders MPI ahead of PETSc for the PyPI wheel)
         from petsc4py import PETSc
 
         self.PETSc = PETSc
@@ -540,6 +556,9 @@ class SymmetricSolver:
         pc.setType("cholesky")
         pc.setFactorSolverType("mumps")
         self.ksp.setOperators(self.A)
+        pc.setFactorSetUpSolverType()
+        factor = pc.getFactorMatrix()
+        factor.setMumpsIcntl(8, 0)  # no scaling: 20 % of a factorisation at this size, residuals unchanged
         self.b = self.A.createVecRight()
         self.x = self.A.createVecRight()
         self._indptr = shell.indptr.astype(PETSc.IntType)
@@ -596,6 +615,11 @@ class Dynamics:
         self.data = shell.new_data()
         self.grad = np.zeros(shell.n_dofs)
         self.extra = []
+        # Newton starts from u_n + Δt v_n: 2 iterations a step once the released lens moves
+        # smoothly (3 from u_n), more in the first steps after the release
+        self.predictor = True
+        # energy backtracking (off: it did not lower the iterations of the release)
+        self.line_search = False
         self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "other"), 0.0)
         self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations"), 0)
 
@@ -627,19 +651,52 @@ class Dynamics:
         r[self.solver.fixed] = 0.0
         return r
 
+    def incremental_potential(self, u, u_n, v_n) -> float:
+        """Φ(u) = Π(u) − f·u + ½ (1/Δt² + c/Δt)(u − u_n)ᵀM(u − u_n) − (u − u_n)ᵀM v_n/Δt,
+        whose gradient is R(u): the backward-Euler step minimises it."""
+        coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
+        w = u - u_n
+        return (self.shell.energy(u) + sum(term(u, np.zeros_like(u), None) for term in self.extra)
+                - self.force @ u + w @ (self.M @ (0.5 * coefficient * w - v_n / self.dt)))
+
+    def _line_search(self, u, du, r, u_n, v_n):
+        """u − α du with α = 1, halved (at most 8 times) while the incremental potential
+        rises: Newton's full step overshoots in the first steps after the rolled lens is
+        released (large rotations). The full step is taken when −du is not a descent direction
+        (an indefinite Jacobian) or when no α lowers Φ."""
+        trial = u - du
+        slope = r @ du
+        if slope <= 0.0 or not self.line_search:
+            return trial, self._system(trial, u_n, v_n, False)
+        t0 = time.process_time()
+        phi0 = self.incremental_potential(u, u_n, v_n)
+        alpha = 1.0
+        for _ in range(8):
+            trial = u - alpha * du
+            if self.incremental_potential(trial, u_n, v_n) <= phi0 - 1e-4 * alpha * slope:
+                break
+            alpha *= 0.5
+        else:
+            trial = u - du
+        self.clock["residual"] += time.process_time() - t0
+        return trial, self._system(trial, u_n, v_n, False)
+
     def step(self) -> int:
-        """One step from (u, v); returns the Newton iterations. Raises RuntimeError when Newton
+        """One step from (u, v); returns the Newton iterations. Newton starts from the
+        predictor u_n + Δt v_n; the tolerance is relative to the residual at u_n (as in
+        ``iol-speed``'s P2 loop, whose first iterate is u_n). Raises RuntimeError when Newton
         does not converge (the state is then left at the last converged step)."""
         u_n, v_n = self.u.copy(), self.v.copy()
-        u = u_n.copy()
-        r = self._system(u, u_n, v_n, True)
-        norm0 = np.linalg.norm(r)
+        norm0 = np.linalg.norm(self._system(u_n, u_n, v_n, False))
         tolerance = max(self.rtol * norm0, self.atol)
-        norm, iterations = norm0, 0
+        u = u_n + self.dt * v_n if self.predictor else u_n.copy()
+        r = self._system(u, u_n, v_n, False)
+        norm, iterations = np.linalg.norm(r), 0
         while norm > tolerance:
             if iterations >= self.max_iterations or not np.isfinite(norm):
                 raise RuntimeError(f"rotation-free Newton: no convergence in {iterations} iterations "
                                    f"(residual {norm:.3e} of {norm0:.3e}) at Δt = {self.dt:g} s")
+            self._system(u, u_n, v_n, True)  # the Jacobian (and the same residual again)
             t0 = time.process_time()
             self.solver.factor(self.data)
             t1 = time.process_time()
@@ -647,9 +704,8 @@ class Dynamics:
             self.clock["factorisation"] += t1 - t0
             self.clock["solve"] += time.process_time() - t1
             self.counts["factorisations"] += 1
-            u -= du
             iterations += 1
-            r = self._system(u, u_n, v_n, True)
+            u, r = self._line_search(u, du, r, u_n, v_n)
             norm = np.linalg.norm(r)
         self.counts["iterations"] += iterations
         self.u = u
