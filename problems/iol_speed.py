@@ -399,15 +399,17 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
             lens = FastLens.build(params)
         except (MeshInputError, ValueError) as err:
             raise ParameterError("mesh_scale", f"the rotation-free lens cannot use this mesh: {err}") from err
-    with ctx.timings("form_compilation"):
-        release(params, 1, lens)
-    runs = []
-    for _ in range(params.repeats):
+
+    def timed(steps: int) -> dict:
         try:
-            runs.append(release(params, params.steps, lens))
-        except RuntimeError as err:
+            return release(params, steps, lens)
+        except RuntimeError as err:  # Newton did not converge within max_iterations
             raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
-                                 f"from the released roll: {err}") from err
+                                 f"from the released roll (Newton: {err}); take a smaller time_step") from err
+
+    with ctx.timings("form_compilation"):
+        timed(1)
+    runs = [timed(params.steps) for _ in range(params.repeats)]
     for phase, value in runs[-1]["phases_cpu"].items():
         ctx.timings.add(f"step_{phase}", value)
     best = min(runs, key=lambda r: r["wall"])

@@ -1,0 +1,168 @@
+"""The rotation-free P1 lens shell (``problems/lens/rotation_free.py``, issue 23).
+
+References and tolerances
+- Kernels: gradient and Hessian against central differences of the energy / gradient
+  (step 1e-6 on O(0.1) displacements of O(1) energies: truncation ~1e-12, round-off
+  ~1e-16/1e-6 relative: 1e-7 relative asserted; measured 4e-11–1.6e-10).
+- Rigid motions cost nothing (the fit commutes with rotations): energy ≤ 1e-20 against
+  O(1) energies of a deformed patch (measured 7e-31).
+- Patch test: the quadratic fit reproduces any quadratic field, so on an unstructured
+  gmsh mesh every triangle with a full patch gets the exact second derivatives (1e-9
+  relative: round-off of the inverted 6×6 fit matrices, condition ≲ 1e5).
+- Plates: Timoshenko & Woinowsky-Krieger (1959), centre deflection of the square plate
+  under uniform load, 0.00406235 (simply supported) and 0.00126532 (clamped) q L⁴/D. The
+  element converges at second order on structured meshes and at first order (clamped) on
+  gmsh's; asserted: the error at 32 divisions is below 0.5 % (simply supported) / 3 %
+  (clamped) and smaller than at 16 (measured: +0.13 / +0.06 %, +1.2 / +2.1 %).
+- Mesh direction: a cylinder (R = 4) rolled along and across the direction-biased mesh
+  (every square cut along the same diagonal) and across an unstructured mesh: bending
+  energies within 2 % of each other (issue 23; measured 0 % and 0.3 %).
+- Cantilever rolled to a half circle by M = π E I / L (the exact arc, Sze, Liu & Lo 2004
+  problem 3.1 at half its moment): tip within 1 % of L at 32 × 2 squares and 0.35 % at
+  64 × 2 (the P2 model's own criterion; measured 0.79 %, 0.21 %: second order).
+- Lens release (``iol-speed``, paper resolution, Δt = 0.01 s): tip and optic-centre
+  displacement histories within 0.05 mm of the P2 C0-IP run at every one of 20 steps
+  (issue 23; measured ≤ 0.037 mm tip, ≤ 0.009 mm optic).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eyemech.problems.lens import rotation_free as rf
+from eyemech.problems.run.parameters import ParameterError
+
+
+def _bumpy_patch(clamped: bool):
+    points, tris = rf.rectangle_mesh(1.0, 1.0, 4, 4, "structured")
+    rng = np.random.default_rng(0)
+    points[:, 2] = 0.1 * rng.standard_normal(len(points))
+    boundary = (lambda m: ["clamped"] * len(m)) if clamped else None
+    return rf.RotationFreeShell(points, tris, 0.1, rf.Material(1.0, 0.3, 1.0), boundary=boundary), rng
+
+
+@pytest.mark.parametrize("clamped", [False, True])
+def test_gradient_and_hessian_against_central_differences(clamped):
+    shell, rng = _bumpy_patch(clamped)
+    u = 0.05 * rng.standard_normal(shell.n_dofs)
+    grad, data = np.zeros(shell.n_dofs), shell.new_data()
+    shell.evaluate(u, grad, data)
+    K = shell.matrix(data).toarray()
+    eps = 1e-6
+    fd_grad, fd_hess = np.zeros_like(grad), np.zeros_like(K)
+    for i in range(shell.n_dofs):
+        d = np.zeros_like(u)
+        d[i] = eps
+        fd_grad[i] = (shell.energy(u + d) - shell.energy(u - d)) / (2 * eps)
+        g_plus, g_minus = np.zeros_like(u), np.zeros_like(u)
+        shell.evaluate(u + d, g_plus)
+        shell.evaluate(u - d, g_minus)
+        fd_hess[:, i] = (g_plus - g_minus) / (2 * eps)
+    assert np.abs(grad - fd_grad).max() < 1e-7 * np.abs(grad).max()
+    assert np.abs(K - fd_hess).max() < 1e-7 * np.abs(K).max()
+    assert np.abs(K - K.T).max() < 1e-12 * np.abs(K).max()
+
+
+def test_rigid_motion_costs_nothing():
+    shell, _ = _bumpy_patch(False)
+    a, b = 0.7, 1.1
+    R = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    X = shell.X
+    assert shell.energy((X @ R.T + 3.0 - X).ravel()) < 1e-20
+
+
+def test_quadratic_fields_are_reproduced_on_an_unstructured_mesh():
+    points, tris = rf.rectangle_mesh(1.0, 1.0, 8, 8, "unstructured")
+    shell = rf.RotationFreeShell(points, tris, 0.01, rf.Material(1.0, 0.3))
+    full = np.all(shell.opposite >= 0, axis=1)
+    assert full.sum() > 0.5 * len(full)
+    x, y = points[:, 0], points[:, 1]
+    w = 0.3 * x * x + 0.5 * x * y - 0.2 * y * y  # Hessian [[0.6, 0.5], [0.5, -0.4]]
+    for t in np.flatnonzero(full):
+        e1 = points[shell.tri[t, 1]] - points[shell.tri[t, 0]]
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross([0, 0, 1.0], e1)  # the triangles are oriented +z
+        F = np.array([e1[:2], e2[:2]])
+        exact = F @ np.array([[0.6, 0.5], [0.5, -0.4]]) @ F.T
+        H = shell.B[t] @ w[shell.nodes[t]]  # ∂₁₁, ∂₂₂, ∂₁₂ in the triangle's frame
+        assert np.allclose(H, [exact[0, 0], exact[1, 1], exact[0, 1]], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("support", ["simply", "clamped"])
+@pytest.mark.parametrize("kind", ["structured", "unstructured"])
+def test_square_plate_converges_to_timoshenko(support, kind):
+    reference = rf.PLATE_REFERENCE[support]
+    errors = [abs(rf.plate_centre_deflection(support, n, kind) / reference - 1) for n in (16, 32)]
+    assert errors[1] < {"simply": 0.005, "clamped": 0.03}[support]
+    assert errors[1] < errors[0]
+
+
+@pytest.mark.xfail(strict=True, reason="known defect: on the alternating-diagonal ('crossed') mesh the "
+                   "patch fits let an oscillation lower the bending energy: +74 % (simply supported), "
+                   "not converging under refinement (docs/iol.md §4b)")
+def test_square_plate_on_crossed_mesh():
+    errors = [abs(rf.plate_centre_deflection("simply", n, "crossed") / rf.PLATE_REFERENCE["simply"] - 1)
+              for n in (16, 32)]
+    assert errors[1] < 0.005
+
+
+@pytest.mark.parametrize("kind", ["structured", "unstructured"])
+def test_rolled_cylinder_energy_does_not_depend_on_the_mesh_direction(kind):
+    ratios = rf.rolled_energy_ratio(16, kind, angles=(0.0, 90.0))
+    assert abs(ratios[0.0] / ratios[90.0] - 1) < 0.02
+
+
+@pytest.mark.parametrize("divisions, tolerance", [(32, 0.01), (64, 0.0035)])
+def test_cantilever_rolled_to_a_half_circle(divisions, tolerance):
+    result = rf.cantilever_rolling(divisions, 2, moment_fraction=0.5, load_steps=16)
+    assert result["tip_error"] < tolerance
+
+
+def test_bad_meshes_and_thickness_are_refused():
+    points, tris = rf.rectangle_mesh(1.0, 1.0, 2, 2)
+    material = rf.Material(1.0, 0.3)
+    extra = np.vstack([points, [[0.5, 0.5, 1.0]]])
+    edge = tris[0][[1, 2]]  # a third triangle on an interior edge: non-manifold
+    with pytest.raises(rf.MeshInputError, match="non-manifold"):
+        rf.RotationFreeShell(extra, np.vstack([tris, [[edge[0], edge[1], len(points)]]]), 0.1, material)
+    inverted = tris.copy()
+    inverted[3] = inverted[3][[0, 2, 1]]
+    with pytest.raises(rf.MeshInputError, match="inverted"):
+        rf.RotationFreeShell(points, inverted, 0.1, material)
+    with pytest.raises(ValueError, match="thickness"):
+        rf.RotationFreeShell(points, tris, 0.0, material)
+
+
+def test_iol_speed_refuses_what_the_fast_model_cannot_do():
+    from eyemech.problems import iol_speed
+
+    with pytest.raises(ParameterError, match="contact"):
+        iol_speed.Parameters(model="p1-rotation-free", contact=True).validate()
+    with pytest.raises(ParameterError, match="method"):
+        iol_speed.Parameters(model="p1-rotation-free", method="linearised").validate()
+    with pytest.raises(ParameterError, match="haptic_thickness"):
+        iol_speed.Parameters(model="p1-rotation-free", haptic_thickness=-0.1).validate()
+    from mpi4py import MPI
+
+    from eyemech.problems.run.context import RunOptions
+
+    with pytest.raises(ParameterError, match="time_step"):  # Newton cannot take it: 25 iterations
+        iol_speed.run(iol_speed.Parameters(model="p1-rotation-free", steps=2, time_step=0.2),
+                      comm=MPI.COMM_SELF, options=RunOptions(fields=False, pictures=False))
+
+
+@pytest.mark.slow
+def test_lens_release_agrees_with_p2():
+    from mpi4py import MPI
+
+    from eyemech.problems import iol_speed
+    from eyemech.problems.run.context import RunOptions
+
+    options = RunOptions(fields=False, pictures=False)
+    runs = {model: iol_speed.run(iol_speed.Parameters(model=model, steps=20), comm=MPI.COMM_SELF,
+                                 options=options).quantities for model in ("p2-c0ip", "p1-rotation-free")}
+    for key in ("tip_history", "optic_history"):
+        p2, p1 = (np.asarray(runs[m][key]) for m in ("p2-c0ip", "p1-rotation-free"))
+        assert np.linalg.norm(p1 - p2, axis=1).max() < 0.05
