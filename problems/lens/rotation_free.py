@@ -815,9 +815,9 @@ class FastLens:
 
     @classmethod
     def build(cls, params) -> "FastLens":
-        from eyemech.meshes.iol import intraocular_lens  # first: it orders MPI ahead of DOLFINx
+        from eyemech.meshes.iol import intraocular_lens  # noqa: I001 (first: it orders MPI ahead of DOLFINx)
 
-        import dolfinx.mesh  # noqa: I001
+        import dolfinx.mesh
         from mpi4py import MPI
 
         tagged = intraocular_lens(params.geometry(), MPI.COMM_SELF)
@@ -861,6 +861,56 @@ def release(params, steps: int | None = None, lens: FastLens | None = None) -> d
     clock["other"] = cpu - sum(v for k, v in clock.items() if k != "other")
     return {"wall": wall, "cpu": cpu, "phases_cpu": clock, "counts": dict(dyn.counts), "history": history,
             "dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri), "nodes": len(lens.shell.X)}
+
+
+# MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20: midpoint of the free edge, linear
+SCORDELIS_LO_REFERENCE = 0.3024
+
+
+def scordelis_lo_deflection(divisions: int, kind: str = "structured") -> float:
+    """The Scordelis–Lo roof of ``scordelis-lo`` (R 25, L 50, 80°, h 0.25, E 4.32e8, ν 0, self
+    weight 90 per unit area) on the rotation-free element, linear: the vertical deflection at
+    the midpoint of a free edge. Diaphragm ends: u_y = u_z = 0 and M_νν = 0; u_x held at the
+    node nearest the roof's centre (removes the axial translation; the load is symmetric).
+    The mesh is ``rectangle_mesh`` of the unit square mapped onto the roof."""
+    R, L, half = 25.0, 50.0, np.radians(40.0)
+    square, tris = rectangle_mesh(1.0, 1.0, divisions, divisions, kind)
+    angle = (2.0 * square[:, 1] - 1.0) * half
+    points = np.column_stack([L * square[:, 0], R * np.sin(angle), R * np.cos(angle)])
+    ends = lambda m: ["simply" if (np.isclose(p[0], 0.0) or np.isclose(p[0], L)) else "free" for p in m]  # noqa: E731
+    shell = RotationFreeShell(points, tris, 0.25, Material(4.32e8, 0.0), boundary=ends,
+                              up=lambda c: np.column_stack([0.0 * c[:, 0], c[:, 1], c[:, 2]]))
+    end_nodes = np.flatnonzero(np.isclose(points[:, 0], 0.0) | np.isclose(points[:, 0], L))
+    centre = np.argmin(np.linalg.norm(points - [L / 2, 0.0, R], axis=1))
+    fixed = np.concatenate([3 * end_nodes + 1, 3 * end_nodes + 2, [3 * centre]])
+    u = solve_linear(shell, shell.pressure_load(90.0, (0.0, 0.0, -1.0)), fixed).reshape(-1, 3)
+    target = np.array([L / 2, R * np.sin(half), R * np.cos(half)])
+    node = np.argmin(np.linalg.norm(points - target, axis=1))
+    if np.linalg.norm(points[node] - target) > 1e-6 * L:
+        raise ValueError("no node at the midpoint of the free edge: use an even number of divisions")
+    return -float(u[node, 2])
+
+
+def cantilever_frequency(divisions: int = 24, width_divisions: int = 4, kind: str = "structured") -> dict:
+    """First bending frequency of the clamped strip of ``cantilever-vibration`` (6 × 1 × 0.13 mm,
+    E 1 MPa, ν 0, ρ 1.2e-9 t/mm³) from K(0) φ = ω² M φ (consistent mass), against
+    Euler–Bernoulli's ω₁ = 1.8751² √(EI/ρA)/L² = 105.8 rad/s."""
+    import scipy.sparse.linalg
+
+    L, b, h, E, rho = 6.0, 1.0, 0.13, 1.0, 1.2e-9
+    points, tris = rectangle_mesh(L, b, divisions, width_divisions, kind)
+    shell = RotationFreeShell(points, tris, h, Material(E, 0.0, rho),
+                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m])
+    data = shell.new_data()
+    shell.evaluate(np.zeros(shell.n_dofs), np.zeros(shell.n_dofs), data)
+    free = np.setdiff1d(np.arange(shell.n_dofs), (3 * np.flatnonzero(np.isclose(points[:, 0], 0.0))[:, None]
+                                                  + np.arange(3)).ravel())
+    K = shell.matrix(data)[free][:, free].tocsc()
+    M = shell.matrix(shell.mass_data)[free][:, free].tocsc()
+    omega2 = scipy.sparse.linalg.eigsh(K, k=1, M=M, sigma=0.0, which="LM", return_eigenvectors=False)
+    exact = 1.8751040687 ** 2 * np.sqrt(E * b * h ** 3 / 12 / (rho * b * h)) / L ** 2
+    omega = float(np.sqrt(omega2[0]))
+    return {"omega": omega, "omega_exact": exact, "error": omega / exact - 1}
 
 
 def rolled_energy_ratio(divisions: int = 16, kind: str = "structured", angles=(0.0, 90.0),
