@@ -36,7 +36,9 @@ step costs when the shared machine is busy with other jobs. Methods:
   on the same gmsh mesh (its vertices: 1,416 unknowns at the paper's resolution), numba
   kernels with the exact Hessian, CSR pattern built once, MUMPS LDLᵀ with the symbolic
   analysis reused; Newton with a fresh Jacobian every iteration (``method=newton``,
-  ``jacobian=fresh``), deformation only (no capsule yet). Phases: ``jacobian`` is residual +
+  ``jacobian=fresh``), deformation only (no capsule yet). ``bending``: ``edge`` (default,
+  consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
+  meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
   Hessian assembly (one kernel pass), ``residual`` the gradient-only passes.
 
 Quantities: steps per second (wall, min over ``repeats``; and CPU), the per-phase split, the
@@ -73,6 +75,7 @@ Method = Literal["newton", "linearised"]
 JacobianKind = Literal["fresh", "lagged", "matrix-free"]
 Tangent = Literal["explicit", "ufl"]
 Model = Literal["p2-c0ip", "p1-rotation-free"]
+Bending = Literal["edge", "patch"]
 METHODS, JACOBIANS, TANGENTS = get_args(Method), get_args(JacobianKind), get_args(Tangent)
 MODELS = get_args(Model)
 PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
@@ -82,6 +85,9 @@ PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle: numba kernels, newton/fresh, no contact yet)")
+    bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
+                                     "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
+                                     "too soft on alternating-diagonal meshes)")
     method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS))
     jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
     refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
@@ -396,7 +402,7 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
 
     with ctx.timings("mesh"):
         try:
-            lens = FastLens.build(params)
+            lens = FastLens.build(params, params.bending)
         except (MeshInputError, ValueError) as err:
             raise ParameterError("mesh_scale", f"the rotation-free lens cannot use this mesh: {err}") from err
 
@@ -416,7 +422,7 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     steps = params.steps
     history = best["history"]
     ctx.result.quantities.update(
-        model=params.model, method=params.method, jacobian=params.jacobian, steps=steps, repeats=len(runs),
+        model=params.model, bending=params.bending, method=params.method, jacobian=params.jacobian, steps=steps, repeats=len(runs),
         steps_per_second=steps / best["wall"], steps_per_second_cpu=steps / min(r["cpu"] for r in runs),
         steps_per_second_all=[steps / r["wall"] for r in runs],
         cpu_seconds_per_step={k: v / steps for k, v in best["phases_cpu"].items()},

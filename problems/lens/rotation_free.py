@@ -131,7 +131,10 @@ def edge_topology(points: np.ndarray, triangles: np.ndarray):
     flat = triangles.ravel()
     opposite[first] = flat[second]
     opposite[second] = flat[first]
-    return opposite.reshape(n_tri, 3)
+    neighbour = -np.ones(3 * n_tri, dtype=np.int64)
+    neighbour[first] = second // 3
+    neighbour[second] = first // 3
+    return opposite.reshape(n_tri, 3), neighbour.reshape(n_tri, 3)
 
 
 def patch_operators(points: np.ndarray, triangles: np.ndarray, opposite: np.ndarray,
@@ -148,6 +151,8 @@ def patch_operators(points: np.ndarray, triangles: np.ndarray, opposite: np.ndar
     d = np.empty((n_tri, 3, 2))
     area = np.empty(n_tri)
     condition = np.empty(n_tri)
+    fits = {"inverse": np.empty((n_tri, 6, 6)), "rhs": np.zeros((n_tri, 6, 3)), "frame": np.empty((n_tri, 2, 3)),
+            "origin": np.empty((n_tri, 3)), "xi": np.empty((n_tri, 3, 2))}
     nu = poisson_ratio
     for t in range(n_tri):
         v = triangles[t]
@@ -195,7 +200,85 @@ def patch_operators(points: np.ndarray, triangles: np.ndarray, opposite: np.ndar
         B[t] = second
         B[t][:, 3:][:, opposite[t] < 0] = 0.0
         b[t] = second @ rhs
-    return nodes, B, b, d, area, condition
+        fits["inverse"][t], fits["rhs"][t], fits["frame"][t], fits["origin"][t] = inverse, rhs, frame, X[0]
+        fits["xi"][t] = xi
+    return nodes, B, b, d, area, condition, fits
+
+
+def edge_operators(points, triangles, opposite, neighbour, nodes, area, fits):
+    """The Green-formula curvature with one gradient per edge (``bending="edge"``):
+
+        H_αβ(T) = (1/A_T) Σ_edges ℓ_e sym(ν_e ⊗ g_e)_αβ,   g_e,β = ½ (∂_β q_T + ∂_β q_T')(m_e)
+
+    (m_e the edge midpoint, q_T, q_T' the patch quadratics of the two triangles, g_e = ∂_β q_T
+    on a boundary edge). Exact for quadratic fields (the midpoint rule integrates the linear
+    gradient of a quadratic exactly along an edge) and, because both triangles use the same
+    g_e with opposite co-normals, the sum over triangles of the curvature of a periodic
+    oscillation telescopes to zero: an oscillation cannot lower the energy on average, which
+    is what makes the 6-node patch curvature too soft on alternating-diagonal meshes.
+    Returns the stencil (12 nodes: the patch and the two further nodes of each neighbour's
+    patch; unused slots repeat vertex 0 with weight 0) and B (3 × 12), b (3 × 3)."""
+    n_tri = len(triangles)
+    stencil = np.empty((n_tri, 12), dtype=np.int64)
+    B = np.zeros((n_tri, 3, 12))
+    b = np.zeros((n_tri, 3, 3))
+
+    def gradient_rows(t, p):
+        """∂q/∂ξ_γ at local point p of triangle t's fit: (2 × 6) over the fit rows."""
+        inv = fits["inverse"][t]
+        return np.array([inv[1] + 2 * p[0] * inv[3] + p[1] * inv[4], inv[2] + p[0] * inv[4] + 2 * p[1] * inv[5]])
+
+    for t in range(n_tri):
+        slots = list(nodes[t, :3]) + [j for j in opposite[t] if j >= 0]
+        for k in range(3):
+            other = neighbour[t, k]
+            if other >= 0:
+                for j in nodes[other]:
+                    if j not in slots and (j != nodes[other, 0] or True):
+                        slots.append(j)
+        slots = [j for i, j in enumerate(slots) if j not in slots[:i]]
+        index = {j: i for i, j in enumerate(slots)}
+        frame, xi = fits["frame"][t], fits["xi"][t]
+        weights = np.zeros((3, 12))  # H components over stencil slots
+        constant = np.zeros((3, 3))
+        for k in range(3):
+            i, i2 = (k + 1) % 3, (k + 2) % 3
+            tau = xi[i2] - xi[i]
+            length = np.linalg.norm(tau)
+            tau = tau / length
+            con = np.array([tau[1], -tau[0]])
+            mid = 0.5 * (points[triangles[t, i]] + points[triangles[t, i2]])
+            sides = [t] if neighbour[t, k] < 0 else [t, neighbour[t, k]]
+            for side in sides:
+                share = 1.0 / len(sides)
+                fr, origin = fits["frame"][side], fits["origin"][side]
+                rows = gradient_rows(side, (mid - origin) @ fr.T)  # 2 × 6 in the side's frame
+                # ∂/∂ξ_β of T = Σ_γ ∂/∂ξ'_γ (e'_γ · e_β)
+                turn = fr @ frame.T  # (γ, β)
+                grad_rows = turn.T @ rows  # (β, fit rows)
+                grad_const = grad_rows @ fits["rhs"][side]  # (β, xyz)
+                patch = nodes[side]
+                valid = np.ones(6, dtype=bool)
+                valid[3:] = opposite[side] >= 0
+                for beta in range(2):
+                    for comp, (alpha_, beta_, factor) in enumerate(((0, 0, 1.0), (1, 1, 1.0), (0, 1, 0.5))):
+                        c = 0.0
+                        if beta == beta_:
+                            c += factor * con[alpha_]
+                        if comp == 2 and beta == alpha_:
+                            c += factor * con[beta_]
+                        if c == 0.0:
+                            continue
+                        w = share * length * c / area[t]
+                        for r in range(6):
+                            if valid[r]:
+                                weights[comp, index[patch[r]]] += w * grad_rows[beta, r]
+                        constant[comp] += w * grad_const[beta]
+        stencil[t, :len(slots)] = slots
+        stencil[t, len(slots):] = slots[0]
+        B[t] = weights
+        b[t] = constant
+    return stencil, B, b
 
 
 def _basis(p):
@@ -258,6 +341,7 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     positions, vertices 0–2 first); adds its gradient (18) and Hessian (18 × 18). ``work``:
     scratch (``bending_scratch()``), so the element loop allocates nothing."""
     Cs, Nn, H, dk, SC, S, M = work
+    NP = B.shape[1]
     e1x, e1y, e1z = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
     e2x, e2y, e2z = x[2, 0] - x[0, 0], x[2, 1] - x[0, 1], x[2, 2] - x[0, 2]
     cx, cy, cz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
@@ -279,7 +363,7 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     for k in range(3):
         for cc in range(3):
             acc = b[k, cc]
-            for i in range(6):
+            for i in range(NP):
                 acc += B[k, i] * x[i, cc]
             H[k, cc] = acc
     kappa0 = n0 * H[0, 0] + n1 * H[0, 1] + n2 * H[0, 2] - K0[0]
@@ -291,22 +375,22 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     k_b = D * area
     energy = 0.5 * k_b * (kappa0 * m0 + kappa1 * m1 + kappa2 * m2)
     for k in range(3):
-        for i in range(6):
+        for i in range(NP):
             for cc in range(3):
                 dk[k, 3 * i + cc] = B[k, i] * n[cc]
         for i in range(3):
             for cc in range(3):
                 dk[k, 3 * i + cc] += Nn[i, 0, cc] * H[k, 0] + Nn[i, 1, cc] * H[k, 1] + Nn[i, 2, cc] * H[k, 2]
-    for p in range(18):
+    for p in range(3 * NP):
         grad[p] += k_b * (m0 * dk[0, p] + m1 * dk[1, p] + m2 * dk[2, p])
     if not want_hess:
         return energy
     c1 = 2.0 * (1.0 - nu)
-    for p in range(18):
+    for p in range(3 * NP):
         g0 = k_b * (dk[0, p] + nu * dk[1, p])
         g1 = k_b * (nu * dk[0, p] + dk[1, p])
         g2 = k_b * c1 * dk[2, p]
-        for q in range(p, 18):
+        for q in range(p, 3 * NP):
             v = g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q]
             hess[p, q] += v
             if q != p:
@@ -331,9 +415,9 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     alpha = (-1.0, 1.0, 0.0)
     beta = (-1.0, 0.0, 1.0)
     wk0, wk1, wk2 = k_b * m0, k_b * m1, k_b * m2
-    for i in range(6):
+    for i in range(NP):
         wi = wk0 * B[0, i] + wk1 * B[1, i] + wk2 * B[2, i]
-        for j in range(6):
+        for j in range(NP):
             wj = wk0 * B[0, j] + wk1 * B[1, j] + wk2 * B[2, j]
             for a in range(3):
                 for c in range(3):
@@ -363,8 +447,8 @@ def _skew3(vx, vy, vz, s, out):
 
 
 @njit(cache=True)
-def bending_scratch():
-    return (np.zeros((3, 3, 3)), np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 18)),
+def bending_scratch(n_nodes):
+    return (np.zeros((3, 3, 3)), np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 3 * n_nodes)),
             np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 3)))
 
 
@@ -376,14 +460,15 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad
     lam = E * nu / (1.0 - nu * nu)
     mu = 0.5 * E / (1.0 + nu)
     energy = 0.0
-    xe = np.zeros((6, 3))
-    gb = np.zeros(18)
-    hb = np.zeros((18, 18))
-    work = bending_scratch()
+    NP = nodes.shape[1]
+    xe = np.zeros((NP, 3))
+    gb = np.zeros(3 * NP)
+    hb = np.zeros((3 * NP, 3 * NP))
+    work = bending_scratch(NP)
     a1, a2, dE = np.zeros(3), np.zeros(3), np.zeros((3, 9))
     for t in range(tri.shape[0]):
         h = thickness[t]
-        for i in range(6):
+        for i in range(NP):
             xe[i] = x[nodes[t, i]]
         gb[:] = 0.0
         if want_hess:
@@ -393,13 +478,13 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad
         if not bending_only:
             energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gb[:9], hb[:9, :9], want_hess,
                                        a1, a2, dE)
-        for i in range(6):
+        for i in range(NP):
             for cc in range(3):
                 grad[3 * nodes[t, i] + cc] += gb[3 * i + cc]
         if want_hess:
             pos = positions[t]
-            for p in range(18):
-                for q in range(18):
+            for p in range(3 * NP):
+                for q in range(3 * NP):
                     data[pos[p, q]] += hb[p, q]
     return energy
 
@@ -414,7 +499,7 @@ def reference_curvature(X, nodes, B, b):
         n = c / np.sqrt(c @ c)
         for k in range(3):
             Hk = b[t, k].copy()
-            for i in range(6):
+            for i in range(nodes.shape[1]):
                 Hk += B[t, k, i] * X[nodes[t, i]]
             K0[t, k] = n @ Hk
     return K0
@@ -439,7 +524,8 @@ class RotationFreeShell:
     condition on boundary edges; default free everywhere. Displacement supports are the
     solver's (``fixed`` dofs)."""
 
-    def __init__(self, points, triangles, thickness, material: Material, boundary=None, up=None):
+    def __init__(self, points, triangles, thickness, material: Material, boundary=None, up=None,
+                 bending: str = "edge"):
         import scipy.sparse
 
         points = np.ascontiguousarray(points, dtype=float)
@@ -447,7 +533,7 @@ class RotationFreeShell:
             raise MeshInputError("points must be an (n, 3) array")
         self.X = points
         self.tri = orient(points, triangles, up)
-        self.opposite = edge_topology(points, self.tri)
+        self.opposite, self.neighbour = edge_topology(points, self.tri)
         self.material = material
         thickness = np.broadcast_to(np.asarray(thickness, dtype=float), (len(self.tri),)).copy()
         if not np.all(thickness > 0):
@@ -461,20 +547,27 @@ class RotationFreeShell:
             kind[t_b, k_b] = [BOUNDARY_KINDS[k] for k in kinds]
         self.boundary_kind = kind
         (self.nodes, self.B, self.b, self.d, self.area,
-         self.condition) = patch_operators(points, self.tri, self.opposite, kind, material.poisson_ratio)
+         self.condition, fits) = patch_operators(points, self.tri, self.opposite, kind, material.poisson_ratio)
         if not np.all(np.isfinite(self.condition)) or self.condition.max() > 1e10:
             t = int(np.argmax(self.condition))
             raise MeshInputError(f"the quadratic patch of triangle {t} is singular (its 6 nodes on one conic)")
+        if bending == "edge":
+            self.nodes, self.B, self.b = edge_operators(points, self.tri, self.opposite, self.neighbour,
+                                                        self.nodes, self.area, fits)
+        elif bending != "patch":
+            raise ValueError(f"bending must be 'patch' or 'edge', got {bending!r}")
+        self.bending = bending
         self.K0 = reference_curvature(points, self.nodes, self.B, self.b)
         n = len(points)
         self.n_dofs = 3 * n
         # CSR pattern and the element entries' positions, once
-        dofs = (3 * self.nodes[:, :, None] + np.arange(3)).reshape(len(self.tri), 18)
-        rows = np.repeat(dofs, 18, axis=1).ravel()
-        cols = np.tile(dofs, (1, 18)).ravel()
+        m = 3 * self.nodes.shape[1]
+        dofs = (3 * self.nodes[:, :, None] + np.arange(3)).reshape(len(self.tri), m)
+        rows = np.repeat(dofs, m, axis=1).ravel()
+        cols = np.tile(dofs, (1, m)).ravel()
         key = rows * self.n_dofs + cols
         unique, inverse = np.unique(key, return_inverse=True)
-        self.positions = inverse.reshape(len(self.tri), 18, 18).astype(np.int64)
+        self.positions = inverse.reshape(len(self.tri), m, m).astype(np.int64)
         r, c = unique // self.n_dofs, unique % self.n_dofs
         indptr = np.zeros(self.n_dofs + 1, dtype=np.int64)
         np.add.at(indptr, r + 1, 1)
@@ -770,7 +863,7 @@ PLATE_REFERENCE = {"simply": 0.00406235, "clamped": 0.00126532}
 
 
 def plate_centre_deflection(support: str, divisions: int, kind: str = "structured",
-                            poisson_ratio: float = 0.3) -> float:
+                            poisson_ratio: float = 0.3, bending: str = "edge") -> float:
     """Linear centre deflection of the square plate (L = 10, h = 0.1, E = 1.092e6: D = 1 at
     ν = 0.3) under q = 1, in units of q L⁴ / D, with all edges ``support`` (simply: w = 0 and
     M_νν = 0; clamped: u = 0 and zero slope). All displacement components of boundary nodes
@@ -778,7 +871,7 @@ def plate_centre_deflection(support: str, divisions: int, kind: str = "structure
     L, h, E = 10.0, 0.1, 1.092e6
     points, tris = rectangle_mesh(L, L, divisions, divisions, kind)
     shell = RotationFreeShell(points, tris, h, Material(E, poisson_ratio),
-                              boundary=lambda m: [support] * len(m))
+                              boundary=lambda m: [support] * len(m), bending=bending)
     D = E * h ** 3 / (12 * (1 - poisson_ratio ** 2))
     on_edge = np.flatnonzero(np.isclose(points[:, 0], 0) | np.isclose(points[:, 0], L)
                              | np.isclose(points[:, 1], 0) | np.isclose(points[:, 1], L))
@@ -814,7 +907,7 @@ class FastLens:
     tip_nodes: np.ndarray  # the vertices of the first haptic's tip edge
 
     @classmethod
-    def build(cls, params) -> "FastLens":
+    def build(cls, params, bending: str = "edge") -> "FastLens":
         from eyemech.meshes.iol import intraocular_lens  # noqa: I001 (first: it orders MPI ahead of DOLFINx)
 
         import dolfinx.mesh
@@ -829,7 +922,7 @@ class FastLens:
         thickness[optic] = params.optic_thickness
         shell = RotationFreeShell(points, triangles, thickness,
                                   Material(params.youngs_modulus, params.poisson_ratio, params.density),
-                                  up=lambda c: np.tile([0.0, 0.0, 1.0], (len(c), 1)))
+                                  up=lambda c: np.tile([0.0, 0.0, 1.0], (len(c), 1)), bending=bending)
         mesh.topology.create_connectivity(1, 0)
         tip = dolfinx.mesh.entities_to_geometry(mesh, 1, tagged.facets("tip_1"))
         return cls(shell, np.unique(triangles[optic]), np.unique(np.asarray(tip)))
@@ -867,7 +960,7 @@ def release(params, steps: int | None = None, lens: FastLens | None = None) -> d
 SCORDELIS_LO_REFERENCE = 0.3024
 
 
-def scordelis_lo_deflection(divisions: int, kind: str = "structured") -> float:
+def scordelis_lo_deflection(divisions: int, kind: str = "structured", bending: str = "edge") -> float:
     """The Scordelis–Lo roof of ``scordelis-lo`` (R 25, L 50, 80°, h 0.25, E 4.32e8, ν 0, self
     weight 90 per unit area) on the rotation-free element, linear: the vertical deflection at
     the midpoint of a free edge. Diaphragm ends: u_y = u_z = 0 and M_νν = 0; u_x held at the
@@ -879,7 +972,7 @@ def scordelis_lo_deflection(divisions: int, kind: str = "structured") -> float:
     points = np.column_stack([L * square[:, 0], R * np.sin(angle), R * np.cos(angle)])
     ends = lambda m: ["simply" if (np.isclose(p[0], 0.0) or np.isclose(p[0], L)) else "free" for p in m]  # noqa: E731
     shell = RotationFreeShell(points, tris, 0.25, Material(4.32e8, 0.0), boundary=ends,
-                              up=lambda c: np.column_stack([0.0 * c[:, 0], c[:, 1], c[:, 2]]))
+                              up=lambda c: np.column_stack([0.0 * c[:, 0], c[:, 1], c[:, 2]]), bending=bending)
     end_nodes = np.flatnonzero(np.isclose(points[:, 0], 0.0) | np.isclose(points[:, 0], L))
     centre = np.argmin(np.linalg.norm(points - [L / 2, 0.0, R], axis=1))
     fixed = np.concatenate([3 * end_nodes + 1, 3 * end_nodes + 2, [3 * centre]])
@@ -891,7 +984,8 @@ def scordelis_lo_deflection(divisions: int, kind: str = "structured") -> float:
     return -float(u[node, 2])
 
 
-def cantilever_frequency(divisions: int = 24, width_divisions: int = 4, kind: str = "structured") -> dict:
+def cantilever_frequency(divisions: int = 24, width_divisions: int = 4, kind: str = "structured",
+                         bending: str = "edge") -> dict:
     """First bending frequency of the clamped strip of ``cantilever-vibration`` (6 × 1 × 0.13 mm,
     E 1 MPa, ν 0, ρ 1.2e-9 t/mm³) from K(0) φ = ω² M φ (consistent mass), against
     Euler–Bernoulli's ω₁ = 1.8751² √(EI/ρA)/L² = 105.8 rad/s."""
@@ -900,7 +994,7 @@ def cantilever_frequency(divisions: int = 24, width_divisions: int = 4, kind: st
     L, b, h, E, rho = 6.0, 1.0, 0.13, 1.0, 1.2e-9
     points, tris = rectangle_mesh(L, b, divisions, width_divisions, kind)
     shell = RotationFreeShell(points, tris, h, Material(E, 0.0, rho),
-                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m])
+                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m], bending=bending)
     data = shell.new_data()
     shell.evaluate(np.zeros(shell.n_dofs), np.zeros(shell.n_dofs), data)
     free = np.setdiff1d(np.arange(shell.n_dofs), (3 * np.flatnonzero(np.isclose(points[:, 0], 0.0))[:, None]
@@ -914,7 +1008,7 @@ def cantilever_frequency(divisions: int = 24, width_divisions: int = 4, kind: st
 
 
 def rolled_energy_ratio(divisions: int = 16, kind: str = "structured", angles=(0.0, 90.0),
-                        poisson_ratio: float = 0.3, radius: float = 4.0) -> dict:
+                        poisson_ratio: float = 0.3, radius: float = 4.0, bending: str = "edge") -> dict:
     """Bending energy of the unit square (h = 0.01, E = 1) rolled isometrically onto a
     cylinder of ``radius`` whose axis makes each of ``angles`` (degrees) with the x axis, over
     the exact ½ D A / R². ``structured``: every square cut along the same diagonal (the mesh
@@ -922,7 +1016,7 @@ def rolled_energy_ratio(divisions: int = 16, kind: str = "structured", angles=(0
     triangles at free edges parallel to the axis (their fit imposes M_νν = 0, an O(h) strip)."""
     points, tris = rectangle_mesh(1.0, 1.0, divisions, divisions, kind)
     h, E = 0.01, 1.0
-    shell = RotationFreeShell(points, tris, h, Material(E, poisson_ratio))
+    shell = RotationFreeShell(points, tris, h, Material(E, poisson_ratio), bending=bending)
     D = E * h ** 3 / (12 * (1 - poisson_ratio ** 2))
     exact = 0.5 * D / radius ** 2
     out = {}
@@ -939,7 +1033,8 @@ def rolled_energy_ratio(divisions: int = 16, kind: str = "structured", angles=(0
 
 
 def cantilever_rolling(divisions: int = 32, width_divisions: int = 2, moment_fraction: float = 1.0,
-                       load_steps: int = 8, kind: str = "structured", line_search: bool = False) -> dict:
+                       load_steps: int = 8, kind: str = "structured", line_search: bool = False,
+                       bending: str = "edge") -> dict:
     """The strip of ``cantilever-rolling`` (L = 12, b = 1, h = 0.1, E = 1.2e6, ν = 0), root
     clamped (positions and slope), rolled by the end moment M = moment_fraction · 2π E I / L.
     The moment does work on the mean angle φ of the last row of segments in the x–z plane
@@ -950,7 +1045,7 @@ def cantilever_rolling(divisions: int = 32, width_divisions: int = 2, moment_fra
     points, tris = rectangle_mesh(L, b, divisions, width_divisions, kind)
     root = np.isclose(points[:, 0], 0.0)
     shell = RotationFreeShell(points, tris, h, Material(E, 0.0),
-                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m])
+                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m], bending=bending)
     I = b * h ** 3 / 12
     full = 2 * np.pi * E * I / L
     end = np.flatnonzero(np.isclose(points[:, 0], L))
