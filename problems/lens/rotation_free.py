@@ -418,6 +418,8 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     for i in range(NP):
         wi = wk0 * B[0, i] + wk1 * B[1, i] + wk2 * B[2, i]
         for j in range(NP):
+            if i >= 3 and j >= 3:
+                break  # no curvature-part terms between two non-vertex nodes
             wj = wk0 * B[0, j] + wk1 * B[1, j] + wk2 * B[2, j]
             for a in range(3):
                 for c in range(3):
