@@ -18,10 +18,10 @@ and a_α = Σ_i x_i d_iα (the deformed tangent vectors),
 — the plane-stress St Venant–Kirchhoff law of ``ShellMaterial.plane_stress`` (C(A)
 = E_Y/(1−ν²)((1−ν)A + ν tr A P)).
 
-**Bending: quadratic patch interpolation (Phaal & Calladine 1992; the BST family of Oñate &
-Zárate 2000 with the quadratic patch of the EBST, Flores & Oñate 2005).** The patch of T is
-T's 3 vertices and the 3 vertices opposite T across its edges. A quadratic
-q(ξ) = c₀ + c₁ξ¹ + c₂ξ² + c₃(ξ¹)² + c₄ξ¹ξ² + c₅(ξ²)² (each Cartesian component of the
+**Bending: quadratic patch fits (Phaal & Calladine 1992; the quadratic patch of the
+EBST, Flores & Oñate 2005) and a Green-formula curvature (the BST of Oñate & Zárate 2000).**
+The patch of T is T's 3 vertices and the 3 vertices opposite T across its edges. A quadratic
+q_T(ξ) = c₀ + c₁ξ¹ + c₂ξ² + c₃(ξ¹)² + c₄ξ¹ξ² + c₅(ξ²)² (each Cartesian component of the
 position) is fitted to the patch: interpolation at the 6 nodes; on a boundary edge without
 opposite node, one condition instead:
 
@@ -31,18 +31,28 @@ opposite node, one condition instead:
 - ``clamped``: the slope across the edge at its midpoint m is the reference one,
   q,_ν(m) = ν (the 3D reference co-normal).
 
-The fit is linear in the nodal positions, so its (constant) second derivatives are
-H_αβ(x) = Σ_i B^i_αβ x_i + b_αβ (B, b computed once per triangle from the reference:
-the inverse of the 6×6 fit matrix), and with n = (x₁−x₀)×(x₂−x₀)/|·| the deformed normal of T,
+The fit is linear in the nodal positions (the inverse of a 6×6 matrix per triangle, once).
+Two curvatures are built from it, both of the form H_αβ(x) = Σ_i B^i_αβ x_i + b_αβ:
+
+- ``bending="edge"`` (default): one gradient per edge shared by its two triangles,
+  g_e = ½ (∇q_T + ∇q_T')(m_e) (∇q_T on a boundary edge), and the Green formula
+  ∫_T ∂_α∂_β x = ∮ ν_α ∂_β x with the midpoint rule on each edge:
+      H_αβ(T) = (1/A_T) Σ_e ℓ_e sym(ν_e ⊗ g_e)_αβ            (stencil: 12 nodes)
+  Exact for quadratic fields (patch test), and the curvatures of a periodic oscillation
+  sum to zero over the triangles (the shared g_e telescopes), so no oscillation can lower
+  the energy: second-order convergence on one-diagonal, alternating-diagonal and gmsh meshes.
+- ``bending="patch"``: H_αβ = ∂_α∂_β q_T, the fit's own constant second derivatives
+  (stencil: 6 nodes, half the cost). Also exact for quadratics, but not telescoping: on the
+  alternating-diagonal mesh an oscillation of period 2h lowers the energy and the plate is
+  ≈ 75 % too soft, not converging (a known defect; docs/iol.md §4b).
+
+With n = (x₁−x₀)×(x₂−x₀)/|·| the deformed normal of T,
 
     K_αβ = n · H_αβ(x),   κ = K(x) − K(X),
     W_b = ½ D A [ν (tr κ)² + (1−ν) κ:κ],   D = E_Y h³/(12(1−ν²))
 
-— ½ (h³/12) C(κ):κ, the bending energy of ``forms/shell.py``. The fit reproduces every
-quadratic field exactly (patch test: any constant curvature is represented exactly, on any
-mesh where the 6 nodes do not lie on one conic), so the bending energy is consistent on
-unstructured meshes and independent of the mesh direction for a uniform curvature; rigid
-motions give κ = 0 (the fit commutes with rotations, n rotates with x).
+— ½ (h³/12) C(κ):κ, the bending energy of ``forms/shell.py``. Rigid motions give κ = 0
+(the fits commute with rotations, n rotates with x).
 
 **Total energy, dynamics.** Π(x) = Σ_T (W_m + W_b) − f_ext·u; consistent P1 mass
 M = Σ_T ρ h A/12 (1 + δ_ij) I₃ (the P2 model's ∫ ρ h u·v dA on P1). Backward Euler with the
@@ -53,7 +63,8 @@ scene's mass-proportional damping c (as ``ImplicitDynamics``):
 **Kernels.** Energy, gradient and the exact Hessian of both element energies are written out
 (numba, ``@njit(cache=True)``): with C_i = ∂c/∂x_i (c = (x₁−x₀)×(x₂−x₀)), N_i = P C_i/|c|,
 P = I − nnᵀ, the second derivative of K = n·H is
-B_i N_j + B_j N_iᵀ + C_iᵀ S C_j + G_ij with S = −(H nᵀ + n Hᵀ + (n·H)(I − 3nnᵀ))/|c|² and
+B_i N_j + B_j N_iᵀ + C_iᵀ S C_j + G_ij (i, j over the stencil; N, C, G only for
+T's vertices) with S = −(H nᵀ + n Hᵀ + (n·H)(I − 3nnᵀ))/|c|² and
 G the bilinear part of c contracted with PH/|c|. They are assembled straight into a CSR
 matrix whose pattern (and every element entry's position in it) is computed once; the
 Newton systems are factorised by MUMPS as symmetric LDLᵀ (PETSc Cholesky, sym = 2), the
