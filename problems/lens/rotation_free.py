@@ -241,13 +241,9 @@ def edge_operators(points, triangles, opposite, neighbour, nodes, area, fits):
 
     for t in range(n_tri):
         slots = list(nodes[t, :3]) + [j for j in opposite[t] if j >= 0]
-        for k in range(3):
-            other = neighbour[t, k]
-            if other >= 0:
-                for j in nodes[other]:
-                    if j not in slots and (j != nodes[other, 0] or True):
-                        slots.append(j)
-        slots = [j for i, j in enumerate(slots) if j not in slots[:i]]
+        for other in neighbour[t]:
+            if other >= 0:  # a neighbour's padded slots repeat its vertex 0, already listed
+                slots += [j for j in nodes[other] if j not in slots]
         index = {j: i for i, j in enumerate(slots)}
         frame, xi = fits["frame"][t], fits["xi"][t]
         weights = np.zeros((3, 12))  # H components over stencil slots
