@@ -494,7 +494,8 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad
             pos = positions[t]
             for p in range(3 * NP):
                 for q in range(3 * NP):
-                    data[pos[p, q]] += hb[p, q]
+                    if pos[p, q] >= 0:
+                        data[pos[p, q]] += hb[p, q]
     return energy
 
 
@@ -584,20 +585,30 @@ class RotationFreeShell:
         self.diagonal = np.searchsorted(unique, np.arange(self.n_dofs) * (self.n_dofs + 1))
         self._scipy = scipy.sparse
         self.mass_data = self._mass()
+        # the upper triangle alone (what an LDLᵀ factorisation reads): half the scatter and copy
+        keep = r <= c
+        renumber = np.cumsum(keep) - 1
+        up_indptr = np.zeros(self.n_dofs + 1, dtype=np.int64)
+        np.add.at(up_indptr, r[keep] + 1, 1)
+        self.upper = {"positions": np.where(keep[self.positions], renumber[self.positions], -1),
+                      "indptr": np.cumsum(up_indptr), "indices": c[keep].astype(np.int64),
+                      "diagonal": renumber[self.diagonal], "mass": self.mass_data[keep]}
 
     # -- assembly --------------------------------------------------------------------------
     def new_data(self) -> np.ndarray:
         return np.zeros(len(self.indices))
 
     def evaluate(self, u: np.ndarray, grad: np.ndarray, data: np.ndarray | None = None,
-                 bending_only: bool = False) -> float:
+                 bending_only: bool = False, upper: bool = False) -> float:
         """Strain energy at displacement u (3n); adds the gradient to ``grad`` and, when
-        ``data`` is given, the Hessian into the CSR values ``data``."""
+        ``data`` is given, the Hessian into the CSR values ``data`` (of the upper triangle's
+        pattern ``self.upper`` when ``upper``)."""
         x = self.X + u.reshape(-1, 3)
         want = data is not None
+        positions = self.upper["positions"] if upper else self.positions
         return assemble(x, self.tri, self.nodes, self.B, self.b, self.K0, self.d, self.area, self.thickness,
                         float(self.material.youngs_modulus), float(self.material.poisson_ratio),
-                        self.positions, grad, data if want else np.zeros(1), want, bending_only)
+                        positions, grad, data if want else np.zeros(1), want, bending_only)
 
     def energy(self, u: np.ndarray, bending_only: bool = False) -> float:
         return self.evaluate(u, np.zeros(self.n_dofs), bending_only=bending_only)
@@ -632,10 +643,9 @@ class SymmetricSolver:
     Dirichlet dofs become identity rows and columns. The symbolic analysis is done at the
     first factorisation and reused (same nonzero pattern)."""
 
-    def __init__(self, shell: RotationFreeShell, fixed: np.ndarray | None = None):
+    def __init__(self, shell: RotationFreeShell, fixed: np.ndarray | None = None, upper: bool = False):
+        import eyemech.meshes  # noqa: F401, I001  (first: it orders MPI ahead of PETSc for the PyPI wheel)
         from petsc4py import PETSc
-
-        import eyemech.meshes  # noqa: F401  (orders MPI ahead of PETSc for the PyPI wheel)
 
         self.PETSc = PETSc
         self.shell = shell
@@ -644,12 +654,16 @@ class SymmetricSolver:
         self.fixed = fixed
         mask = np.zeros(n, dtype=bool)
         mask[fixed] = True
-        rows = np.repeat(np.arange(n), np.diff(shell.indptr))
-        self.zero = np.flatnonzero(mask[rows] | mask[shell.indices])
-        self.fixed_diagonal = shell.diagonal[fixed]
-        self.A = PETSc.Mat().createAIJ((n, n), csr=(shell.indptr.astype(PETSc.IntType),
-                                                    shell.indices.astype(PETSc.IntType),
-                                                    np.zeros(len(shell.indices))),
+        if upper:
+            indptr, indices, diagonal = shell.upper["indptr"], shell.upper["indices"], shell.upper["diagonal"]
+        else:
+            indptr, indices, diagonal = shell.indptr, shell.indices, shell.diagonal
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        self.zero = np.flatnonzero(mask[rows] | mask[indices])
+        self.fixed_diagonal = diagonal[fixed]
+        self._indptr = indptr.astype(PETSc.IntType)
+        self._indices = indices.astype(PETSc.IntType)
+        self.A = PETSc.Mat().createAIJ((n, n), csr=(self._indptr, self._indices, np.zeros(len(indices))),
                                        comm=PETSc.COMM_SELF)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
@@ -664,8 +678,6 @@ class SymmetricSolver:
         factor.setMumpsIcntl(8, 0)  # no scaling: 20 % of a factorisation at this size, residuals unchanged
         self.b = self.A.createVecRight()
         self.x = self.A.createVecRight()
-        self._indptr = shell.indptr.astype(PETSc.IntType)
-        self._indices = shell.indices.astype(PETSc.IntType)
         self.factorisations = 0
 
     def factor(self, data: np.ndarray) -> None:
@@ -701,21 +713,24 @@ def solve_linear(shell: RotationFreeShell, force: np.ndarray, fixed) -> np.ndarr
 class Dynamics:
     """Backward Euler with mass-proportional damping c (as ``ImplicitDynamics``), Newton on
     R(u) = ∇Π(u) − f + M[(1/Δt² + c/Δt)(u − u_n) − v_n/Δt] with the exact Hessian.
-    ``extra``: callables (u, grad, data or None) → energy adding more terms (contact)."""
+    ``extra``: callables (u, grad, data or None) → energy adding more terms (contact), on
+    the full pattern; without them the Jacobian is kept as its upper triangle (``upper``)."""
 
     def __init__(self, shell: RotationFreeShell, time_step: float, damping: float, fixed=None,
-                 rtol: float = 1e-6, atol: float = 1e-11, max_iterations: int = 25):
+                 rtol: float = 1e-6, atol: float = 1e-11, max_iterations: int = 25, upper: bool = True):
         if not time_step > 0 or not np.isfinite(time_step):
             raise ValueError(f"time_step must be > 0, got {time_step!r}")
         self.shell = shell
         self.dt, self.c = time_step, damping
-        self.solver = SymmetricSolver(shell, fixed)
+        self.upper = upper
+        self.solver = SymmetricSolver(shell, fixed, upper=upper)
         self.rtol, self.atol, self.max_iterations = rtol, atol, max_iterations
         self.u = np.zeros(shell.n_dofs)
         self.v = np.zeros(shell.n_dofs)
         self.force = np.zeros(shell.n_dofs)
         self.M = shell.matrix(shell.mass_data)
-        self.data = shell.new_data()
+        self.data = np.zeros(len(shell.upper["indices"])) if upper else shell.new_data()
+        self.mass_data = shell.upper["mass"] if upper else shell.mass_data
         self.grad = np.zeros(shell.n_dofs)
         self.extra = []
         # Newton starts from u_n + Δt v_n: 2 iterations a step once the released lens moves
@@ -738,10 +753,10 @@ class Dynamics:
         self.grad[:] = 0.0
         if with_jacobian:
             self.data[:] = 0.0
-            self.shell.evaluate(u, self.grad, self.data)
+            self.shell.evaluate(u, self.grad, self.data, upper=self.upper)
             for term in self.extra:
                 term(u, self.grad, self.data)
-            self.data += coefficient * self.shell.mass_data
+            self.data += coefficient * self.mass_data
             self.clock["jacobian"] += time.process_time() - t0
             self.counts["jacobians"] += 1
         else:
@@ -1086,7 +1101,7 @@ def cantilever_rolling(divisions: int = 32, width_divisions: int = 2, moment_fra
         return float(np.sum(scale * phi))
 
     fixed = (3 * np.flatnonzero(root)[:, None] + np.arange(3)).ravel()
-    dyn = Dynamics(shell, 1.0, 0.0, fixed=fixed, rtol=1e-8, atol=1e-9, max_iterations=100)
+    dyn = Dynamics(shell, 1.0, 0.0, fixed=fixed, rtol=1e-8, atol=1e-9, max_iterations=100, upper=False)
     dyn.predictor = False
     dyn.line_search = line_search
     dyn.extra.append(moment_term)
