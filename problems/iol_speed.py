@@ -29,6 +29,18 @@ step costs when the shared machine is busy with other jobs. Methods:
   LU factors (Newton–Krylov; Knoll & Keyes 2004). Exact Newton directions at the price of
   residuals — which cost ~1/200 of a Jacobian assembly for this shell.
 
+``model``:
+- ``p2-c0ip`` (default): the P2 C0-IP Kirchhoff–Love lens of ``LensShell`` (UFL/FFCx
+  kernels, PETSc, MUMPS LU), every method above.
+- ``p1-rotation-free``: the rotation-free P1 triangle of ``problems/lens/rotation_free.py``
+  on the same gmsh mesh (its vertices: 1,416 unknowns at the paper's resolution), numba
+  kernels with the exact Hessian, CSR pattern built once, MUMPS LDLᵀ with the symbolic
+  analysis reused; Newton with a fresh Jacobian every iteration (``method=newton``,
+  ``jacobian=fresh``), deformation only (no capsule yet). ``bending``: ``edge`` (default,
+  consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
+  meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
+  Hessian assembly (one kernel pass), ``residual`` the gradient-only passes.
+
 Quantities: steps per second (wall, min over ``repeats``; and CPU), the per-phase split, the
 history of the tip and optic-centre displacement (``tip_history``, ``optic_history`` at
 every step), Newton iterations, Jacobians and factorisations, residual of the last step.
@@ -62,12 +74,20 @@ from petsc4py import PETSc
 Method = Literal["newton", "linearised"]
 JacobianKind = Literal["fresh", "lagged", "matrix-free"]
 Tangent = Literal["explicit", "ufl"]
+Model = Literal["p2-c0ip", "p1-rotation-free"]
+Bending = Literal["edge", "patch"]
 METHODS, JACOBIANS, TANGENTS = get_args(Method), get_args(JacobianKind), get_args(Tangent)
+MODELS = get_args(Model)
 PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(LensParameters):
+    model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
+                                    "triangle: numba kernels, newton/fresh, no contact yet)")
+    bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
+                                     "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
+                                     "too soft on alternating-diagonal meshes)")
     method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS))
     jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
     refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
@@ -101,6 +121,15 @@ class Parameters(LensParameters):
         if self.method == "linearised" and SCHEMES[self.scheme].alpha_f:
             raise ParameterError("scheme", "generalized-alpha needs the residual at the accepted state "
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
+        if self.model == "p1-rotation-free":
+            if (self.method, self.jacobian) != ("newton", "fresh"):
+                raise ParameterError("method", "model=p1-rotation-free runs method=newton with jacobian=fresh "
+                                     "(the other methods are the P2 model's)")
+            if self.contact:
+                raise ParameterError("contact", "model=p1-rotation-free has no capsule contact yet: "
+                                     "set contact=false")
+            if self.scheme != "backward-euler":
+                raise ParameterError("scheme", "model=p1-rotation-free integrates with backward-euler only")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
             raise ParameterError("capsule_semi_axes", "three positive semi-axes, mm")
         if self.roll_radius < 0.5 * self.overall_length / np.pi:
@@ -345,6 +374,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
         if ctx.comm.size != 1:
             raise ParameterError("ranks", "iol-speed measures one core: run it on one rank")
+        if params.model == "p1-rotation-free":
+            _run_rotation_free(ctx, params)
+            return ctx.result
         with ctx.timings("mesh"):
             shell = _lens(params)
         with ctx.timings("form_compilation"):
@@ -361,6 +393,43 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         if capsule is not None:
             ctx.result.quantities["capsule_semi_axes_mm"] = capsule.semi_axes.tolist()
     return ctx.result
+
+
+def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
+    """The same release on the rotation-free P1 lens; one untimed step first compiles (or
+    loads from numba's cache) the kernels."""
+    from eyemech.problems.lens.rotation_free import FastLens, MeshInputError, release
+
+    with ctx.timings("mesh"):
+        try:
+            lens = FastLens.build(params, params.bending)
+        except (MeshInputError, ValueError) as err:
+            raise ParameterError("mesh_scale", f"the rotation-free lens cannot use this mesh: {err}") from err
+
+    def timed(steps: int) -> dict:
+        try:
+            return release(params, steps, lens)
+        except RuntimeError as err:  # Newton did not converge within max_iterations
+            raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
+                                 f"from the released roll (Newton: {err}); take a smaller time_step") from err
+
+    with ctx.timings("form_compilation"):
+        timed(1)
+    runs = [timed(params.steps) for _ in range(params.repeats)]
+    for phase, value in runs[-1]["phases_cpu"].items():
+        ctx.timings.add(f"step_{phase}", value)
+    best = min(runs, key=lambda r: r["wall"])
+    steps = params.steps
+    history = best["history"]
+    ctx.result.quantities.update(
+        model=params.model, bending=params.bending, method=params.method, jacobian=params.jacobian, steps=steps, repeats=len(runs),
+        steps_per_second=steps / best["wall"], steps_per_second_cpu=steps / min(r["cpu"] for r in runs),
+        steps_per_second_all=[steps / r["wall"] for r in runs],
+        cpu_seconds_per_step={k: v / steps for k, v in best["phases_cpu"].items()},
+        **best["counts"], newton_iterations=history["iterations"],
+        tip_history=history["tip"], optic_history=history["optic"],
+        time=[params.time_step * (i + 1) for i in range(steps)], load_average=os.getloadavg()[0],
+        dofs=best["dofs"], cells=best["cells"], nodes=best["nodes"])
 
 
 def _lens(params: Parameters) -> LensShell:

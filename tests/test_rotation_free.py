@@ -1,0 +1,205 @@
+"""The rotation-free P1 lens shell (``problems/lens/rotation_free.py``, issue 23).
+
+References and tolerances
+- Kernels: gradient and Hessian against central differences of the energy / gradient
+  (step 1e-6 on O(0.1) displacements of O(1) energies: truncation ~1e-12, round-off
+  ~1e-16/1e-6 relative: 1e-7 relative asserted; measured 4e-11–1.6e-10).
+- Rigid motions cost nothing (the fit commutes with rotations): energy ≤ 1e-20 against
+  O(1) energies of a deformed patch (measured 7e-31).
+- Patch test: the quadratic fit reproduces any quadratic field, so on an unstructured
+  gmsh mesh every triangle with a full patch gets the exact second derivatives (1e-9
+  relative: round-off of the inverted 6×6 fit matrices, condition ≲ 1e5).
+- Plates: Timoshenko & Woinowsky-Krieger (1959), centre deflection of the square plate
+  under uniform load, 0.00406235 (simply supported) and 0.00126532 (clamped) q L⁴/D, with
+  the default ``bending="edge"`` curvature on one-diagonal, alternating-diagonal and gmsh
+  meshes; second order. Asserted: the error at 32 divisions below 0.5 % (simply supported)
+  / 3 % (clamped) and smaller than at 16 (measured at 32: +0.13 / +0.18 / +0.004 % and
+  +1.15 / +1.21 / +0.75 %). ``bending="patch"`` on the alternating-diagonal mesh is +74 %:
+  a strict xfail recording that defect.
+- Mesh direction: a cylinder (R = 4) rolled along and across the direction-biased mesh
+  (every square cut along the same diagonal) and across an unstructured mesh: bending
+  energies within 2 % of each other (issue 23; measured 0 % and 0.2 %).
+- Cantilever rolled to a half circle by M = π E I / L (the exact arc, Sze, Liu & Lo 2004
+  problem 3.1 at half its moment): tip within 1 % of L at 32 × 2 squares and 0.35 % at
+  64 × 2 (the P2 model's own criterion; measured 0.79 %, 0.21 %: second order); the full
+  circle M = 2π E I / L on the centre-line-symmetric mesh 64 × 4 within 1 % of L (measured
+  0.70 %; 2.75 % at 32 × 4: second order).
+- Scordelis–Lo roof: 0.3024 (MacNeal & Harder 1985), linear. The constant-strain membrane
+  locks on the curved roof, so the deflection converges from below at ≈ O(h^1.5)
+  (structured 16/32/64: −13.4/−4.4/−1.6 %; gmsh −8.3/−2.8/−1.2 %); asserted at 32: within
+  6 % (structured) / 4 % (gmsh) and closer than at 16.
+- Cantilever vibration: Euler–Bernoulli ω₁ = 1.8751² √(EI/ρA)/L² = 105.8 rad/s (ν = 0, so the
+  plate strip's first mode is the beam's); asserted within 0.5 % at 24 × 4 (measured
+  −0.08 % structured, −0.06 % gmsh; second order).
+- Lens release (``iol-speed``, paper resolution, Δt = 0.01 s): tip and optic-centre
+  displacement histories within 0.05 mm of the P2 C0-IP run at every one of 20 steps
+  (issue 23; measured ≤ 0.037 mm tip, ≤ 0.009 mm optic).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eyemech.problems.lens import rotation_free as rf
+from eyemech.problems.run.parameters import ParameterError
+
+
+def _bumpy_patch(clamped: bool, bending: str = "edge"):
+    points, tris = rf.rectangle_mesh(1.0, 1.0, 4, 4, "structured")
+    rng = np.random.default_rng(0)
+    points[:, 2] = 0.1 * rng.standard_normal(len(points))
+    boundary = (lambda m: ["clamped"] * len(m)) if clamped else None
+    return rf.RotationFreeShell(points, tris, 0.1, rf.Material(1.0, 0.3, 1.0), boundary=boundary,
+                                bending=bending), rng
+
+
+@pytest.mark.parametrize("bending", ["edge", "patch"])
+@pytest.mark.parametrize("clamped", [False, True])
+def test_gradient_and_hessian_against_central_differences(clamped, bending):
+    shell, rng = _bumpy_patch(clamped, bending)
+    u = 0.05 * rng.standard_normal(shell.n_dofs)
+    grad, data = np.zeros(shell.n_dofs), shell.new_data()
+    shell.evaluate(u, grad, data)
+    K = shell.matrix(data).toarray()
+    eps = 1e-6
+    fd_grad, fd_hess = np.zeros_like(grad), np.zeros_like(K)
+    for i in range(shell.n_dofs):
+        d = np.zeros_like(u)
+        d[i] = eps
+        fd_grad[i] = (shell.energy(u + d) - shell.energy(u - d)) / (2 * eps)
+        g_plus, g_minus = np.zeros_like(u), np.zeros_like(u)
+        shell.evaluate(u + d, g_plus)
+        shell.evaluate(u - d, g_minus)
+        fd_hess[:, i] = (g_plus - g_minus) / (2 * eps)
+    assert np.abs(grad - fd_grad).max() < 1e-7 * np.abs(grad).max()
+    assert np.abs(K - fd_hess).max() < 1e-7 * np.abs(K).max()
+    assert np.abs(K - K.T).max() < 1e-12 * np.abs(K).max()
+
+
+@pytest.mark.parametrize("bending", ["edge", "patch"])
+def test_rigid_motion_costs_nothing(bending):
+    shell, _ = _bumpy_patch(False, bending)
+    a, b = 0.7, 1.1
+    R = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    X = shell.X
+    assert shell.energy((X @ R.T + 3.0 - X).ravel()) < 1e-20
+
+
+@pytest.mark.parametrize("bending", ["edge", "patch"])
+def test_quadratic_fields_are_reproduced_on_an_unstructured_mesh(bending):
+    points, tris = rf.rectangle_mesh(1.0, 1.0, 8, 8, "unstructured")
+    shell = rf.RotationFreeShell(points, tris, 0.01, rf.Material(1.0, 0.3), bending=bending)
+    full = np.all(shell.opposite >= 0, axis=1)
+    if bending == "edge":  # the neighbours' patches must be full too
+        full &= np.array([np.all(shell.opposite[shell.neighbour[t]] >= 0) if full[t] else False
+                          for t in range(len(full))])
+    assert full.sum() > 0.5 * len(full)
+    x, y = points[:, 0], points[:, 1]
+    w = 0.3 * x * x + 0.5 * x * y - 0.2 * y * y  # Hessian [[0.6, 0.5], [0.5, -0.4]]
+    for t in np.flatnonzero(full):
+        e1 = points[shell.tri[t, 1]] - points[shell.tri[t, 0]]
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross([0, 0, 1.0], e1)  # the triangles are oriented +z
+        F = np.array([e1[:2], e2[:2]])
+        exact = F @ np.array([[0.6, 0.5], [0.5, -0.4]]) @ F.T
+        H = shell.B[t] @ w[shell.nodes[t]]  # ∂₁₁, ∂₂₂, ∂₁₂ in the triangle's frame
+        assert np.allclose(H, [exact[0, 0], exact[1, 1], exact[0, 1]], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("support", ["simply", "clamped"])
+@pytest.mark.parametrize("kind", ["structured", "crossed", "unstructured"])
+def test_square_plate_converges_to_timoshenko(support, kind):
+    reference = rf.PLATE_REFERENCE[support]
+    errors = [abs(rf.plate_centre_deflection(support, n, kind) / reference - 1) for n in (16, 32)]
+    assert errors[1] < {"simply": 0.005, "clamped": 0.03}[support]
+    assert errors[1] < errors[0]
+
+
+@pytest.mark.xfail(strict=True, reason="known defect of bending=patch: on the alternating-diagonal "
+                   "('crossed') mesh the 6-node fits let an oscillation lower the bending energy: +74 % "
+                   "(simply supported), not converging (docs/iol.md §4b); bending=edge is the fix")
+def test_patch_curvature_on_crossed_mesh():
+    errors = [abs(rf.plate_centre_deflection("simply", n, "crossed", bending="patch")
+                  / rf.PLATE_REFERENCE["simply"] - 1) for n in (16, 32)]
+    assert errors[1] < 0.005
+
+
+@pytest.mark.parametrize("kind, tolerance", [("structured", 0.06), ("unstructured", 0.04)])
+def test_scordelis_lo_converges_from_below(kind, tolerance):
+    errors = [rf.scordelis_lo_deflection(n, kind) / rf.SCORDELIS_LO_REFERENCE - 1 for n in (16, 32)]
+    assert -tolerance < errors[1] < 0.0
+    assert abs(errors[1]) < abs(errors[0])
+
+
+@pytest.mark.parametrize("kind, tolerance", [("structured", 0.005), ("unstructured", 0.005)])
+def test_cantilever_first_frequency(kind, tolerance):
+    assert abs(rf.cantilever_frequency(24, 4, kind)["error"]) < tolerance
+
+
+@pytest.mark.parametrize("kind", ["structured", "unstructured"])
+def test_rolled_cylinder_energy_does_not_depend_on_the_mesh_direction(kind):
+    ratios = rf.rolled_energy_ratio(16, kind, angles=(0.0, 90.0))
+    assert abs(ratios[0.0] / ratios[90.0] - 1) < 0.02
+
+
+@pytest.mark.parametrize("divisions, tolerance", [(32, 0.01), (64, 0.0035)])
+def test_cantilever_rolled_to_a_half_circle(divisions, tolerance):
+    result = rf.cantilever_rolling(divisions, 2, moment_fraction=0.5, load_steps=16)
+    assert result["tip_error"] < tolerance
+
+
+def test_cantilever_rolled_to_a_full_circle():
+    # the mesh symmetric about the strip's centre line (alternating diagonals, 4 across): on the
+    # one-diagonal mesh the end drifts sideways past ≈ 160° and Newton fails near 225°
+    result = rf.cantilever_rolling(64, 4, moment_fraction=1.0, load_steps=32, kind="crossed")
+    assert result["tip_error"] < 0.01
+
+
+def test_bad_meshes_and_thickness_are_refused():
+    points, tris = rf.rectangle_mesh(1.0, 1.0, 2, 2)
+    material = rf.Material(1.0, 0.3)
+    extra = np.vstack([points, [[0.5, 0.5, 1.0]]])
+    edge = tris[0][[1, 2]]  # a third triangle on an interior edge: non-manifold
+    with pytest.raises(rf.MeshInputError, match="non-manifold"):
+        rf.RotationFreeShell(extra, np.vstack([tris, [[edge[0], edge[1], len(points)]]]), 0.1, material)
+    inverted = tris.copy()
+    inverted[3] = inverted[3][[0, 2, 1]]
+    with pytest.raises(rf.MeshInputError, match="inverted"):
+        rf.RotationFreeShell(points, inverted, 0.1, material)
+    with pytest.raises(ValueError, match="thickness"):
+        rf.RotationFreeShell(points, tris, 0.0, material)
+
+
+def test_iol_speed_refuses_what_the_fast_model_cannot_do():
+    from eyemech.problems import iol_speed
+
+    with pytest.raises(ParameterError, match="contact"):
+        iol_speed.Parameters(model="p1-rotation-free", contact=True).validate()
+    with pytest.raises(ParameterError, match="method"):
+        iol_speed.Parameters(model="p1-rotation-free", method="linearised").validate()
+    with pytest.raises(ParameterError, match="haptic_thickness"):
+        iol_speed.Parameters(model="p1-rotation-free", haptic_thickness=-0.1).validate()
+    from mpi4py import MPI
+
+    from eyemech.problems.run.context import RunOptions
+
+    with pytest.raises(ParameterError, match="time_step"):  # Newton cannot take it: 25 iterations
+        iol_speed.run(iol_speed.Parameters(model="p1-rotation-free", steps=2, time_step=0.2),
+                      comm=MPI.COMM_SELF, options=RunOptions(fields=False, pictures=False))
+
+
+@pytest.mark.slow
+def test_lens_release_agrees_with_p2():
+    from mpi4py import MPI
+
+    from eyemech.problems import iol_speed
+    from eyemech.problems.run.context import RunOptions
+
+    options = RunOptions(fields=False, pictures=False)
+    runs = {model: iol_speed.run(iol_speed.Parameters(model=model, steps=20), comm=MPI.COMM_SELF,
+                                 options=options).quantities for model in ("p2-c0ip", "p1-rotation-free")}
+    for key in ("tip_history", "optic_history"):
+        p2, p1 = (np.asarray(runs[m][key]) for m in ("p2-c0ip", "p1-rotation-free"))
+        assert np.linalg.norm(p1 - p2, axis=1).max() < 0.05
