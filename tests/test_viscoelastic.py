@@ -36,7 +36,7 @@ from conftest import last_json, run_cli
 from eyemech.problems import sls_creep, uniaxial_relaxation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
-from eyemech.problems.solid.viscous_bar import UnstableIntegration
+from eyemech.problems.solid.viscous_bar import TooManySteps, UnstableIntegration
 from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure
 from scipy.integrate import solve_ivp
 
@@ -187,6 +187,29 @@ def test_taylor_hood_tetrahedra_agree():
     params = uniaxial_relaxation.Parameters(element="P2P1", t_end=30.0)
     result = uniaxial_relaxation.run(params, options=QUIET)
     assert _relaxation_error(params, result).max() < 5e-3
+
+
+def test_fixed_steps_report_the_error_they_make_where_they_miss_the_bound():
+    """λ = 1.5, μ∞ = 0.005, μv = 0.5 (the viscous branch 100× stiffer): the fixed dt = 1 s
+    is 0.79 % off the point ODE (measured), past the 0.5 % bound; the time-error estimate
+    (12.9 % measured, conservative: it lets errors decay at the retardation rate only)
+    says so, and exceeds the default tolerance."""
+    params = uniaxial_relaxation.Parameters(stretch=1.5, mu_inf=0.005, mu_v=0.5, time_stepping="fixed")
+    result = uniaxial_relaxation.run(params, options=QUIET)
+    error = _relaxation_error(params, result).max()
+    assert error > 5e-3
+    assert result.quantities["time_error_estimate"] > max(error, params.time_tolerance)
+
+
+def test_adaptive_steps_past_the_cap_stop_with_a_clear_error(tmp_path):
+    params = uniaxial_relaxation.Parameters(max_steps=20, t_end=60.0)
+    with pytest.raises(TooManySteps) as info:
+        uniaxial_relaxation.run(params, out=tmp_path, options=QUIET)
+    assert isinstance(info.value, SolveFailure)
+    assert "max_steps = 20" in str(info.value) and "time_tolerance" in str(info.value)
+    import json
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert saved["status"] == "failed" and len(saved["quantities"]["times"]) == 20
 
 
 # -- forward Euler ----------------------------------------------------------------------
