@@ -145,7 +145,8 @@ def test_hertz(label, case):
     ("time scale x0.1", dict(tau=10.0, t_end=30.0, ramp_time=1.0)),
     ("stretch 1.5", dict(stretch=1.5)),
     ("compression 0.8", dict(stretch=0.8)),
-    _slow(("stretch 1.5, mu_v/mu_inf = 10 (1 900 steps)", dict(stretch=1.5, mu_inf=0.005))),
+    # 1 767 adaptive steps, 0.093 % (fixed dt = 1 s: 0.70 %, past the bound), 12 s warm
+    _slow(("stretch 1.5, mu_v/mu_inf = 10", dict(stretch=1.5, mu_inf=0.005))),
 ])
 def test_uniaxial_relaxation(label, case):
     params, q = _run(uniaxial_relaxation, **case)
