@@ -17,7 +17,7 @@ estimates BE's local error. Its effect on the stress is measured against the str
 scale D = μ∞ |C̄ − I| + μv |C̄ − Cv| (the two branches' strains): μv E/D is a step's
 relative stress error. Errors of Cv relax at least at the retardation rate
 1/τc = μ∞/((μ∞ + μv) τ), so the global error is tracked per point as
-G ← G e^(−dt/τc) + E, and μv G/D (largest over the points and steps) is reported as
+G ← G e^(−dt/τc) + E, and μv max G / max D (largest over the steps) is reported as
 ``time_error_estimate``, in fixed and adaptive mode alike. A step is accepted when
 
     μv E/D ≤ max(tol · dt/τc, (tol/10)²),   tol = time_tolerance:
@@ -153,25 +153,36 @@ class ViscousHistory:
 
     def time_error(self) -> tuple[float, float]:
         """For the current u and dt, before ``update``: (μv E/D, μv (G e^(−dt/τc) + E)/D),
-        each the largest over all points (module docstring of viscous_bar). C̄_n must hold
+        numerators and D each the largest over all points (module docstring of viscous_bar). C̄_n must hold
         the strain at the start of the step (``store_strain`` after an instantaneous
         load, ``update`` after each step keep it so)."""
-        m = self.material
+        mu_inf, mu_v, retardation = self._moduli()
         error = self._norms(self._difference)
-        scale = m.mu_inf * self._norms(self._strain) + m.mu_v * self._norms(self._distance) + 1e-300
-        decay = np.exp(-float(self.dt.value) / m.retardation_time)
+        scale = mu_inf * self._norms(self._strain) + mu_v * self._norms(self._distance)
+        decay = np.exp(-float(self.dt.value) / retardation)
         self._last_error = error
-        local = (m.mu_v * error / scale).max(initial=0.0)
-        accumulated = (m.mu_v * (self.global_error * decay + error) / scale).max(initial=0.0)
-        if not (np.isfinite(local) and np.isfinite(accumulated)):
-            local = accumulated = np.inf
-        return (self.comm.allreduce(float(local), op=MPI.MAX),
-                self.comm.allreduce(float(accumulated), op=MPI.MAX))
+        # against the body's largest stress scale: a point at rest (D → 0) must not
+        # dominate; in the homogeneous bar this is the per-point ratio
+        values = np.array([(mu_v * error).max(initial=0.0),
+                           (mu_v * (self.global_error * decay + error)).max(initial=0.0),
+                           scale.max(initial=0.0)])
+        if not np.all(np.isfinite(values)):
+            values[:2] = np.inf
+        largest = np.empty(3)
+        self.comm.Allreduce(values, largest, op=MPI.MAX)
+        return float(largest[0] / largest[2]), float(largest[1] / largest[2])
 
     def accept_time_error(self) -> None:
         """G ← G e^(−dt/τc) + E with the E of the last ``time_error``."""
-        decay = np.exp(-float(self.dt.value) / self.material.retardation_time)
+        decay = np.exp(-float(self.dt.value) / self._moduli()[2])
         self.global_error = self.global_error * decay + self._last_error
+
+    def _moduli(self) -> tuple[float, float, float]:
+        """μ∞, μv and the retardation time as numbers (the material may hold Constants)."""
+        number = lambda x: float(np.asarray(getattr(x, "value", x)))
+        mu_inf, mu_v, tau = (number(x) for x in (self.material.mu_inf, self.material.mu_v,
+                                                 self.material.tau))
+        return mu_inf, mu_v, tau * (mu_inf + mu_v) / mu_inf
 
     def update(self) -> float:
         """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
