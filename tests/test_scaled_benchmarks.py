@@ -275,3 +275,28 @@ def test_cantilever_vibration(label, scale):
     assert q["omega_exact"] == pytest.approx(omega, rel=1e-6)
     assert q["period"] == pytest.approx(q["period_exact"], rel=5e-3)
     assert abs(q["period_error"]) < 5e-3  # against the time scheme's own oscillator
+
+
+# -- contact patch (two-pass): Cauchy-stress spread below 8 % in both blocks
+# (tests/test_contact.py); the blocks' element sizes are absolute parameters, scaled with the
+# width ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("label, scale", [
+    ("default", {}),
+    # gmsh does not mesh the scaled blocks as the scaled mesh (834 and 837 cells against
+    # 867 at width 1) and the two-pass spread depends on how the meshes overlap: 9.8 % and
+    # 12.2 % measured. The 8 % bound is the default arrangement's, not a property of the
+    # method at this resolution (docs/contact.md).
+    pytest.param("geometry x0.2", dict(width=0.2, master_size=0.05, slave_size=0.034),
+                 marks=pytest.mark.xfail(strict=True, reason="spread 9.8 % on gmsh's other mesh")),
+    pytest.param("geometry x5", dict(width=5.0, master_size=1.25, slave_size=0.85),
+                 marks=pytest.mark.xfail(strict=True, reason="spread 12.2 % on gmsh's other mesh")),
+    ("modulus x0.1, pressure x0.1", dict(youngs_modulus=0.1, pressure=0.001)),
+    ("modulus x10", dict(youngs_modulus=10.0)),
+    ("pressure x3", dict(pressure=0.03)),
+])
+def test_contact_patch(label, scale):
+    from eyemech.problems import contact_patch
+
+    _, q = _run(contact_patch, passes=2, **scale)
+    for block in ("lower", "upper"):
+        assert q[f"stress_spread_{block}"] < 0.08
