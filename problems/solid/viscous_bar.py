@@ -22,12 +22,13 @@ G ← G e^(−dt/τc) + E, and μv max G / max D (largest over the steps) is rep
 
     μv E/D ≤ max(tol · dt/τc, (tol/10)²),   tol = time_tolerance:
 
-error per unit step, which keeps μv G/D ≤ tol once the decay balances the new errors;
-the second bound only lets a ramp start from rest (where μv E/D ∝ dt/τ whatever the
-step), at a first step of ~1e-4 τ that then doubles. The next step is
-dt · min(2, max(0.2, 0.9 √(allowed/(μv E/D)))). The step count cap (``max_steps``)
-stays: an adaptive run that needs more stops with a message naming
-``time_tolerance`` and ``max_steps``.
+error per unit step, which keeps μv G/D ≤ tol once the decay balances the new errors.
+The second bound lets a ramp start from rest, where μv E/D ≈ dt/2τ and the first bound
+are both proportional to dt so that no shorter step meets it: the first step is of
+order τ (tol/10)² and then doubles. The next step is
+dt · min(2, max(0.2, 0.9 √(allowed/(μv E/D)))). ``max_steps`` caps the number of steps
+in both modes: an adaptive run that needs more stops with a message naming
+``time_tolerance`` and ``max_steps`` (``TooManySteps``, a ``SolveFailure``).
 """
 
 from __future__ import annotations
