@@ -12,6 +12,14 @@ rises by d (the load parameter is the obstacle's translation). Hertz's
 half-space assumption holds for a ≪ R: the ball's own compliance adds a
 correction of order a/R, hence the small default d/R = 0.001 (a/R = 0.032).
 
+Mesh sizes follow the physics: ``resolution`` cells per contact radius a = √(R d) in the
+contact zone (the pole's neighbourhood of radius 1.5 a) and ``far_resolution`` cells per
+ball radius elsewhere, so a larger ball pressed deeper gets the same mesh relative to
+its contact and the same accuracy at the same cost. ``mesh_size`` / ``far_size`` set
+absolute sizes instead (0 = derived). Before meshing the number of cells is estimated
+from the size field (``quarter_hemisphere_cells``) and a run above ``max_cells`` is
+refused, naming the parameters to change.
+
 Quantities: ``contact_force`` (whole ball, from the assembled penalty traction),
 ``contact_radius`` from the pressure's second moment (for the Hertz profile
 ∫p r² dA / ∫p dA = 2a²/5), ``max_penetration`` (over the surface nodes), the Hertz
@@ -28,7 +36,7 @@ import dolfinx.fem
 import numpy as np
 import ufl
 from eyemech.forms import compressible_neo_hooke, deformation_gradient, contact
-from eyemech.meshes.contact_bodies import quarter_hemisphere
+from eyemech.meshes.contact_bodies import quarter_hemisphere, quarter_hemisphere_cells
 from eyemech.problems.contact.rigid import (
     NodalPenetration,
     refuse_initial_penetration,
@@ -54,26 +62,60 @@ class Parameters(SceneParameters):
     poisson_ratio: float = field(0.3, "Poisson's ratio ν", "")
     indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm")
     penalty: float = field(30.0, "penalty factor: α = penalty · E / mesh_size", "")
-    mesh_size: float = field(0.012, "element size in the contact zone (a/h ≈ 2.6 at the default d)", "mm")
-    far_size: float = field(0.25, "element size away from the contact zone", "mm")
+    resolution: float = field(2.6, "cells per contact radius a = √(R d) in the contact zone", "")
+    far_resolution: float = field(4.0, "cells per ball radius away from the contact zone", "")
+    mesh_size: float = field(0.0, "element size in the contact zone; 0 = √(R d) / resolution", "mm")
+    far_size: float = field(0.0, "element size away from the contact zone; 0 = radius / far_resolution", "mm")
+    max_cells: int = field(100_000, "refuse a mesh estimated above this many cells (before meshing)")
     initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm")
     load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
 
     def validate(self) -> None:
-        self.require_positive("radius", "youngs_modulus", "indentation", "penalty", "mesh_size",
-                              "far_size", "load_steps")
+        self.require_positive("radius", "youngs_modulus", "indentation", "penalty", "resolution",
+                              "far_resolution", "max_cells", "load_steps")
+        self.require_nonnegative("mesh_size", "far_size")
         if not -1.0 < self.poisson_ratio < 0.5:
             raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio}")
         if self.indentation > 0.2 * self.radius:
             raise ParameterError("indentation", "beyond 0.2·radius Hertz's small-contact law is meaningless")
-        if self.mesh_size > self.far_size:
-            raise ParameterError("mesh_size", f"must not exceed far_size ({self.far_size})")
-        if self.far_size > self.radius:
+        if self.contact_size > self.far_element_size:
+            raise ParameterError("mesh_size", f"the contact zone's size {self.contact_size:.3g} mm must not "
+                                              f"exceed the far size {self.far_element_size:.3g} mm")
+        if self.far_element_size > self.radius:
             raise ParameterError("far_size", "is larger than the ball")
+        cells = self.estimated_cells
+        if cells > self.max_cells:
+            raise ParameterError(
+                "resolution", f"the mesh would have about {cells:,.0f} cells (contact size "
+                f"{self.contact_size:.3g} mm, far size {self.far_element_size:.3g} mm), more than "
+                f"max_cells = {self.max_cells:,}: lower resolution (or set a larger mesh_size / "
+                f"far_size), or raise max_cells")
+
+    @property
+    def contact_radius(self) -> float:
+        """Hertz's a = √(R d) at the full indentation."""
+        return float(np.sqrt(self.radius * self.indentation))
+
+    @property
+    def zone(self) -> float:
+        """Radius about the pole meshed at the contact size."""
+        return 1.5 * self.contact_radius
+
+    @property
+    def contact_size(self) -> float:
+        return self.mesh_size if self.mesh_size > 0 else self.contact_radius / self.resolution
+
+    @property
+    def far_element_size(self) -> float:
+        return self.far_size if self.far_size > 0 else self.radius / self.far_resolution
+
+    @property
+    def estimated_cells(self) -> float:
+        return quarter_hemisphere_cells(self.radius, self.contact_size, self.far_element_size, self.zone)
 
     @property
     def penalty_stiffness(self) -> float:
-        return contact.default_penalty(self.youngs_modulus, self.mesh_size, self.penalty)
+        return contact.default_penalty(self.youngs_modulus, self.contact_size, self.penalty)
 
 
 def hertz_force(params: Parameters, depth: float) -> float:
@@ -86,8 +128,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
         R = params.radius
         with ctx.timings("mesh"):
-            zone = 1.5 * np.sqrt(R * params.indentation)
-            ball = quarter_hemisphere(R, params.mesh_size, params.far_size, zone, comm=ctx.comm)
+            ball = quarter_hemisphere(R, params.contact_size, params.far_element_size, params.zone,
+                                      comm=ctx.comm)
             ball.require_nonempty("contact")
         mesh = ball.mesh
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", 2, (3,)))
@@ -150,6 +192,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ctx.result.quantities["newton_iterations"] = sum(r.iterations for r in records)
         ctx.result.quantities["load_steps"] = len(records)
         ctx.result.quantities["dofs"] = global_dofs(u)
+        ctx.result.quantities["cells"] = mesh.topology.index_map(mesh.topology.dim).size_global
+        ctx.result.quantities["estimated_cells"] = params.estimated_cells
+        ctx.result.quantities["contact_size"] = params.contact_size
         if ctx.pictures:
             with ctx.timings("output"):
                 _picture(penetration, params.penalty_stiffness, ctx, params)

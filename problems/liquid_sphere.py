@@ -64,7 +64,9 @@ class Parameters(SceneParameters, SolverChoice):
     initial_pressure: float = field(0.002, "liquid pressure P_ini at the stress-free cavity volume",
                                     "MPa")
     external_pressure: float = field(0.05, "external pressure on the outer surface (follower)", "MPa")
-    mesh_size: float = field(2.0, "target element size", "mm")
+    cells_across_wall: float = field(1.0, "elements across the wall thickness (outer − inner radius); "
+                                   "sets the element size unless mesh_size is given")
+    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
     element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
     cavity_formulation: Literal["real", "substituted"] = field(
         "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)")
@@ -72,7 +74,8 @@ class Parameters(SceneParameters, SolverChoice):
     cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid")
 
     def validate(self) -> None:
-        self.require_positive("inner_radius", "c10", "mesh_size", "load_steps", "bulk_modulus")
+        self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
+        self.require_nonnegative("mesh_size")
         check_element(self.element)
         if self.cavity_formulation not in ("real", "substituted"):
             raise ParameterError("cavity_formulation", f"must be real or substituted, got "
@@ -82,11 +85,18 @@ class Parameters(SceneParameters, SolverChoice):
                                  "substituted formulation's dense wall block defeats multigrid)")
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius})")
-        if self.mesh_size > self.outer_radius:
+        if self.element_size > self.outer_radius:
             raise ParameterError("mesh_size", "is larger than the sphere")
         for key in ("initial_pressure", "external_pressure"):
             if not np.isfinite(getattr(self, key)):
                 raise ParameterError(key, "must be finite")
+
+    @property
+    def element_size(self) -> float:
+        """mesh_size, or the wall thickness over cells_across_wall."""
+        if self.mesh_size > 0:
+            return self.mesh_size
+        return (self.outer_radius - self.inner_radius) / self.cells_across_wall
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -94,7 +104,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
         family = ELEMENTS[params.element]
         with ctx.timings("mesh"):
-            shell = spherical_shell(params.inner_radius, params.outer_radius, params.mesh_size,
+            shell = spherical_shell(params.inner_radius, params.outer_radius, params.element_size,
                                     order=family.geometry_order, hexahedra=family.hexahedral,
                                     comm=ctx.comm)
         real = params.cavity_formulation == "real"

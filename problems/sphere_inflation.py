@@ -52,22 +52,32 @@ class Parameters(SceneParameters, SolverChoice):
     outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
     c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa")
     pressure: float = field(0.01, "internal pressure (follower load)", "MPa")
-    mesh_size: float = field(1.0, "target element size", "mm")
+    cells_across_wall: float = field(2.0, "elements across the wall thickness (outer − inner radius); "
+                                   "sets the element size unless mesh_size is given")
+    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
     element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
     bulk_modulus: float = field(100.0, "bulk modulus of the displacement-only P1 family "
                                 "(U = K/4 (J² − 1 − 2 ln J)); unused by mixed families", "MPa")
     load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
 
     def validate(self) -> None:
-        self.require_positive("inner_radius", "c10", "mesh_size", "load_steps", "bulk_modulus")
+        self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
+        self.require_nonnegative("mesh_size")
         check_element(self.element)
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius}), "
                                  f"got {self.outer_radius}")
-        if self.mesh_size > self.outer_radius:
+        if self.element_size > self.outer_radius:
             raise ParameterError("mesh_size", "is larger than the sphere")
         if not np.isfinite(self.pressure):
             raise ParameterError("pressure", "must be finite")
+
+    @property
+    def element_size(self) -> float:
+        """mesh_size, or the wall thickness over cells_across_wall."""
+        if self.mesh_size > 0:
+            return self.mesh_size
+        return (self.outer_radius - self.inner_radius) / self.cells_across_wall
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -75,7 +85,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
         with ctx.timings("mesh"):
             family = ELEMENTS[params.element]
-            shell = spherical_shell(params.inner_radius, params.outer_radius, params.mesh_size,
+            shell = spherical_shell(params.inner_radius, params.outer_radius, params.element_size,
                                     order=family.geometry_order, hexahedra=family.hexahedral,
                                     comm=ctx.comm)
         fields, tests = solid_fields(shell.mesh, family)

@@ -77,10 +77,12 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                            SCENE.name)
             record(0.0)
         try:
-            march(ctx, bar, solver, params, lambda t: set_stretch(params.stretch_at(t)), record,
+            timing = march(ctx, bar, solver, params, lambda t: set_stretch(params.stretch_at(t)), record,
                   SCENE.name, extra_stops=(params.ramp_time,))
         finally:
             ctx.result.quantities.update(times=times, cauchy_stress=stresses, axial_stretch=stretches)
+        ctx.result.quantities.update(timing, time_tolerance=params.time_tolerance,
+                                     time_stepping=params.time_stepping)
         ctx.result.quantities["final_cauchy_stress"] = stresses[-1]
         ctx.result.quantities["max_relative_error_point_ode"] = float(np.max(np.abs(
             np.array(stresses) / point_reference(params, times) - 1.0)))
@@ -103,9 +105,15 @@ def _picture(ctx: RunContext, params: Parameters, times, stresses) -> None:
     path = ctx.out / "cauchy_stress.png"
     plot_history(path, times, stresses, point_reference(params, times), "axial Cauchy stress (MPa)",
                  f"uniaxial relaxation, λ = {params.stretch:g}, τ = {params.tau:g} s, "
-                 f"dt = {params.dt:g} s ({params.time_scheme})",
+                 f"{_steps(params)} ({params.time_scheme})",
                  reference_label="same law at one point (scipy)")
     ctx.result.pictures.append(path.name)
+
+
+def _steps(params) -> str:
+    if params.time_stepping == "fixed":
+        return f"dt = {params.dt:g} s"
+    return f"adaptive, tol {params.time_tolerance:g}"
 
 
 SCENE = Scene(name="uniaxial-relaxation", kind="benchmark", parameters=Parameters, run=run,

@@ -164,6 +164,25 @@ def test_hertz_bad_parameters(key, value):
         hertz.Parameters(**{key: value}).validate()
 
 
+def test_hertz_refuses_a_mesh_above_max_cells_before_meshing():
+    """A 5× ball pressed to d/R = 0.005 with the default ball's absolute contact size (0.012
+    mm) asks for ~3e5 cells; the estimate refuses it and names the parameters to change."""
+    params = hertz.Parameters(radius=5.0, indentation=0.025, mesh_size=0.012)
+    with pytest.raises(ParameterError, match="resolution.*max_cells"):
+        params.validate()
+    hertz.Parameters(radius=5.0, indentation=0.025, mesh_size=0.012, max_cells=10**6).validate()
+
+
+def test_hertz_sizes_follow_the_contact_radius():
+    """Derived sizes scale with √(R d) and R: the same number of cells (within the
+    estimate's noise) for a ball 5× larger pressed to d/R = 0.005 at the same a/h."""
+    base, big = hertz.Parameters(), hertz.Parameters(radius=5.0, indentation=0.025)
+    assert base.contact_size == pytest.approx(np.sqrt(1e-3) / base.resolution)
+    assert big.contact_size == pytest.approx(np.sqrt(0.125) / base.resolution)
+    assert big.far_element_size == pytest.approx(5.0 / base.far_resolution)
+    assert big.estimated_cells == pytest.approx(base.estimated_cells, rel=0.3)
+
+
 # -- node to surface ------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def retina_serial():

@@ -8,6 +8,27 @@ u_z = 0 on z = 0; the load acts on x = L (a prescribed u_x or an axial traction)
 other faces are free. The exact solution is homogeneous uniaxial tension, so a single
 element is as accurate as any mesh: these scenes test the constitutive update and the
 time stepping, not the spatial discretisation.
+
+Time steps (``time_stepping``): ``fixed`` steps dt; ``adaptive`` (the default) chooses
+each step from a local error estimate of the internal variable. Backward Euler (BE) and
+forward Euler (FE) from the same Cv_n form an embedded pair: their local errors are
+∓dt²/2 C̈v + O(dt³), so E = ½ |Cv_BE − Cv_FE| (Frobenius, per quadrature point)
+estimates BE's local error. Its effect on the stress is measured against the stress
+scale D = μ∞ |C̄ − I| + μv |C̄ − Cv| (the two branches' strains): μv E/D is a step's
+relative stress error. Errors of Cv relax at least at the retardation rate
+1/τc = μ∞/((μ∞ + μv) τ), so the global error is tracked per point as
+G ← G e^(−dt/τc) + E, and μv max G / max D (largest over the steps) is reported as
+``time_error_estimate``, in fixed and adaptive mode alike. A step is accepted when
+
+    μv E/D ≤ max(tol · dt/τc, (tol/10)²),   tol = time_tolerance:
+
+error per unit step, which keeps μv G/D ≤ tol once the decay balances the new errors.
+The second bound lets a ramp start from rest, where μv E/D ≈ dt/2τ and the first bound
+are both proportional to dt so that no shorter step meets it: the first step is of
+order τ (tol/10)² and then doubles. The next step is
+dt · min(2, max(0.2, 0.9 √(allowed/(μv E/D)))). ``max_steps`` caps the number of steps
+in both modes: an adaptive run that needs more stops with a message naming
+``time_tolerance`` and ``max_steps`` (``TooManySteps``, a ``SolveFailure``).
 """
 
 from __future__ import annotations
@@ -45,7 +66,12 @@ class BarParameters(SceneParameters):
     mu_v: float = field(0.05, "viscous-branch shear modulus μv (Ψv = μv/2 (tr(C̄ Cv⁻¹) − 3))", "MPa")
     tau: float = field(100.0, "relaxation time τ of the evolution τ Ċv = C̄ − ⅓ tr(C̄ Cv⁻¹) Cv", "s")
     t_end: float = field(300.0, "end time", "s")
-    dt: float = field(1.0, "time step (fixed; a step that Newton cannot solve is cut)", "s")
+    dt: float = field(1.0, "time step (fixed mode; the first step in adaptive mode)", "s")
+    time_stepping: Literal["adaptive", "fixed"] = field(
+        "adaptive", "adaptive: steps from a local error estimate of Cv; fixed: every step dt")
+    time_tolerance: float = field(1e-2, "adaptive mode: allowed relative stress error from the time "
+                                        "steps (embedded BE/FE estimate, module viscous_bar)")
+    max_steps: int = field(20000, "most time steps a run may take (adaptive or fixed)")
     time_scheme: Literal["backward-euler", "forward-euler"] = field(
         "backward-euler", "integration of the evolution law (forward Euler: stability study only)")
     element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)")
@@ -53,7 +79,8 @@ class BarParameters(SceneParameters):
     length: float = field(1.0, "edge of the cube", "mm")
 
     def validate(self) -> None:
-        self.require_positive("mu_inf", "mu_v", "tau", "t_end", "dt", "mesh_divisions", "length")
+        self.require_positive("mu_inf", "mu_v", "tau", "t_end", "dt", "mesh_divisions", "length",
+                              "time_tolerance", "max_steps")
         for key in ("mu_inf", "mu_v", "tau", "t_end", "dt", "length"):
             if not np.isfinite(getattr(self, key)):
                 raise ParameterError(key, "must be finite")
@@ -64,8 +91,12 @@ class BarParameters(SceneParameters):
             raise ParameterError("element", f"must be Q2P1 or P2P1, got {self.element!r}")
         if self.dt > self.t_end:
             raise ParameterError("dt", f"is longer than t_end ({self.t_end})")
-        if self.t_end / self.dt > 20000:
-            raise ParameterError("dt", f"gives {self.t_end / self.dt:.0f} steps; at most 20000")
+        if self.time_stepping == "fixed" and self.t_end / self.dt > self.max_steps:
+            raise ParameterError("dt", f"gives {self.t_end / self.dt:.0f} steps; at most max_steps = "
+                                       f"{self.max_steps}")
+        if self.time_stepping == "adaptive" and self.time_scheme != "backward-euler":
+            raise ParameterError("time_stepping", "adaptive steps need time_scheme = backward-euler "
+                                                  "(forward Euler is the stability study's fixed step)")
 
     @property
     def material(self) -> ve.Viscoelastic:
@@ -92,6 +123,18 @@ class ViscousHistory:
         self._Cv_next = dolfinx.fem.Expression(self.Cv, points)
         self._Cbar_next = dolfinx.fem.Expression(ve.isochoric_cauchy_green(F), points)
         self._scratch = dolfinx.fem.Function(Q)
+        # the embedded pair: ½ (Cv_BE − Cv_FE) from the same Cv_n, C̄_n and dt
+        pair = 0.5 * (ve.current_internal_variable("backward-euler", material, F, self.Cv_n,
+                                                   self.Cbar_n, self.dt)
+                      - ve.current_internal_variable("forward-euler", material, F, self.Cv_n,
+                                                     self.Cbar_n, self.dt))
+        self._difference = dolfinx.fem.Expression(pair, points)
+        Cbar = ve.isochoric_cauchy_green(F)
+        self._distance = dolfinx.fem.Expression(Cbar - self.Cv, points)
+        self._strain = dolfinx.fem.Expression(Cbar - ufl.Identity(3), points)
+        self.material = material
+        self.global_error = np.zeros(self._scratch.x.array.size // 9)  # G per point
+        self._last_error = self.global_error
 
     @staticmethod
     def _identity(Q, name: str) -> dolfinx.fem.Function:
@@ -104,6 +147,43 @@ class ViscousHistory:
         forward Euler's first step must start from the loaded C̄(0+), not from C̄ = I."""
         self._scratch.interpolate(self._Cbar_next)
         self.Cbar_n.x.array[:] = self._scratch.x.array
+
+    def _norms(self, expression) -> np.ndarray:
+        self._scratch.interpolate(expression)
+        return np.sqrt((self._scratch.x.array.reshape(-1, 9) ** 2).sum(axis=1))
+
+    def time_error(self) -> tuple[float, float]:
+        """For the current u and dt, before ``update``: (μv E/D, μv (G e^(−dt/τc) + E)/D),
+        numerators and D each the largest over all points (module docstring of viscous_bar). C̄_n must hold
+        the strain at the start of the step (``store_strain`` after an instantaneous
+        load, ``update`` after each step keep it so)."""
+        mu_inf, mu_v, retardation = self._moduli()
+        error = self._norms(self._difference)
+        scale = mu_inf * self._norms(self._strain) + mu_v * self._norms(self._distance)
+        decay = np.exp(-float(self.dt.value) / retardation)
+        self._last_error = error
+        # against the body's largest stress scale: a point at rest (D → 0) must not
+        # dominate; in the homogeneous bar this is the per-point ratio
+        values = np.array([(mu_v * error).max(initial=0.0),
+                           (mu_v * (self.global_error * decay + error)).max(initial=0.0),
+                           scale.max(initial=0.0)])
+        if not np.all(np.isfinite(values)):
+            values[:2] = np.inf
+        largest = np.empty(3)
+        self.comm.Allreduce(values, largest, op=MPI.MAX)
+        return float(largest[0] / largest[2]), float(largest[1] / largest[2])
+
+    def accept_time_error(self) -> None:
+        """G ← G e^(−dt/τc) + E with the E of the last ``time_error``."""
+        decay = np.exp(-float(self.dt.value) / self._moduli()[2])
+        self.global_error = self.global_error * decay + self._last_error
+
+    def _moduli(self) -> tuple[float, float, float]:
+        """μ∞, μv and the retardation time as numbers (the material may hold Constants)."""
+        number = lambda x: float(np.asarray(getattr(x, "value", x)))
+        mu_inf, mu_v, tau = (number(x) for x in (self.material.mu_inf, self.material.mu_v,
+                                                 self.material.tau))
+        return mu_inf, mu_v, tau * (mu_inf + mu_v) / mu_inf
 
     def update(self) -> float:
         """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
@@ -156,6 +236,7 @@ class ViscousBar:
         self.history = ViscousHistory(self.u, self.material, params.time_scheme, degree)
         self.dt, self.Cv = self.history.dt, self.history.Cv
         self.update_history, self.store_strain = self.history.update, self.history.store_strain
+        self.time_error, self.accept_time_error = self.history.time_error, self.history.accept_time_error
         F = deformation_gradient(self.u)
         self.residual = ve.residual(self.material, self.u, self.p, self.v, self.q, self.Cv, self.dx)
 
@@ -218,17 +299,54 @@ def time_stops(params: BarParameters, extra: tuple[float, ...] = ()) -> tuple[fl
     return tuple(sorted(set(grid) | {t for t in extra if 0 < t <= params.t_end} | {params.t_end}))
 
 
+class TooManySteps(SolveFailure):
+    """The adaptive steps would exceed ``max_steps`` (the state reached is kept)."""
+
+    def __init__(self, step: int, time: float, dt: float, max_steps: int):
+        self.step, self.load, self.last_converged = step, time, time
+        self.residuals, self.reason = [], "too many time steps"
+        RuntimeError.__init__(
+            self, f"adaptive time stepping needs more than max_steps = {max_steps} steps: at "
+                  f"t = {time:.6g} the step allowed by time_tolerance is {dt:.3g}; raise "
+                  f"time_tolerance or max_steps. The state at t = {time:.6g} is kept.")
+
+
 def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: BarParameters,
           apply_load: Callable[[float], None], record: Callable[[float], None], label: str,
-          extra_stops: tuple[float, ...] = ()) -> None:
-    """Time stepping with fixed dt from 0 to t_end: ``apply_load(t)`` sets the load,
-    ``record(t)`` stores outputs of the converged step, before the history update.
+          extra_stops: tuple[float, ...] = ()) -> dict[str, float]:
+    """Time stepping from 0 to t_end, fixed or adaptive (``params.time_stepping``):
+    ``apply_load(t)`` sets the load, ``record(t)`` stores outputs of the converged step,
+    before the history update. Returns the time-discretisation summary
+    (``time_error_estimate``, ``time_steps``, ``rejected_steps``) for the quantities.
 
-    Cv_n is touched only in on_converged, so a cut (failed) step leaves it intact. For
-    forward Euler no cut is allowed: the step size is the experiment, and halving it
+    Cv_n is touched only after a step is accepted, so a cut (failed) step leaves it intact.
+    For forward Euler no cut is allowed: the step size is the experiment, and halving it
     would hide the instability; a Cv that loses positive definiteness stops the run
     with a SolveFailure naming the time.
     """
+    summary = {"time_error_estimate": 0.0, "time_steps": 0, "rejected_steps": 0}
+
+    def accept(step: int, t: float, dt: float, iterations: int, cuts: int, residuals,
+               errors: tuple[float, float], counts: dict | None = None):
+        # outputs first: the stress expression reads Cv_{n+1}(u, Cv_n) and must see the
+        # Cv_n this step was solved with, not the updated one
+        record(t)
+        error = errors[0]
+        if np.isfinite(errors[1]):
+            bar.accept_time_error()
+            summary["time_error_estimate"] = max(summary["time_error_estimate"], errors[1])
+        smallest = bar.update_history()
+        summary["time_steps"] += 1
+        ctx.record_step(step=step, time=t, dt=dt, newton_iterations=iterations, cuts=cuts,
+                        **(counts or {}), residuals=residuals, smallest_cv_eigenvalue=smallest,
+                        local_time_error=error)
+        if not smallest > 0:
+            raise UnstableIntegration(step, t, smallest, dt / params.tau)
+
+    if params.time_stepping == "adaptive":
+        _march_adaptive(bar, solver, params, apply_load, accept, summary, extra_stops)
+        return summary
+
     explicit = params.time_scheme == "forward-euler"
     fraction = params.dt / params.t_end
     stepping = Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=fraction, max_step=fraction,
@@ -240,18 +358,60 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
         apply_load(t)
 
     def converged(step: StepRecord) -> None:
-        # outputs first: the stress expression reads Cv_{n+1}(u, Cv_n) and must see the
-        # Cv_n this step was solved with, not the updated one
-        record(step.load)
-        smallest = bar.update_history()
-        ctx.record_step(step=step.step, time=step.load, dt=step.increment,
-                        newton_iterations=step.iterations, cuts=step.cuts, **step.counts(), residuals=step.residuals,
-                        smallest_cv_eigenvalue=smallest)
-        if not smallest > 0:
-            raise UnstableIntegration(step.step, step.load, smallest, params.dt / params.tau)
+        error = bar.time_error() if not explicit else (float("nan"), float("nan"))
+        accept(step.step, step.load, step.increment, step.iterations, step.cuts, step.residuals, error,
+               step.counts())
 
     follow_path(solver, apply, stepping, on_converged=converged, label=label,
                 quiet=ctx.options.quiet)
+    return summary
+
+
+def _march_adaptive(bar: ViscousBar, solver: NonlinearSolver, params: BarParameters,
+                    apply_load: Callable[[float], None], accept, summary: dict,
+                    extra_stops: tuple[float, ...]) -> None:
+    """Backward Euler with steps from the embedded BE/FE estimate (module docstring).
+    A step Newton cannot solve is halved (at most 6 times in a row); a step whose
+    estimate exceeds the tolerance is repeated shorter."""
+    t_end, tol = params.t_end, params.time_tolerance
+    retardation = params.material.retardation_time
+    stops = sorted({t for t in extra_stops if 0 < t < t_end} | {t_end})
+    t, dt, step, cuts = 0.0, min(params.dt, t_end), 0, 0
+    while t < t_end * (1 - 1e-12):
+        if step >= params.max_steps:
+            raise TooManySteps(step, t, dt, params.max_steps)
+        state = solver.save_state()
+        next_stop = next(s for s in stops if s > t * (1 + 1e-12) + 1e-300)
+        target = min(t + dt, next_stop)
+        if next_stop - target < 1e-3 * dt:  # no sliver before a stop
+            target = next_stop
+        h = target - t
+        bar.dt.value = h
+        apply_load(target)
+        converged, iterations = solver.solve()
+        if not converged:
+            residuals, reason = list(solver.residual_history), solver.reason()
+            solver.restore_state(state)
+            cuts += 1
+            dt = 0.5 * h
+            if cuts > 6:
+                bar.dt.value = 0.0
+                apply_load(t)
+                raise SolveFailure(step + 1, target, t, residuals, reason)
+            continue
+        errors = bar.time_error()
+        relative = errors[0]
+        allowed = max(tol * h / retardation, (tol / 10) ** 2)
+        ratio = np.sqrt(allowed / relative) if relative > 0 else np.inf
+        if ratio < 1.0:
+            solver.restore_state(state)
+            summary["rejected_steps"] += 1
+            dt = h * max(0.2, 0.9 * ratio)
+            continue
+        step += 1
+        accept(step, target, h, iterations, cuts, list(solver.residual_history), errors)
+        t, cuts = target, 0
+        dt = h * min(2.0, max(0.2, 0.9 * ratio))
 
 
 def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,

@@ -42,7 +42,8 @@ QUIET = RunOptions(fields=False, pictures=False)
 
 def one_case(scheme: str, ratio: float, comm) -> tuple[dict, list[float], list[float]]:
     """One run; a failed one is read back from its results.json (the converged steps)."""
-    params = uniaxial_relaxation.Parameters(time_scheme=scheme, dt=ratio * CASE["tau"], **CASE)
+    params = uniaxial_relaxation.Parameters(time_scheme=scheme, dt=ratio * CASE["tau"],
+                                            time_stepping="fixed", **CASE)
     folder = comm.bcast(tempfile.mkdtemp(prefix="eyemech_visco_") if comm.rank == 0 else None)
     status, failed_at = "ok", math.nan
     try:
