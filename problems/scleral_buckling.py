@@ -87,6 +87,13 @@ from eyemech.problems.solve.driver import (
 from eyemech.problems.solve.linear_solvers import SolverChoice
 from mpi4py import MPI
 
+# refraction from the geometry: diopters per mm of axial length (Gullstrand's schematic
+# eye, emmetropic: ≈ 2.7 D/mm) and the keratometric index that turns the anterior
+# corneal radius into power, K = (n_k − 1)/R (n_k = 1.3375, the keratometers' convention)
+DIOPTRES_PER_MM = 2.7
+KERATOMETRIC_INDEX = 1.3375
+KERATOMETRY_ZONE = 3.0  # mm from the axis: the central cornea a keratometer reads
+
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
 BENCHMARK = {"resolution": "paper"}
 
@@ -323,6 +330,8 @@ class BucklingModel:
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
         self.stage_results: dict[int, dict] = {}
         self.reference_positions: dict[str, np.ndarray] = {}
+        # the eye before surgery (end of step 1): every change is measured from it
+        self.preoperative: dict[str, float] = {}
 
     def residual(self, tests, dx, ds):
         """The eye's residual, all of it but the node-wise terms:
@@ -410,6 +419,16 @@ class BucklingModel:
         apex = np.array([[0.0, 0.0, geo.cornea_center + geo.cornea_radius]])
         pole = np.array([[0.0, 0.0, -geo.sclera_radius]])
         self.apex = NodeProbe(V, apex, cornea)
+        # the central cornea a keratometer reads (ρ ≤ 3 mm; at least 4 nodes)
+        X = V.tabulate_dof_coordinates()
+        owned = V.dofmap.index_map.size_local
+        mine = cornea[cornea < owned]
+        rho = np.hypot(X[mine, 0], X[mine, 1])
+        for zone in (KERATOMETRY_ZONE, 4.0, 5.0):
+            central = mine[rho <= zone]
+            if self.ctx.comm.allreduce(len(central), op=MPI.SUM) >= 4:
+                break
+        self.central_cornea = central.astype(np.int32)
         self.pole = NodeProbe(V, pole, inner)
         theta = math.radians(self.buckle_angle)
         under = np.array([[0.0, geo.sclera_radius * math.sin(theta), self.axial_position]])
@@ -468,6 +487,8 @@ class BucklingModel:
         self.reference_positions = {"apex": self.apex.positions(self.u),
                                     "pole": self.pole.positions(self.u),
                                     "under_buckle": self.under_buckle.positions(self.u)}
+        self.preoperative = self._optics() | {"volume_mm3": 2.0 * self.volume(),
+                                              "iop_mmHg": self.cavity_pressure() / MMHG}
 
     def _sclera_radius_under_buckle(self) -> float:
         """Largest distance from the optic axis of the deformed sclera within the
@@ -507,6 +528,8 @@ class BucklingModel:
                           self._restore_sutures)
         checkpoints.value("reference_positions", lambda: self.reference_positions,
                           lambda saved: setattr(self, "reference_positions", saved))
+        checkpoints.value("preoperative", lambda: self.preoperative,
+                          lambda saved: setattr(self, "preoperative", dict(saved)))
         checkpoints.value("stage_results", lambda: self.stage_results,
                           lambda saved: setattr(self, "stage_results",
                                                 {int(k): v for k, v in saved.items()}))
@@ -532,8 +555,8 @@ class BucklingModel:
         with self.ctx.timings("contact_search"):
             # an attached retina (detachment_height = 0): no subretinal gap to measure
             gaps = self.pairing.gaps(self.u) if self.pairing is not None else np.zeros(1)
-        apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
-        axial = apex[2] - pole[2]
+        optics = self._optics()
+        axial = optics["axial_length_mm"]
         reference_axial = self.apex.nodes[0][2] - self.pole.nodes[0][2]
         under = self.under_buckle.positions(self.u)[0]
         before = self.reference_positions.get("under_buckle", self.under_buckle.nodes)[0]
@@ -541,9 +564,13 @@ class BucklingModel:
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
         zonules = self.zonules.summary() if self.zonules is not None else {}
-        return self._retina_contact_measures() | zonules | {
+        return self._retina_contact_measures() | zonules | self._changes(optics) | {
             "axial_length_mm": axial,
-            "axial_length_change_mm": axial - reference_axial,
+            "corneal_radius_mm": optics["corneal_radius_mm"],
+            "corneal_power_D": optics["corneal_power_D"],
+            # the inflation from the unloaded mesh is not a surgical change; kept under
+            # its own name (the mesh is the eye at zero pressure)
+            "axial_length_change_from_unloaded_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
             "buckle_travel_mm": float(self.indentation.value),
             "iop_mmHg": self.cavity_pressure() / MMHG,
@@ -559,6 +586,41 @@ class BucklingModel:
             "von_mises_max_MPa": self.von_mises.update(),
             "suture_force_N": float(self.sutures.magnitude),
         }
+
+    def _optics(self) -> dict:
+        """Axial length (corneal apex to the retina's posterior pole) and the central
+        cornea's radius of curvature: a sphere centred on the optic axis fitted (least
+        squares) to the deformed anterior corneal nodes within the keratometry zone,
+        with its keratometric power (n_k − 1)/R."""
+        apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
+        V = self.u.function_space
+        x = V.tabulate_dof_coordinates()[self.central_cornea] \
+            + self.u.x.array.reshape(-1, 3)[self.central_cornea]
+        x = np.vstack(self.ctx.comm.allgather(x))
+        # ρ² + z² = 2 z z_c + (R² − z_c²): linear in (z_c, R² − z_c²)
+        A = np.column_stack([2.0 * x[:, 2], np.ones(len(x))])
+        (zc, k), *_ = np.linalg.lstsq(A, np.einsum("ij,ij->i", x, x), rcond=None)
+        radius = math.sqrt(k + zc**2)
+        return {"axial_length_mm": float(apex[2] - pole[2]), "corneal_radius_mm": radius,
+                "corneal_power_D": 1000.0 * (KERATOMETRIC_INDEX - 1.0) / radius}
+
+    def _changes(self, optics: dict) -> dict:
+        """Changes from the eye before surgery (the end of step 1): axial length, corneal
+        power, refraction, IOP, whole-eye liquid volume. Refraction (spherical
+        equivalent at the cornea): ΔSE = −D_AL ΔAL − ΔK, D_AL = 2.7 D per mm of axial
+        length (Gullstrand's schematic eye, emmetropic) and ΔK the keratometric power
+        change; negative = myopic shift. Zero by definition at the end of step 1; absent
+        before it."""
+        pre = self.preoperative
+        if not pre:
+            return {}
+        axial = optics["axial_length_mm"] - pre["axial_length_mm"]
+        power = optics["corneal_power_D"] - pre["corneal_power_D"]
+        return {"axial_length_change_mm": axial,
+                "corneal_power_change_D": power,
+                "refraction_change_D": -DIOPTRES_PER_MM * axial - power,
+                "iop_change_mmHg": self.cavity_pressure() / MMHG - pre["iop_mmHg"],
+                "volume_change_mm3": 2.0 * self.volume() - pre["volume_mm3"]}
 
     def _retina_contact_measures(self) -> dict:
         """The penalty contact's own view (whole eye: twice the half model's area and

@@ -23,9 +23,31 @@ def stage(result, number):
 
 
 def test_iop_lengthens_the_axis(coarse):
+    # inflation from the unloaded mesh; the surgical changes start from this state
     after = coarse.quantities["after_iop"]
     assert after["iop_mmHg"] == pytest.approx(15.0, rel=1e-9)
-    assert after["axial_length_change_mm"] > 0.05
+    assert after["axial_length_change_from_unloaded_mm"] > 0.05
+    for key in ("axial_length_change_mm", "iop_change_mmHg", "volume_change_mm3",
+                "refraction_change_D", "corneal_power_change_D"):
+        assert after[key] == 0.0, key
+
+
+def test_changes_are_read_from_the_eye_before_surgery(coarse):
+    # every change after step 1 is the difference from the pre-operative eye (end of
+    # step 1), and the refraction follows from it: ΔSE = −2.7 D/mm ΔAL − ΔK
+    pre, post = coarse.quantities["after_iop"], coarse.quantities["after_suturing"]
+    assert post["axial_length_change_mm"] == pytest.approx(
+        post["axial_length_mm"] - pre["axial_length_mm"], abs=1e-12)
+    assert post["iop_change_mmHg"] == pytest.approx(post["iop_mmHg"] - pre["iop_mmHg"], abs=1e-9)
+    assert post["volume_change_mm3"] == pytest.approx(
+        post["cavity_volume_mm3"] - pre["cavity_volume_mm3"], abs=1e-9)
+    assert post["refraction_change_D"] == pytest.approx(
+        -sb.DIOPTRES_PER_MM * post["axial_length_change_mm"] - post["corneal_power_change_D"],
+        abs=1e-12)
+    # the corneal fit reads a human cornea: 7.8 mm in the mesh, ~43 D
+    assert 7.0 < pre["corneal_radius_mm"] < 8.6
+    assert 39.0 < pre["corneal_power_D"] < 48.0
+    assert post["refraction_change_D"] < 0  # the buckle lengthens the eye: a myopic shift
 
 
 def test_buckling_closes_the_gap_and_raises_the_pressure(coarse):
