@@ -54,7 +54,7 @@ from eyemech.forms import (
     liquid_law_residual,
     von_mises,
 )
-from eyemech.forms.buckle import Buckle, BuckleShape
+from eyemech.forms.buckle import Buckle, BuckleShape, slip, tangential_tie_energy
 from eyemech.forms.contact import default_penalty, smoothed_penalty_energy
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems import buckling_output
@@ -119,6 +119,14 @@ class Parameters(SceneParameters, SolverChoice):
     zonule_area: float = field(
         0.008, "cross-section of one zonule bar (a 0.1 mm fibre bundle; not given in seed 002)",
         "mm²")
+    buckle: Literal["encircling+segmental", "encircling", "segmental"] = field(
+        "encircling+segmental", "which buckle: a band all round, a silicone tire over the tear "
+        "(segmental), or both (the paper's operation)")
+    buckle_attachment: Literal["sutured", "frictionless"] = field(
+        "sutured", "sutured: the sclera under the buckle's footprint is tied to it tangentially "
+        "from step 2 on; frictionless: it may slide along the buckle")
+    tire_arc_deg: float = field(90.0, "arc of the silicone tire about the optic axis, centred "
+                                "on the tear's meridian (360: a full ring)", "deg")
     buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
@@ -163,16 +171,25 @@ class Parameters(SceneParameters, SolverChoice):
                               "tear_closure_tolerance", "retina_thickness")
         self.require_nonnegative("buckle_corner_radius", "tire_height", "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
+        if not 0 < self.tire_arc_deg <= 360:
+            raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
+                                 "lie in (0, 360] degrees")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
         shape = self.buckle_shape()
-        if self.suture_width < shape.footprint:
+        if self.suture_azimuths and any(shape.element_at(a) is None for a in self.suture_azimuths):
+            raise ParameterError("suture_azimuths", "a suture lies off the segmental tire (its arc "
+                                 f"is ±{self.tire_arc_deg / 2:g} degrees about the tear): "
+                                 "nothing to hold there")
+        widest = max((shape.element_at(a)[0] for a in self.suture_azimuths),
+                     default=shape.footprint)
+        if self.suture_width < widest:
             raise ParameterError("suture_width", f"{self.suture_width} mm is narrower than the buckle "
-                                 f"({shape.footprint} mm): the sutures would pass through it")
-        if self.suture_width > shape.footprint + 4.0:
-            raise ParameterError("suture_width", f"{self.suture_width} mm is wider than the band "
-                                 f"region (buckle {shape.footprint} mm + 2 mm each side)")
+                                 f"({widest} mm): the sutures would pass through it")
+        if self.suture_width > shape.footprint + 8.0:
+            raise ParameterError("suture_width", f"{self.suture_width} mm is wider than the buckle "
+                                 f"region (buckle {shape.footprint} mm + 4 mm each side)")
         geometry = self.geometry()
         arc_to_pole = math.radians(180.0 - geometry.limbus_angle) * geometry.sclera_radius
         if not shape.footprint < self.buckle_position < arc_to_pole - 2 * geometry.optic_nerve_radius:
@@ -196,7 +213,7 @@ class Parameters(SceneParameters, SolverChoice):
 
     def buckle_shape(self) -> BuckleShape:
         return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,
-                           self.buckle_corner_radius)
+                           self.buckle_corner_radius, self.buckle, self.tire_arc_deg)
 
     def stiffness(self) -> dict[str, float]:
         return {t: getattr(self, f"c_{t}") for t in TISSUES}
@@ -304,6 +321,9 @@ class BucklingModel:
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
+        # the sutured buckle: the sclera's displacement when it is tied (end of step 1)
+        self.u_tied = dolfinx.fem.Function(self.u.function_space, name="u_tied")
+        self.tied = dolfinx.fem.Constant(mesh, 0.0)
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
                                     self.sclera_nodes, params.suture_bite_radius)
         residual = self.residual(tests, dx, ds)
@@ -341,6 +361,8 @@ class BucklingModel:
           + c · R_liquid + (1 − c) · R_pin   P's row: the liquid law from step 2 (c = 1),
                                              P pinned to the IOP ramp in step 1 (c = 0)
           + δΠ_buckle                        smoothed penalty contact with the rigid buckle
+          + δΠ_tie                           sutured buckle: the sclera under its footprint
+                                             tied tangentially (from step 2 on)
           + R_sutures                        suture forces at the bites (lagged directions)
 
         The zonule bars and the retina–choroid contact are added node-wise by hooks of the
@@ -358,6 +380,10 @@ class BucklingModel:
         contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
                                           contact_ds(self.eye.tag("sclera_outer")))
         residual += ufl.derivative(contact, self.u, v)
+        if params.buckle_attachment == "sutured":
+            tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.penalty,
+                                        contact_ds(self.eye.tag("sclera_outer")))
+            residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
         return residual
 
@@ -483,6 +509,8 @@ class BucklingModel:
             # step 1 it would only cost iterations (12-14 per step instead of 3-4)
             self.solver.snes.getLineSearch().setType("bt")
         self.coupled.value = 1.0
+        self.u_tied.x.array[:] = self.u.x.array
+        self.tied.value = 1.0
         self.base_radius.value = self._sclera_radius_under_buckle() + self.params.buckle_clearance
         self.reference_positions = {"apex": self.apex.positions(self.u),
                                     "pole": self.pole.positions(self.u),
@@ -506,11 +534,12 @@ class BucklingModel:
         """Where each suture leaves the buckle: the tire's outer corner on its side,
         in the suture's meridional plane (directions for the next step)."""
         shape = self.params.buckle_shape()
-        rho = float(self.base_radius.value) - float(self.indentation.value) + shape.tire_height
         anchors = []
         for point in self.sutures.points:
+            width, height = shape.element_at(point.azimuth_deg)
+            rho = float(self.base_radius.value) - float(self.indentation.value) + height
             psi = math.radians(point.azimuth_deg)
-            z = self.axial_position + point.side * 0.5 * shape.footprint
+            z = self.axial_position + point.side * 0.5 * width
             anchors.append([rho * math.sin(psi), rho * math.cos(psi), z])
         return np.array(anchors)
 
@@ -520,8 +549,9 @@ class BucklingModel:
         line search chosen in step 2, the contact's sticky memory, the stage results."""
         for name, f in zip(("u", "p", "P"), self.fields):
             checkpoints.function(name, f)
+        checkpoints.function("u_tied", self.u_tied)
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
-                     "base_radius", "indentation"):
+                     "base_radius", "indentation", "tied"):
             checkpoints.constant(name, getattr(self, name))
         checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
                                               "magnitude": self.sutures.magnitude},
@@ -564,7 +594,7 @@ class BucklingModel:
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
         zonules = self.zonules.summary() if self.zonules is not None else {}
-        return self._retina_contact_measures() | zonules | self._changes(optics) | {
+        return self._retina_contact_measures() | zonules | self._changes(optics) | self._slip() | {
             "axial_length_mm": axial,
             "corneal_radius_mm": optics["corneal_radius_mm"],
             "corneal_power_D": optics["corneal_power_D"],
@@ -621,6 +651,28 @@ class BucklingModel:
                 "refraction_change_D": -DIOPTRES_PER_MM * axial - power,
                 "iop_change_mmHg": self.cavity_pressure() / MMHG - pre["iop_mmHg"],
                 "volume_change_mm3": 2.0 * self.volume() - pre["volume_mm3"]}
+
+    def _slip(self) -> dict:
+        """Tangential motion (axial and circumferential) of the sclera's outer nodes under
+        the buckle's footprint since the buckle was placed (end of step 1): the buckle
+        moves only radially, so this is the slip along it. ``buckle_slip_axial_mean_mm``
+        > 0: the sclera moved forward (towards the cornea) under the buckle."""
+        if not self.preoperative:
+            return {}
+        V = self.u.function_space
+        owned = V.dofmap.index_map.size_local
+        nodes = self.sclera_nodes[self.sclera_nodes < owned]
+        tied = self.u_tied.x.array.reshape(-1, 3)[nodes]
+        x0 = V.tabulate_dof_coordinates()[nodes] + tied
+        under = self.buckle.footprint_mask(x0)
+        du = self.u.x.array.reshape(-1, 3)[nodes][under] - tied[under]
+        values = slip(x0[under], du)
+        comm = self.ctx.comm
+        count = comm.allreduce(int(under.sum()), op=MPI.SUM)
+        return {"buckle_slip_max_mm": comm.allreduce(float(values.max(initial=0.0)), op=MPI.MAX),
+                "buckle_slip_axial_mean_mm": comm.allreduce(float(du[:, 2].sum()), op=MPI.SUM)
+                / max(count, 1),
+                "buckle_footprint_nodes": count}
 
     def _retina_contact_measures(self) -> dict:
         """The penalty contact's own view (whole eye: twice the half model's area and
