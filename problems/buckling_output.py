@@ -12,7 +12,7 @@ from eyemech.problems.run.output import (
     render_png,
 )
 
-STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing"}
+STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing", 4: "settled"}
 
 
 class Writer:

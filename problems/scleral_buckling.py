@@ -14,6 +14,10 @@ Three steps along one load path s ∈ [0, 3]:
    outline, directions from the last converged step (seed 002, §2.2), spread over each
    suture's bite (radius ``suture_bite_radius``) rather than put on one node, whose
    point-load response does not converge under mesh refinement.
+4. s ∈ [3, 4] — settling (``settle``): the acute state of step 3 keeps the liquid's
+   volume (the paper's law); within hours aqueous outflow returns the IOP to its
+   pre-operative value. P's row is pinned again and its target ramped from the acute
+   pressure back to the IOP of step 1: the liquid volume is released.
 
 Every soft tissue is neo-Hookean, W = c (Ī1 − 3), with c per tissue (paper Table 1) held
 in a cellwise-constant field; incompressibility by a pressure multiplier (Q1P0 as in
@@ -134,10 +138,10 @@ class Parameters(SceneParameters, SolverChoice):
     tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm")
-    indentation: float = field(1.0, "radial inward travel of the buckle in step 2", "mm")
+    indentation: float = field(1.5, "radial inward travel of the buckle in step 2", "mm")
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
-    suture_force: float = field(0.05, "pull on each suture at the end of step 3", "N")
+    suture_force: float = field(0.2, "pull on each suture at the end of step 3", "N")
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
     suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
                                                "suture meridians, degrees from the tear", "deg")
@@ -158,6 +162,8 @@ class Parameters(SceneParameters, SolverChoice):
         "rule: node-to-rigid-surface contact)")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
+    settle: bool = field(True, "step 4: the settled state hours after surgery; outflow returns "
+                         "the IOP to its pre-operative value (the liquid volume is released)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
 
@@ -191,6 +197,9 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("suture_width", f"{self.suture_width} mm is wider than the buckle "
                                  f"region (buckle {shape.footprint} mm + 4 mm each side)")
         geometry = self.geometry()
+        if self.indentation >= geometry.sclera_radius:
+            raise ParameterError("indentation", f"{self.indentation} mm would push the buckle "
+                                 f"through the eye's axis (sclera radius {geometry.sclera_radius} mm)")
         arc_to_pole = math.radians(180.0 - geometry.limbus_angle) * geometry.sclera_radius
         if not shape.footprint < self.buckle_position < arc_to_pole - 2 * geometry.optic_nerve_radius:
             raise ParameterError("buckle_position", f"must put the buckle on the sclera between the "
@@ -227,10 +236,10 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer.state(0.0, stage=0)
         model.register_checkpoint(ctx.checkpoints)
         try:
-            follow_path(model.solver, model.apply, Stepping(0.0, 3.0,
-                                                            initial_step=min(1 / 12, _max_step(params)),
+            follow_path(model.solver, model.apply, Stepping(0.0, model.last_stage,
+                                                            initial_step=min(0.25 / _span(params), _max_step(params)),
                                                             max_step=_max_step(params),
-                                                            stops=(1.0, 2.0)),
+                                                            stops=(1.0, 2.0, 3.0)),
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
         except SolveFailure:
@@ -244,16 +253,22 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
 
 def _max_step(params: Parameters) -> float:
-    """Largest step as a fraction of the path (3 stages): a quarter of the path, and
+    """Largest step as a fraction of the path (``span`` stages): three quarters of a stage, and
     never a buckle travel of more than a quarter of the buckle's radial thickness.
     A deeper jump starts Newton with sclera nodes deep inside the buckle, and its
     first iterate throws them through it (measured: a 0.64 mm jump with the default
     1.6 mm buckle left the sclera outside the tire, or "converged" in no iteration
     with the buckle inside the eye)."""
     thickness = params.tire_height + params.band_thickness
+    span = _span(params)
     if params.indentation <= 0:
-        return 1 / 4
-    return min(1 / 4, 0.25 * thickness / params.indentation / 3.0)
+        return 0.75 / span
+    return min(0.75 / span, 0.25 * thickness / params.indentation / span)
+
+
+def _span(params: Parameters) -> float:
+    """Length of the load path: 3 stages, 4 with the settling step."""
+    return 4.0 if params.settle else 3.0
 
 
 def _contact_quadrature(integration: str, family) -> dict:
@@ -271,6 +286,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
     stage = model.stage_of(record.load)
     if abs(record.load - 1.0) < 1e-12:
         model.couple_liquid()
+    if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
+        model.release_liquid()
     values = model.measure()
     ctx.record_step(step=record.step, load=record.load, stage=stage,
                     newton_iterations=record.iterations, cuts=record.cuts,
@@ -303,6 +320,7 @@ class BucklingModel:
         # step 1 pins P to the ramp; from step 2 on P obeys the liquid law
         self.iop = params.iop_mmHg * MMHG
         self.pressure_target = dolfinx.fem.Constant(mesh, 0.0)
+        self.acute_pressure = dolfinx.fem.Constant(mesh, self.iop)  # end of step 3
         self.coupled = dolfinx.fem.Constant(mesh, 0.0)
         self.initial_volume = dolfinx.fem.Constant(mesh, 1.0)
         self.initial_pressure = dolfinx.fem.Constant(mesh, self.iop)
@@ -491,10 +509,18 @@ class BucklingModel:
     # -- the load path --------------------------------------------------------------
     @staticmethod
     def stage_of(load: float) -> int:
-        return 1 if load <= 1.0 + 1e-12 else (2 if load <= 2.0 + 1e-12 else 3)
+        return min(4, max(1, math.ceil(load - 1e-12)))
+
+    @property
+    def last_stage(self) -> float:
+        return _span(self.params)
 
     def apply(self, load: float, _increment: float) -> None:
-        self.pressure_target.value = min(load, 1.0) * self.iop
+        if load <= 3.0 + 1e-12:
+            self.pressure_target.value = min(load, 1.0) * self.iop
+        else:  # step 4: the IOP returns from its acute value to the pre-operative one
+            f = min(load - 3.0, 1.0)
+            self.pressure_target.value = (1 - f) * float(self.acute_pressure.value) + f * self.iop
         self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
         self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
 
@@ -517,6 +543,13 @@ class BucklingModel:
                                     "under_buckle": self.under_buckle.positions(self.u)}
         self.preoperative = self._optics() | {"volume_mm3": 2.0 * self.volume(),
                                               "iop_mmHg": self.cavity_pressure() / MMHG}
+
+    def release_liquid(self) -> None:
+        """End of step 3 (the acute state): from here the liquid's volume is free and its
+        pressure is driven back to the pre-operative IOP, as aqueous outflow does within
+        hours of surgery; P's row is pinned to the ramp again."""
+        self.acute_pressure.value = self.cavity_pressure()
+        self.coupled.value = 0.0
 
     def _sclera_radius_under_buckle(self) -> float:
         """Largest distance from the optic axis of the deformed sclera within the
@@ -551,7 +584,7 @@ class BucklingModel:
             checkpoints.function(name, f)
         checkpoints.function("u_tied", self.u_tied)
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
-                     "base_radius", "indentation", "tied"):
+                     "base_radius", "indentation", "tied", "acute_pressure"):
             checkpoints.constant(name, getattr(self, name))
         checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
                                               "magnitude": self.sutures.magnitude},
@@ -696,6 +729,10 @@ class BucklingModel:
                 # retina_choroid_gap_* measure along the radius to the node they started above)
                 "retina_choroid_gap_nts_min_mm": gap_min,
                 "tear_closed_nts": closed,
+                # the widest node-to-surface gap of the paired nodes on the tear's rim
+                # (those tear_closed_nts looks at): closed when below the tolerance
+                "tear_rim_gap_max_mm": float(rim[np.isfinite(rim)].max())
+                if np.isfinite(rim).any() else float("nan"),
                 "retina_contact_nodes": summary["active_nodes"],
                 "retina_pressed_nodes": self.ctx.comm.allreduce(int(pressed.sum()), op=MPI.SUM),
                 "retina_penalty_contact_area_mm2": 2.0 * pressed_area,
@@ -712,7 +749,7 @@ class BucklingModel:
         return self._detached_area
 
     def summary(self) -> dict:
-        names = {1: "iop", 2: "buckling", 3: "suturing"}
+        names = {1: "iop", 2: "buckling", 3: "suturing", 4: "settling"}
         out = {f"after_{names[k]}": v for k, v in sorted(self.stage_results.items())}
         out["dofs"] = global_dofs(*self.fields)
         out["cells"] = self.eye.mesh.topology.index_map(3).size_global
