@@ -652,18 +652,20 @@ class BucklingModel:
 
     def _optics(self) -> dict:
         """Axial length (corneal apex to the retina's posterior pole) and the central
-        cornea's radius of curvature: a sphere centred on the optic axis fitted (least
-        squares) to the deformed anterior corneal nodes within the keratometry zone,
-        with its keratometric power (n_k − 1)/R."""
+        cornea's radius of curvature: a sphere fitted (least squares) to the deformed
+        anterior corneal nodes within the keratometry zone, with its keratometric power
+        (n_k − 1)/R."""
         apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
         V = self.u.function_space
         x = V.tabulate_dof_coordinates()[self.central_cornea] \
             + self.u.x.array.reshape(-1, 3)[self.central_cornea]
         x = np.vstack(self.ctx.comm.allgather(x))
-        # ρ² + z² = 2 z z_c + (R² − z_c²): linear in (z_c, R² − z_c²)
-        A = np.column_stack([2.0 * x[:, 2], np.ones(len(x))])
-        (zc, k), *_ = np.linalg.lstsq(A, np.einsum("ij,ij->i", x, x), rcond=None)
-        radius = math.sqrt(k + zc**2)
+        # |x|² = 2 y y_c + 2 z z_c + (R² − y_c² − z_c²): linear in the centre and R² − |c|²;
+        # the centre is free in the symmetry plane (x_c = 0), so a buckle that pushes the
+        # cornea sideways (a segmental tire) does not read as a change of curvature
+        A = np.column_stack([2.0 * x[:, 1], 2.0 * x[:, 2], np.ones(len(x))])
+        (yc, zc, k), *_ = np.linalg.lstsq(A, np.einsum("ij,ij->i", x, x), rcond=None)
+        radius = math.sqrt(k + yc**2 + zc**2)
         return {"axial_length_mm": float(apex[2] - pole[2]), "corneal_radius_mm": radius,
                 "corneal_power_D": 1000.0 * (KERATOMETRIC_INDEX - 1.0) / radius}
 
