@@ -1,46 +1,99 @@
-"""The scleral buckle as a rigid obstacle: an encircling band on a silicone tire.
+"""The scleral buckle as a rigid obstacle: an encircling band and/or a silicone tire.
 
 Both are rings about the optic axis (z) whose cross-sections in the (ρ, z) half-plane
-are rounded rectangles: the tire (``tire_width`` along z, ``tire_height`` radially)
-against the sclera, the band (``band_width``, ``band_thickness``) outside it. The
-obstacle is their union, so its signed distance is the smaller of the two. The whole
-buckle moves radially inward by ``indentation`` (the load parameter of the buckling
-step); ``base_radius`` is the radius of the tire's inner face before indentation.
+are rounded rectangles: the band (``band_width`` along z, ``band_thickness``
+radially) all round the eye, the tire (``tire_width``, ``tire_height``) over an arc
+of ``tire_arc_deg`` centred on the tear's meridian (azimuth 0, the +y axis). The
+kinds (``kind``) are the operations surgeons perform:
+
+- ``encircling``: the band alone;
+- ``segmental``: the tire alone (seed 002 §1, the segmental operation);
+- ``encircling+segmental``: the band all round and the tire under it at the tear
+  (seed 002 §3, the paper's operation).
+
+Both elements start with their inner faces at ``base_radius`` (the clearance from the
+inflated sclera) and move radially inward by ``indentation`` (the band tightened,
+the tire pressed in by it); where the tire lies the band runs over it, so the
+obstacle is the union of the two, and its signed distance the smaller one.
+
+An arc-limited tire is the intersection of the swept ring with the wedge
+|φ| ≤ φ₀/2 about the axis; its signed distance is approximated by the larger of
+the ring's and the wedge's (exact away from the edges where both are positive).
+The wedge's distance is ρ sin(|φ| − φ₀/2), clamped to ±90° of overshoot so that
+points deep inside the wedge stay inside.
+
+Sutured buckle: the sclera under the buckle's footprint is tied to it tangentially
+(:func:`tangential_tie_energy`): sutures hold band and tire on the sclera, which
+must not slide along them (with a frictionless obstacle it does: the eye is
+squeezed forward through the band).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import numpy as np
 import ufl
 
 from eyemech.forms.contact import Ring, RoundedRectangle
 
+KINDS = ("encircling+segmental", "encircling", "segmental")
+
 
 @dataclasses.dataclass(frozen=True)
 class BuckleShape:
-    """Cross-section of band and tire (mm)."""
+    """Cross-section of band and tire (mm), which of them there are, and the tire's arc."""
 
     band_width: float = 2.5
     band_thickness: float = 0.6
     tire_width: float = 7.0
     tire_height: float = 1.0
     corner_radius: float = 0.3
+    kind: str = "encircling+segmental"
+    tire_arc_deg: float = 360.0
+
+    @property
+    def has_band(self) -> bool:
+        return self.kind in ("encircling", "encircling+segmental")
+
+    @property
+    def has_tire(self) -> bool:
+        return self.kind in ("segmental", "encircling+segmental") and self.tire_height > 0
 
     @property
     def footprint(self) -> float:
-        """Axial width of what can touch the sclera."""
-        return max(self.tire_width, self.band_width) if self.tire_height > 0 else self.band_width
+        """Axial width of what can touch the sclera (the widest element)."""
+        widths = ([self.band_width] if self.has_band else []) + \
+            ([self.tire_width] if self.has_tire else [])
+        return max(widths) if widths else self.band_width
+
+    def on_tire(self, azimuth_deg: float) -> bool:
+        """Whether the meridian at ``azimuth_deg`` from the tear passes under the tire."""
+        return self.has_tire and abs(azimuth_deg) <= 0.5 * self.tire_arc_deg + 1e-9
+
+    def element_at(self, azimuth_deg: float) -> tuple[float, float] | None:
+        """(axial width, radial height) of what the sclera meets at this meridian."""
+        if self.on_tire(azimuth_deg):
+            return self.tire_width, self.tire_height
+        if self.has_band:
+            return self.band_width, self.band_thickness
+        return None
+
+
+def _abs_azimuth(x):
+    """|φ| ∈ [0, π], the angle about the z axis from the tear's meridian (+y)."""
+    return ufl.atan2(ufl.sqrt(x[0] ** 2 + 1e-24), x[1])
 
 
 def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indentation):
-    """(tire, band) obstacles; ``base_radius`` and ``indentation`` may be Constants."""
+    """(tire, band) ring obstacles (both at ``base_radius``); ``base_radius`` and
+    ``indentation`` may be Constants."""
     height = max(shape.tire_height, 1e-6)
     tire = RoundedRectangle(center=(base_radius + 0.5 * height, axial_position),
                             width=height, height=shape.tire_width,
                             corner_radius=min(shape.corner_radius, 0.5 * height, 0.5 * shape.tire_width))
-    band = RoundedRectangle(center=(base_radius + shape.tire_height + 0.5 * shape.band_thickness,
-                                    axial_position),
+    band = RoundedRectangle(center=(base_radius + 0.5 * shape.band_thickness, axial_position),
                             width=shape.band_thickness, height=shape.band_width,
                             corner_radius=min(shape.corner_radius, 0.5 * shape.band_thickness))
     return Ring(indentation=indentation, profile=tire), Ring(indentation=indentation, profile=band)
@@ -48,7 +101,8 @@ def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indenta
 
 @dataclasses.dataclass(frozen=True)
 class Buckle:
-    """Union of the tire and band rings: ``gap(x)`` is the smaller signed distance."""
+    """Union of the band ring and the (arc-limited) tire: ``gap(x)`` is the smaller
+    signed distance."""
 
     shape: BuckleShape
     axial_position: float
@@ -58,4 +112,71 @@ class Buckle:
     def gap(self, x):
         tire, band = buckle_rings(self.shape, self.axial_position, self.base_radius,
                                   self.indentation)
-        return ufl.min_value(tire.gap(x), band.gap(x))
+        gaps = []
+        if self.shape.has_tire:
+            g = tire.gap(x)
+            if self.shape.tire_arc_deg < 360.0:
+                half = math.radians(0.5 * self.shape.tire_arc_deg)
+                rho = ufl.sqrt(x[0] ** 2 + x[1] ** 2 + 1e-24)
+                over = ufl.min_value(ufl.max_value(_abs_azimuth(x) - half, -0.5 * math.pi),
+                                     0.5 * math.pi)
+                g = ufl.max_value(g, rho * ufl.sin(over))
+            gaps.append(g)
+        if self.shape.has_band:
+            gaps.append(band.gap(x))
+        return gaps[0] if len(gaps) == 1 else ufl.min_value(*gaps)
+
+    def footprint_weight(self, x):
+        """1 on the sclera under the buckle (axially within the element's width at
+        that meridian), 0 elsewhere; ``x`` a position that does not depend on the
+        unknowns (the pre-operative one), so the weight carries no derivative."""
+        z = abs(x[2] - self.axial_position)
+        weights = []
+        if self.shape.has_tire:
+            inside = ufl.le(z, 0.5 * self.shape.tire_width)
+            if self.shape.tire_arc_deg < 360.0:
+                inside = ufl.And(inside, ufl.le(_abs_azimuth(x),
+                                                math.radians(0.5 * self.shape.tire_arc_deg)))
+            weights.append(ufl.conditional(inside, 1.0, 0.0))
+        if self.shape.has_band:
+            weights.append(ufl.conditional(ufl.le(z, 0.5 * self.shape.band_width), 1.0, 0.0))
+        return weights[0] if len(weights) == 1 else ufl.max_value(*weights)
+
+    def footprint_mask(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`footprint_weight` on an array of points (n, 3)."""
+        z = np.abs(x[:, 2] - self.axial_position)
+        azimuth = np.degrees(np.arctan2(np.abs(x[:, 0]), x[:, 1]))
+        mask = np.zeros(len(x), bool)
+        if self.shape.has_tire:
+            mask |= (z <= 0.5 * self.shape.tire_width) & \
+                (azimuth <= 0.5 * self.shape.tire_arc_deg)
+        if self.shape.has_band:
+            mask |= z <= 0.5 * self.shape.band_width
+        return mask
+
+
+def tangential_components(x, w):
+    """(w·e_z, w·e_φ) of a vector w at position x: the directions along which the
+    sclera slides on a buckle of revolution about z."""
+    rho = ufl.sqrt(x[0] ** 2 + x[1] ** 2 + 1e-24)
+    return w[2], (x[0] * w[1] - x[1] * w[0]) / rho
+
+
+def tangential_tie_energy(buckle: Buckle, u, u_tied, stiffness, measure):
+    """Π_t = ∫ ½ k_t w(x₀) |(u − u₀)_t|² dA: a penalty on the sclera's tangential
+    motion relative to the buckle under its footprint, w of
+    :meth:`Buckle.footprint_weight` at the tied position x₀ = X + u₀. The buckle moves
+    only radially, so its tangential displacement is zero and the slip is the
+    sclera's own (axial and circumferential) displacement since it was tied;
+    the radial direction stays free for the contact."""
+    X = ufl.SpatialCoordinate(measure.ufl_domain())
+    x0 = X + u_tied
+    along, around = tangential_components(x0, u - u_tied)
+    return 0.5 * stiffness * buckle.footprint_weight(x0) * (along**2 + around**2) * measure
+
+
+def slip(x0: np.ndarray, du: np.ndarray) -> np.ndarray:
+    """|(du)_t| at positions x0 (numpy twin of :func:`tangential_components`)."""
+    rho = np.hypot(x0[:, 0], x0[:, 1])
+    around = (x0[:, 0] * du[:, 1] - x0[:, 1] * du[:, 0]) / rho
+    return np.hypot(du[:, 2], around)

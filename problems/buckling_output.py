@@ -12,7 +12,7 @@ from eyemech.problems.run.output import (
     render_png,
 )
 
-STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing"}
+STAGE_NAMES = {0: "reference", 1: "IOP", 2: "buckling", 3: "suturing", 4: "settled"}
 
 
 class Writer:
@@ -101,13 +101,20 @@ def _buckle_outline(model):
         return None
     shape = model.params.buckle_shape()
     z0 = model.axial_position
-    tire = [(base, -shape.tire_width / 2), (base + shape.tire_height, -shape.tire_width / 2),
-            (base + shape.tire_height, shape.tire_width / 2), (base, shape.tire_width / 2)]
-    top = base + shape.tire_height
-    band = [(top, -shape.band_width / 2), (top + shape.band_thickness, -shape.band_width / 2),
-            (top + shape.band_thickness, shape.band_width / 2), (top, shape.band_width / 2)]
+    polygons = []
+    if shape.on_tire(0.0):  # the tire at the tear, the band (if any) running over it
+        polygons.append([(base, -shape.tire_width / 2), (base + shape.tire_height, -shape.tire_width / 2),
+                         (base + shape.tire_height, shape.tire_width / 2), (base, shape.tire_width / 2)])
+        bottom = base + shape.tire_height
+    else:
+        bottom = base
+    if shape.has_band:
+        polygons.append([(bottom, -shape.band_width / 2),
+                         (bottom + shape.band_thickness, -shape.band_width / 2),
+                         (bottom + shape.band_thickness, shape.band_width / 2),
+                         (bottom, shape.band_width / 2)])
     points = []
-    for polygon in (tire, band):
+    for polygon in polygons:
         closed = polygon + polygon[:1]
         for a, b in zip(closed[:-1], closed[1:]):
             points += [(-0.01, a[0], z0 + a[1]), (-0.01, b[0], z0 + b[1])]

@@ -14,6 +14,10 @@ Three steps along one load path s ∈ [0, 3]:
    outline, directions from the last converged step (seed 002, §2.2), spread over each
    suture's bite (radius ``suture_bite_radius``) rather than put on one node, whose
    point-load response does not converge under mesh refinement.
+4. s ∈ [3, 4] — settling (``settle``): the acute state of step 3 keeps the liquid's
+   volume (the paper's law); within hours aqueous outflow returns the IOP to its
+   pre-operative value. P's row is pinned again and its target ramped from the acute
+   pressure back to the IOP of step 1: the liquid volume is released.
 
 Every soft tissue is neo-Hookean, W = c (Ī1 − 3), with c per tissue (paper Table 1) held
 in a cellwise-constant field; incompressibility by a pressure multiplier (Q1P0 as in
@@ -54,7 +58,7 @@ from eyemech.forms import (
     liquid_law_residual,
     von_mises,
 )
-from eyemech.forms.buckle import Buckle, BuckleShape
+from eyemech.forms.buckle import Buckle, BuckleShape, slip, tangential_tie_energy
 from eyemech.forms.contact import default_penalty, smoothed_penalty_energy
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems import buckling_output
@@ -87,6 +91,13 @@ from eyemech.problems.solve.driver import (
 from eyemech.problems.solve.linear_solvers import SolverChoice
 from mpi4py import MPI
 
+# refraction from the geometry: diopters per mm of axial length (Gullstrand's schematic
+# eye, emmetropic: ≈ 2.7 D/mm) and the keratometric index that turns the anterior
+# corneal radius into power, K = (n_k − 1)/R (n_k = 1.3375, the keratometers' convention)
+DIOPTRES_PER_MM = 2.7
+KERATOMETRIC_INDEX = 1.3375
+KERATOMETRY_ZONE = 3.0  # mm from the axis: the central cornea a keratometer reads
+
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
 BENCHMARK = {"resolution": "paper"}
 
@@ -112,6 +123,14 @@ class Parameters(SceneParameters, SolverChoice):
     zonule_area: float = field(
         0.008, "cross-section of one zonule bar (a 0.1 mm fibre bundle; not given in seed 002)",
         "mm²")
+    buckle: Literal["encircling+segmental", "encircling", "segmental"] = field(
+        "encircling+segmental", "which buckle: a band all round, a silicone tire over the tear "
+        "(segmental), or both (the paper's operation)")
+    buckle_attachment: Literal["sutured", "frictionless"] = field(
+        "sutured", "sutured: the sclera under the buckle's footprint is tied to it tangentially "
+        "from step 2 on; frictionless: it may slide along the buckle")
+    tire_arc_deg: float = field(90.0, "arc of the silicone tire about the optic axis, centred "
+                                "on the tear's meridian (360: a full ring)", "deg")
     buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
@@ -119,10 +138,10 @@ class Parameters(SceneParameters, SolverChoice):
     tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm")
-    indentation: float = field(1.0, "radial inward travel of the buckle in step 2", "mm")
+    indentation: float = field(1.5, "radial inward travel of the buckle in step 2", "mm")
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
-    suture_force: float = field(0.05, "pull on each suture at the end of step 3", "N")
+    suture_force: float = field(0.2, "pull on each suture at the end of step 3", "N")
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
     suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
                                                "suture meridians, degrees from the tear", "deg")
@@ -143,6 +162,8 @@ class Parameters(SceneParameters, SolverChoice):
         "rule: node-to-rigid-surface contact)")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
+    settle: bool = field(True, "step 4: the settled state hours after surgery; outflow returns "
+                         "the IOP to its pre-operative value (the liquid volume is released)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
 
@@ -156,17 +177,29 @@ class Parameters(SceneParameters, SolverChoice):
                               "tear_closure_tolerance", "retina_thickness")
         self.require_nonnegative("buckle_corner_radius", "tire_height", "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
+        if not 0 < self.tire_arc_deg <= 360:
+            raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
+                                 "lie in (0, 360] degrees")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
         shape = self.buckle_shape()
-        if self.suture_width < shape.footprint:
+        if self.suture_azimuths and any(shape.element_at(a) is None for a in self.suture_azimuths):
+            raise ParameterError("suture_azimuths", "a suture lies off the segmental tire (its arc "
+                                 f"is ±{self.tire_arc_deg / 2:g} degrees about the tear): "
+                                 "nothing to hold there")
+        widest = max((shape.element_at(a)[0] for a in self.suture_azimuths),
+                     default=shape.footprint)
+        if self.suture_width < widest:
             raise ParameterError("suture_width", f"{self.suture_width} mm is narrower than the buckle "
-                                 f"({shape.footprint} mm): the sutures would pass through it")
-        if self.suture_width > shape.footprint + 4.0:
-            raise ParameterError("suture_width", f"{self.suture_width} mm is wider than the band "
-                                 f"region (buckle {shape.footprint} mm + 2 mm each side)")
+                                 f"({widest} mm): the sutures would pass through it")
+        if self.suture_width > shape.footprint + 8.0:
+            raise ParameterError("suture_width", f"{self.suture_width} mm is wider than the buckle "
+                                 f"region (buckle {shape.footprint} mm + 4 mm each side)")
         geometry = self.geometry()
+        if self.indentation >= geometry.sclera_radius:
+            raise ParameterError("indentation", f"{self.indentation} mm would push the buckle "
+                                 f"through the eye's axis (sclera radius {geometry.sclera_radius} mm)")
         arc_to_pole = math.radians(180.0 - geometry.limbus_angle) * geometry.sclera_radius
         if not shape.footprint < self.buckle_position < arc_to_pole - 2 * geometry.optic_nerve_radius:
             raise ParameterError("buckle_position", f"must put the buckle on the sclera between the "
@@ -189,7 +222,7 @@ class Parameters(SceneParameters, SolverChoice):
 
     def buckle_shape(self) -> BuckleShape:
         return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,
-                           self.buckle_corner_radius)
+                           self.buckle_corner_radius, self.buckle, self.tire_arc_deg)
 
     def stiffness(self) -> dict[str, float]:
         return {t: getattr(self, f"c_{t}") for t in TISSUES}
@@ -203,10 +236,10 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer.state(0.0, stage=0)
         model.register_checkpoint(ctx.checkpoints)
         try:
-            follow_path(model.solver, model.apply, Stepping(0.0, 3.0,
-                                                            initial_step=min(1 / 12, _max_step(params)),
+            follow_path(model.solver, model.apply, Stepping(0.0, model.last_stage,
+                                                            initial_step=min(0.25 / _span(params), _max_step(params)),
                                                             max_step=_max_step(params),
-                                                            stops=(1.0, 2.0)),
+                                                            stops=(1.0, 2.0, 3.0)),
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
         except SolveFailure:
@@ -220,16 +253,22 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
 
 def _max_step(params: Parameters) -> float:
-    """Largest step as a fraction of the path (3 stages): a quarter of the path, and
+    """Largest step as a fraction of the path (``span`` stages): three quarters of a stage, and
     never a buckle travel of more than a quarter of the buckle's radial thickness.
     A deeper jump starts Newton with sclera nodes deep inside the buckle, and its
     first iterate throws them through it (measured: a 0.64 mm jump with the default
     1.6 mm buckle left the sclera outside the tire, or "converged" in no iteration
     with the buckle inside the eye)."""
     thickness = params.tire_height + params.band_thickness
+    span = _span(params)
     if params.indentation <= 0:
-        return 1 / 4
-    return min(1 / 4, 0.25 * thickness / params.indentation / 3.0)
+        return 0.75 / span
+    return min(0.75 / span, 0.25 * thickness / params.indentation / span)
+
+
+def _span(params: Parameters) -> float:
+    """Length of the load path: 3 stages, 4 with the settling step."""
+    return 4.0 if params.settle else 3.0
 
 
 def _contact_quadrature(integration: str, family) -> dict:
@@ -247,6 +286,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
     stage = model.stage_of(record.load)
     if abs(record.load - 1.0) < 1e-12:
         model.couple_liquid()
+    if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
+        model.release_liquid()
     values = model.measure()
     ctx.record_step(step=record.step, load=record.load, stage=stage,
                     newton_iterations=record.iterations, cuts=record.cuts, **record.counts(),
@@ -279,6 +320,7 @@ class BucklingModel:
         # step 1 pins P to the ramp; from step 2 on P obeys the liquid law
         self.iop = params.iop_mmHg * MMHG
         self.pressure_target = dolfinx.fem.Constant(mesh, 0.0)
+        self.acute_pressure = dolfinx.fem.Constant(mesh, self.iop)  # end of step 3
         self.coupled = dolfinx.fem.Constant(mesh, 0.0)
         self.initial_volume = dolfinx.fem.Constant(mesh, 1.0)
         self.initial_pressure = dolfinx.fem.Constant(mesh, self.iop)
@@ -297,6 +339,9 @@ class BucklingModel:
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
+        # the sutured buckle: the sclera's displacement when it is tied (end of step 1)
+        self.u_tied = dolfinx.fem.Function(self.u.function_space, name="u_tied")
+        self.tied = dolfinx.fem.Constant(mesh, 0.0)
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
                                     self.sclera_nodes, params.suture_bite_radius)
         residual = self.residual(tests, dx, ds)
@@ -323,6 +368,8 @@ class BucklingModel:
         self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
         self.stage_results: dict[int, dict] = {}
         self.reference_positions: dict[str, np.ndarray] = {}
+        # the eye before surgery (end of step 1): every change is measured from it
+        self.preoperative: dict[str, float] = {}
 
     def residual(self, tests, dx, ds):
         """The eye's residual, all of it but the node-wise terms:
@@ -332,6 +379,8 @@ class BucklingModel:
           + c · R_liquid + (1 − c) · R_pin   P's row: the liquid law from step 2 (c = 1),
                                              P pinned to the IOP ramp in step 1 (c = 0)
           + δΠ_buckle                        smoothed penalty contact with the rigid buckle
+          + δΠ_tie                           sutured buckle: the sclera under its footprint
+                                             tied tangentially (from step 2 on)
           + R_sutures                        suture forces at the bites (lagged directions)
 
         The zonule bars and the retina–choroid contact are added node-wise by hooks of the
@@ -349,6 +398,10 @@ class BucklingModel:
         contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
                                           contact_ds(self.eye.tag("sclera_outer")))
         residual += ufl.derivative(contact, self.u, v)
+        if params.buckle_attachment == "sutured":
+            tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.penalty,
+                                        contact_ds(self.eye.tag("sclera_outer")))
+            residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
         return residual
 
@@ -410,6 +463,16 @@ class BucklingModel:
         apex = np.array([[0.0, 0.0, geo.cornea_center + geo.cornea_radius]])
         pole = np.array([[0.0, 0.0, -geo.sclera_radius]])
         self.apex = NodeProbe(V, apex, cornea)
+        # the central cornea a keratometer reads (ρ ≤ 3 mm; at least 4 nodes)
+        X = V.tabulate_dof_coordinates()
+        owned = V.dofmap.index_map.size_local
+        mine = cornea[cornea < owned]
+        rho = np.hypot(X[mine, 0], X[mine, 1])
+        for zone in (KERATOMETRY_ZONE, 4.0, 5.0):
+            central = mine[rho <= zone]
+            if self.ctx.comm.allreduce(len(central), op=MPI.SUM) >= 4:
+                break
+        self.central_cornea = central.astype(np.int32)
         self.pole = NodeProbe(V, pole, inner)
         theta = math.radians(self.buckle_angle)
         under = np.array([[0.0, geo.sclera_radius * math.sin(theta), self.axial_position]])
@@ -446,10 +509,18 @@ class BucklingModel:
     # -- the load path --------------------------------------------------------------
     @staticmethod
     def stage_of(load: float) -> int:
-        return 1 if load <= 1.0 + 1e-12 else (2 if load <= 2.0 + 1e-12 else 3)
+        return min(4, max(1, math.ceil(load - 1e-12)))
+
+    @property
+    def last_stage(self) -> float:
+        return _span(self.params)
 
     def apply(self, load: float, _increment: float) -> None:
-        self.pressure_target.value = min(load, 1.0) * self.iop
+        if load <= 3.0 + 1e-12:
+            self.pressure_target.value = min(load, 1.0) * self.iop
+        else:  # step 4: the IOP returns from its acute value to the pre-operative one
+            f = min(load - 3.0, 1.0)
+            self.pressure_target.value = (1 - f) * float(self.acute_pressure.value) + f * self.iop
         self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
         self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
 
@@ -464,10 +535,21 @@ class BucklingModel:
             # step 1 it would only cost iterations (12-14 per step instead of 3-4)
             self.solver.snes.getLineSearch().setType("bt")
         self.coupled.value = 1.0
+        self.u_tied.x.array[:] = self.u.x.array
+        self.tied.value = 1.0
         self.base_radius.value = self._sclera_radius_under_buckle() + self.params.buckle_clearance
         self.reference_positions = {"apex": self.apex.positions(self.u),
                                     "pole": self.pole.positions(self.u),
                                     "under_buckle": self.under_buckle.positions(self.u)}
+        self.preoperative = self._optics() | {"volume_mm3": 2.0 * self.volume(),
+                                              "iop_mmHg": self.cavity_pressure() / MMHG}
+
+    def release_liquid(self) -> None:
+        """End of step 3 (the acute state): from here the liquid's volume is free and its
+        pressure is driven back to the pre-operative IOP, as aqueous outflow does within
+        hours of surgery; P's row is pinned to the ramp again."""
+        self.acute_pressure.value = self.cavity_pressure()
+        self.coupled.value = 0.0
 
     def _sclera_radius_under_buckle(self) -> float:
         """Largest distance from the optic axis of the deformed sclera within the
@@ -485,11 +567,12 @@ class BucklingModel:
         """Where each suture leaves the buckle: the tire's outer corner on its side,
         in the suture's meridional plane (directions for the next step)."""
         shape = self.params.buckle_shape()
-        rho = float(self.base_radius.value) - float(self.indentation.value) + shape.tire_height
         anchors = []
         for point in self.sutures.points:
+            width, height = shape.element_at(point.azimuth_deg)
+            rho = float(self.base_radius.value) - float(self.indentation.value) + height
             psi = math.radians(point.azimuth_deg)
-            z = self.axial_position + point.side * 0.5 * shape.footprint
+            z = self.axial_position + point.side * 0.5 * width
             anchors.append([rho * math.sin(psi), rho * math.cos(psi), z])
         return np.array(anchors)
 
@@ -499,14 +582,17 @@ class BucklingModel:
         line search chosen in step 2, the contact's sticky memory, the stage results."""
         for name, f in zip(("u", "p", "P"), self.fields):
             checkpoints.function(name, f)
+        checkpoints.function("u_tied", self.u_tied)
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
-                     "base_radius", "indentation"):
+                     "base_radius", "indentation", "tied", "acute_pressure"):
             checkpoints.constant(name, getattr(self, name))
         checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
                                               "magnitude": self.sutures.magnitude},
                           self._restore_sutures)
         checkpoints.value("reference_positions", lambda: self.reference_positions,
                           lambda saved: setattr(self, "reference_positions", saved))
+        checkpoints.value("preoperative", lambda: self.preoperative,
+                          lambda saved: setattr(self, "preoperative", dict(saved)))
         checkpoints.value("stage_results", lambda: self.stage_results,
                           lambda saved: setattr(self, "stage_results",
                                                 {int(k): v for k, v in saved.items()}))
@@ -532,8 +618,8 @@ class BucklingModel:
         with self.ctx.timings("contact_search"):
             # an attached retina (detachment_height = 0): no subretinal gap to measure
             gaps = self.pairing.gaps(self.u) if self.pairing is not None else np.zeros(1)
-        apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
-        axial = apex[2] - pole[2]
+        optics = self._optics()
+        axial = optics["axial_length_mm"]
         reference_axial = self.apex.nodes[0][2] - self.pole.nodes[0][2]
         under = self.under_buckle.positions(self.u)[0]
         before = self.reference_positions.get("under_buckle", self.under_buckle.nodes)[0]
@@ -541,9 +627,13 @@ class BucklingModel:
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
         zonules = self.zonules.summary() if self.zonules is not None else {}
-        return self._retina_contact_measures() | zonules | {
+        return self._retina_contact_measures() | zonules | self._changes(optics) | self._slip() | {
             "axial_length_mm": axial,
-            "axial_length_change_mm": axial - reference_axial,
+            "corneal_radius_mm": optics["corneal_radius_mm"],
+            "corneal_power_D": optics["corneal_power_D"],
+            # the inflation from the unloaded mesh is not a surgical change; kept under
+            # its own name (the mesh is the eye at zero pressure)
+            "axial_length_change_from_unloaded_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
             "buckle_travel_mm": float(self.indentation.value),
             "iop_mmHg": self.cavity_pressure() / MMHG,
@@ -559,6 +649,65 @@ class BucklingModel:
             "von_mises_max_MPa": self.von_mises.update(),
             "suture_force_N": float(self.sutures.magnitude),
         }
+
+    def _optics(self) -> dict:
+        """Axial length (corneal apex to the retina's posterior pole) and the central
+        cornea's radius of curvature: a sphere fitted (least squares) to the deformed
+        anterior corneal nodes within the keratometry zone, with its keratometric power
+        (n_k − 1)/R."""
+        apex, pole = self.apex.positions(self.u)[0], self.pole.positions(self.u)[0]
+        V = self.u.function_space
+        x = V.tabulate_dof_coordinates()[self.central_cornea] \
+            + self.u.x.array.reshape(-1, 3)[self.central_cornea]
+        x = np.vstack(self.ctx.comm.allgather(x))
+        # |x|² = 2 y y_c + 2 z z_c + (R² − y_c² − z_c²): linear in the centre and R² − |c|²;
+        # the centre is free in the symmetry plane (x_c = 0), so a buckle that pushes the
+        # cornea sideways (a segmental tire) does not read as a change of curvature
+        A = np.column_stack([2.0 * x[:, 1], 2.0 * x[:, 2], np.ones(len(x))])
+        (yc, zc, k), *_ = np.linalg.lstsq(A, np.einsum("ij,ij->i", x, x), rcond=None)
+        radius = math.sqrt(k + yc**2 + zc**2)
+        return {"axial_length_mm": float(apex[2] - pole[2]), "corneal_radius_mm": radius,
+                "corneal_power_D": 1000.0 * (KERATOMETRIC_INDEX - 1.0) / radius}
+
+    def _changes(self, optics: dict) -> dict:
+        """Changes from the eye before surgery (the end of step 1): axial length, corneal
+        power, refraction, IOP, whole-eye liquid volume. Refraction (spherical
+        equivalent at the cornea): ΔSE = −D_AL ΔAL − ΔK, D_AL = 2.7 D per mm of axial
+        length (Gullstrand's schematic eye, emmetropic) and ΔK the keratometric power
+        change; negative = myopic shift. Zero by definition at the end of step 1; absent
+        before it."""
+        pre = self.preoperative
+        if not pre:
+            return {}
+        axial = optics["axial_length_mm"] - pre["axial_length_mm"]
+        power = optics["corneal_power_D"] - pre["corneal_power_D"]
+        return {"axial_length_change_mm": axial,
+                "corneal_power_change_D": power,
+                "refraction_change_D": -DIOPTRES_PER_MM * axial - power,
+                "iop_change_mmHg": self.cavity_pressure() / MMHG - pre["iop_mmHg"],
+                "volume_change_mm3": 2.0 * self.volume() - pre["volume_mm3"]}
+
+    def _slip(self) -> dict:
+        """Tangential motion (axial and circumferential) of the sclera's outer nodes under
+        the buckle's footprint since the buckle was placed (end of step 1): the buckle
+        moves only radially, so this is the slip along it. ``buckle_slip_axial_mean_mm``
+        > 0: the sclera moved forward (towards the cornea) under the buckle."""
+        if not self.preoperative:
+            return {}
+        V = self.u.function_space
+        owned = V.dofmap.index_map.size_local
+        nodes = self.sclera_nodes[self.sclera_nodes < owned]
+        tied = self.u_tied.x.array.reshape(-1, 3)[nodes]
+        x0 = V.tabulate_dof_coordinates()[nodes] + tied
+        under = self.buckle.footprint_mask(x0)
+        du = self.u.x.array.reshape(-1, 3)[nodes][under] - tied[under]
+        values = slip(x0[under], du)
+        comm = self.ctx.comm
+        count = comm.allreduce(int(under.sum()), op=MPI.SUM)
+        return {"buckle_slip_max_mm": comm.allreduce(float(values.max(initial=0.0)), op=MPI.MAX),
+                "buckle_slip_axial_mean_mm": comm.allreduce(float(du[:, 2].sum()), op=MPI.SUM)
+                / max(count, 1),
+                "buckle_footprint_nodes": count}
 
     def _retina_contact_measures(self) -> dict:
         """The penalty contact's own view (whole eye: twice the half model's area and
@@ -582,6 +731,10 @@ class BucklingModel:
                 # retina_choroid_gap_* measure along the radius to the node they started above)
                 "retina_choroid_gap_nts_min_mm": gap_min,
                 "tear_closed_nts": closed,
+                # the widest node-to-surface gap of the paired nodes on the tear's rim
+                # (those tear_closed_nts looks at): closed when below the tolerance
+                "tear_rim_gap_max_mm": float(rim[np.isfinite(rim)].max())
+                if np.isfinite(rim).any() else float("nan"),
                 "retina_contact_nodes": summary["active_nodes"],
                 "retina_pressed_nodes": self.ctx.comm.allreduce(int(pressed.sum()), op=MPI.SUM),
                 "retina_penalty_contact_area_mm2": 2.0 * pressed_area,
@@ -598,7 +751,7 @@ class BucklingModel:
         return self._detached_area
 
     def summary(self) -> dict:
-        names = {1: "iop", 2: "buckling", 3: "suturing"}
+        names = {1: "iop", 2: "buckling", 3: "suturing", 4: "settling"}
         out = {f"after_{names[k]}": v for k, v in sorted(self.stage_results.items())}
         out["dofs"] = global_dofs(*self.fields)
         out["cells"] = self.eye.mesh.topology.index_map(3).size_global
