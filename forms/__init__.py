@@ -4,7 +4,14 @@ A form takes functions and parameters and returns UFL; nothing here builds a mes
 assembles, solves or writes a file.
 """
 
-from eyemech.forms.kinematics import deformation_gradient, isochoric_invariants
+from eyemech.forms.cavity import (
+    axis_volumes,
+    enclosed_volume,
+    follower_pressure,
+    liquid_law_residual,
+    liquid_pressure,
+    volume_density,
+)
 from eyemech.forms.hyperelastic import (
     Material,
     MooneyRivlin,
@@ -16,8 +23,7 @@ from eyemech.forms.hyperelastic import (
     volumetric_energy,
     von_mises,
 )
-from eyemech.forms.cavity import (axis_volumes, enclosed_volume, follower_pressure, liquid_law_residual,
-                                  liquid_pressure, volume_density)
+from eyemech.forms.kinematics import deformation_gradient, isochoric_invariants
 from eyemech.forms.viscoelastic import Viscoelastic
 
 __all__ = [

@@ -35,9 +35,9 @@ import dataclasses
 from typing import Literal
 
 import ufl
+import ufl.algorithms
 
 from eyemech.forms.kinematics import deformation_gradient
-import ufl.algorithms
 
 Kinematics = Literal["linear", "nonlinear"]
 

@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import dataclasses
 
+import dolfinx.mesh
 import gmsh
 import numpy as np
-from mpi4py import MPI
-
-import dolfinx.mesh
 from dolfinx.io import gmsh as gmshio
+from mpi4py import MPI
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh, gmsh_session
 

@@ -15,12 +15,11 @@ from __future__ import annotations
 from typing import Callable, Literal
 
 import basix.ufl
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
+import numpy as np
+from mpi4py import MPI
 
 from eyemech.meshes.tagged import MeshError, TaggedMesh
 

@@ -11,13 +11,12 @@ import contextlib
 import dataclasses
 from typing import Callable, Iterator
 
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx
 import gmsh
+import numpy as np
 import ufl
 from dolfinx.io import gmsh as gmshio
+from mpi4py import MPI
 
 
 class MeshError(ValueError):

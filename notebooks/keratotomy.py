@@ -78,12 +78,13 @@ try:  # the PyPI DOLFINx wheel: MPI ordered before the bindings
 except ImportError:
     pass
 import dolfinx
+from mpi4py import MPI
+
 from eyemech.problems import keratotomy as kt
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import gather_grid
 from eyemech.problems.run.parameters import build
 from eyemech.problems.solve.driver import Stepping, follow_path
-from mpi4py import MPI
 
 known = {f.name for f in dataclasses.fields(kt.Parameters)}
 scene_params = build(kt.Parameters, {k: v for k, v in params.items() if k in known})

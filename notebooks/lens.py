@@ -40,10 +40,11 @@ import pyvista as pv
 
 run_dir = Path(os.environ.get("EYEMECH_RUN_DIR", "results/iol-injection"))
 if not (run_dir / "results.json").exists():
+    from mpi4py import MPI
+
     from eyemech.problems import iol_injection
     from eyemech.problems.iol_speed import initial_roll
     from eyemech.problems.lens.model import LensShell, save_state
-    from mpi4py import MPI
 
     run_dir.mkdir(parents=True, exist_ok=True)
     small = {"mesh_size": 1.2, "contact": False, "plunger_speed": 52.0, "settle_time": 0.0,

@@ -26,6 +26,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pyvista as pv
+
 from eyemech.problems.reference import analytic
 
 run_dir = Path(os.environ.get("EYEMECH_RUN_DIR", "results/sphere-inflation"))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from eyemech.problems.run.output import (
     gather_grid,
     render_png,
@@ -65,6 +66,7 @@ class Writer:
         """The symmetry plane x = 0 seen from −x, zoomed on the buckle, with the
         buckle's outline drawn at its current position."""
         import pyvista
+
         from eyemech.problems.run.output import quiet_vtk
 
         quiet_vtk()

@@ -23,19 +23,19 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import dolfinx.fem
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-import dolfinx.fem
 from eyemech.forms.shell import Kinematics, end_rotation
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
-    ShellDiscretisation,
     Shell,
+    ShellDiscretisation,
     check_shell_parameters,
     newton_options,
     picture,

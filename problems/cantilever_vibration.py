@@ -24,7 +24,6 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-
 from eyemech.forms.dynamics import mass_form
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
@@ -35,8 +34,8 @@ from eyemech.problems.shell.model import Shell, ShellDiscretisation, check_shell
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.time_integration import (
     SCHEMES,
-    SchemeName,
     ImplicitDynamics,
+    SchemeName,
     oscillator_response,
 )
 

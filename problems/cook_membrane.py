@@ -19,6 +19,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import NeoHooke
 from eyemech.meshes.cook import TIP, cook_membrane
 from eyemech.problems.run.context import RunContext, RunOptions
@@ -35,7 +37,6 @@ from eyemech.problems.solid.spaces import (
     solid_fields,
 )
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
-from mpi4py import MPI
 
 REFERENCE_TIP_DISPLACEMENT = 6.9  # mm, converged value of the references above
 

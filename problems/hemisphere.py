@@ -14,6 +14,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.hemisphere import (
@@ -21,7 +23,6 @@ from eyemech.problems.shell.hemisphere import (
     HemisphereParameters,
     run_hemisphere,
 )
-from mpi4py import MPI
 
 __all__ = ["REFERENCE", "Parameters", "SCENE", "run"]
 

@@ -21,12 +21,13 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
+
 from eyemech.forms.shell import Kinematics
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.hemisphere import HemisphereParameters, run_hemisphere
-from mpi4py import MPI
 
 # Sze, Liu & Lo (2004), problem 3.4, the table of the hemisphere's load–deflection
 # curve. Columns: P/P_max, radial displacement of the point loaded outward, radial

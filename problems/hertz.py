@@ -35,7 +35,9 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
-from eyemech.forms import compressible_neo_hooke, deformation_gradient, contact
+from mpi4py import MPI
+
+from eyemech.forms import compressible_neo_hooke, contact, deformation_gradient
 from eyemech.meshes.contact_bodies import quarter_hemisphere, quarter_hemisphere_cells
 from eyemech.problems.contact.rigid import (
     NodalPenetration,
@@ -48,7 +50,6 @@ from eyemech.problems.run.parameters import ParameterError, SceneParameters, fie
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
-from mpi4py import MPI
 
 QUADRATURE = {"quadrature_degree": 4}
 # the penalty integrand ⟨−g⟩² has a kink at the contact edge: more points there
@@ -213,6 +214,7 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from eyemech.problems.studies._common import stamp
 
     r = np.concatenate([g[0] for g in gathered])

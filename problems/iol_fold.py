@@ -9,11 +9,12 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
+
 from eyemech.problems.lens.fold import FoldParameters, fold, self_contact_kind
 from eyemech.problems.lens.model import LensShell, save_state, write_animation
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.scene import Scene
-from mpi4py import MPI
 
 
 @dataclasses.dataclass(frozen=True)

@@ -24,7 +24,6 @@ from typing import Literal
 import numpy as np
 from mpi4py import MPI
 
-
 from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.contact.self_distance import self_distance_probe
 from eyemech.problems.lens.fold import (

@@ -55,12 +55,13 @@ import time
 from pathlib import Path
 from typing import Literal, get_args
 
+import dolfinx.fem
+import dolfinx.fem.petsc
 import numpy as np
 import ufl
 from mpi4py import MPI
+from petsc4py import PETSc
 
-import dolfinx.fem
-import dolfinx.fem.petsc
 from eyemech.meshes.iol import LensGeometry
 from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.lens.injector import Capsule
@@ -69,7 +70,6 @@ from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
-from petsc4py import PETSc
 
 Method = Literal["newton", "linearised"]
 JacobianKind = Literal["fresh", "lagged", "matrix-free"]

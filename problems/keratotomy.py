@@ -28,6 +28,8 @@ from typing import Literal
 import dolfinx
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import follower_pressure
 from eyemech.forms import viscoelastic as ve
 from eyemech.meshes import MeshError
@@ -46,7 +48,6 @@ from eyemech.problems.solid.spaces import (
 from eyemech.problems.solid.viscous_bar import ViscousHistory
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.linear_solvers import SolverChoice
-from mpi4py import MPI
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,6 +20,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import (
     NeoHooke,
     enclosed_volume,
@@ -48,7 +50,6 @@ from eyemech.problems.solid.spaces import (
 )
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.linear_solvers import SolverChoice
-from mpi4py import MPI
 
 SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import PlateParameters, run_plate
-from mpi4py import MPI
 
 Parameters = PlateParameters
 

@@ -25,6 +25,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import compressible_neo_hooke, deformation_gradient, follower_pressure
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.contact_bodies import layered_caps
@@ -35,7 +37,6 @@ from eyemech.problems.run.parameters import ParameterError, SceneParameters, fie
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
-from mpi4py import MPI
 
 QUADRATURE = {"quadrature_degree": 4}
 

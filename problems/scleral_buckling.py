@@ -49,6 +49,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import (
     NeoHooke,
     cauchy_stress,
@@ -89,7 +91,6 @@ from eyemech.problems.solve.driver import (
     follow_path,
 )
 from eyemech.problems.solve.linear_solvers import SolverChoice
-from mpi4py import MPI
 
 # refraction from the geometry: diopters per mm of axial length (Gullstrand's schematic
 # eye, emmetropic: ≈ 2.7 D/mm) and the keratometric index that turns the anterior

@@ -17,20 +17,21 @@ from pathlib import Path
 
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
-    ShellDiscretisation,
     Shell,
+    ShellDiscretisation,
     check_shell_parameters,
     newton_options,
     picture,
 )
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
-from mpi4py import MPI
 
 REFERENCE = 0.3024  # MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20
 

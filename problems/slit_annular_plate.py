@@ -26,13 +26,13 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import dolfinx.fem
+import dolfinx.la
+import dolfinx.mesh
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-import dolfinx.fem
-import dolfinx.la
-import dolfinx.mesh
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface
 from eyemech.meshes.tagged import TaggedMesh
@@ -40,8 +40,8 @@ from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
-    ShellDiscretisation,
     Shell,
+    ShellDiscretisation,
     check_shell_parameters,
     newton_options,
     picture,

@@ -16,6 +16,8 @@ from pathlib import Path
 import dolfinx
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, field
@@ -28,7 +30,6 @@ from eyemech.problems.solid.viscous_bar import (
     plot_history,
 )
 from eyemech.problems.solve.driver import NonlinearSolver
-from mpi4py import MPI
 
 
 @dataclasses.dataclass(frozen=True)

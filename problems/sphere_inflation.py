@@ -15,6 +15,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import NeoHooke, enclosed_volume, follower_pressure
 from eyemech.meshes import spherical_shell
 from eyemech.problems.reference import analytic
@@ -43,7 +45,6 @@ from eyemech.problems.solve.driver import (
     follow_path,
 )
 from eyemech.problems.solve.linear_solvers import SolverChoice
-from mpi4py import MPI
 
 
 @dataclasses.dataclass(frozen=True)

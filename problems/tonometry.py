@@ -45,6 +45,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import contact, follower_pressure
 from eyemech.forms import viscoelastic as ve
 from eyemech.meshes import MeshError
@@ -54,7 +56,7 @@ from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries, displacement_grid, render_png
 from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
-from eyemech.problems.solid.limbus import Support, SUPPORTS, limbus_support, validate_support
+from eyemech.problems.solid.limbus import SUPPORTS, Support, limbus_support, validate_support
 from eyemech.problems.solid.spaces import (
     ELEMENTS,
     global_dofs,
@@ -66,7 +68,6 @@ from eyemech.problems.solve.driver import (
     Stepping,
     follow_path,
 )
-from mpi4py import MPI
 
 GOLDMANN_DIAMETER = 3.06  # mm
 CONTACT_QUADRATURE = 6    # the penalty integrand has a kink at the contact edge

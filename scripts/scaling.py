@@ -164,6 +164,7 @@ def chart(rows: list[dict], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from eyemech.problems.studies._common import stamp
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))

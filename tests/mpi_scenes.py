@@ -43,8 +43,9 @@ def redirected(stdout: Path, stderr: Path):
 
 
 def main() -> int:
-    from eyemech.scripts.cli import main as eyemech
     from mpi4py import MPI
+
+    from eyemech.scripts.cli import main as eyemech
 
     comm = MPI.COMM_WORLD
     out = Path(sys.argv[1])

@@ -34,9 +34,10 @@ except ImportError:
 import dolfinx
 import dolfinx.fem.petsc
 import ufl
-from eyemech.problems.contact.ipc import SelfContact
 from scipy.spatial import cKDTree
 from sheets import GAP, two_sheets
+
+from eyemech.problems.contact.ipc import SelfContact
 
 DHAT = 0.05
 

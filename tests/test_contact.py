@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 import ufl
 from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
+from mpi4py import MPI
+
 from eyemech.forms import contact
 from eyemech.meshes import MeshError
 from eyemech.problems import hertz
@@ -24,7 +26,6 @@ from eyemech.problems import retina_reattachment as retina
 from eyemech.problems.contact.node_to_surface import closest_points, penalty_pressure
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError
-from mpi4py import MPI
 
 QUIET = RunOptions(fields=False, pictures=False)
 

@@ -14,6 +14,7 @@ coarse mesh is ~0.4 % short), 2 % for Q1P0 at 16×16; P1 locks (> 30 % short).
 from __future__ import annotations
 
 import pytest
+
 from eyemech.problems import cook_membrane as cm
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build

@@ -15,6 +15,7 @@ import dolfinx
 import numpy as np
 import pytest
 import ufl
+
 from eyemech.meshes import MeshError  # imports dolfinx_solver before dolfinx
 from eyemech.meshes.cornea import CorneaGeometry, cornea
 

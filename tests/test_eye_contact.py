@@ -27,6 +27,7 @@ import basix.ufl
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
+
 from eyemech.forms import compressible_neo_hooke, deformation_gradient
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact

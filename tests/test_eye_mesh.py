@@ -9,9 +9,10 @@ import dolfinx
 import numpy as np
 import pytest
 import ufl
+from mpi4py import MPI
+
 from eyemech.meshes import MeshError
 from eyemech.meshes.eye import EyeGeometry, build_grid, half_eye
-from mpi4py import MPI
 
 GEOMETRY = EyeGeometry(cells_per_edge=8)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import pytest
+
 from eyemech.problems import sphere_inflation as si
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
@@ -63,6 +64,7 @@ def test_hexahedral_octant_is_valid_and_curved():
     import dolfinx
     import numpy as np
     import ufl
+
     from eyemech.meshes import spherical_shell
 
     shell = spherical_shell(10.0, 12.0, 2.0, order=2, hexahedra=True)
@@ -95,6 +97,7 @@ def test_materials_by_cell_tag_sum_to_the_single_law():
     import dolfinx
     import numpy as np
     import ufl
+
     from eyemech.forms import NeoHooke
     from eyemech.meshes import spherical_shell
     from eyemech.problems.solid.residual import solid_residual

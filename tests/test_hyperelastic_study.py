@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import csv
 
+from mpi4py import MPI
+
 from eyemech.problems.studies import studies
 from eyemech.problems.studies.hyperelastic_convergence import FAMILIES
-from mpi4py import MPI
 
 
 def test_quick_study_writes_csv_and_png(tmp_path):

@@ -20,6 +20,7 @@ except ImportError:
     pass
 import basix.ufl
 import dolfinx.fem
+
 from eyemech.meshes import MeshError
 from eyemech.meshes.iol import LensGeometry, intraocular_lens
 from eyemech.problems import iol_fold, iol_injection
@@ -104,8 +105,9 @@ def test_bad_input_is_refused_before_any_solve():
 def test_a_folded_state_that_passes_through_itself_is_refused(tmp_path):
     """The barrier cannot start from an intersecting state: refused before any solve."""
     pytest.importorskip("ipctk")
-    from eyemech.problems.lens.model import LensShell, save_state
     from mpi4py import MPI
+
+    from eyemech.problems.lens.model import LensShell, save_state
 
     params = iol_injection.Parameters()
     shell = LensShell(params, MPI.COMM_WORLD)

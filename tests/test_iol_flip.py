@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from mpi4py import MPI
+
 from eyemech.problems import iol_injection
 from eyemech.problems.lens.injector import turn_about_x
 from eyemech.problems.lens.model import LensShell, write_frame_grid
 from eyemech.problems.run.output import PyvistaSeries
 from eyemech.problems.studies import iol_flip
-from mpi4py import MPI
 
 
 def test_roll_and_final_normal_of_a_rigidly_turned_lens(tmp_path):
@@ -36,8 +37,9 @@ def test_roll_and_final_normal_of_a_rigidly_turned_lens(tmp_path):
 def test_walls_chart_takes_rows_read_back_from_the_csv(tmp_path):
     """The walls chart is redrawn from iol_flip.csv (values as strings, empty where a case
     lacks a column) as well as from fresh runs (numbers)."""
-    from eyemech.problems.studies._common import read_csv, stamp, write_csv
     from PIL import Image
+
+    from eyemech.problems.studies._common import read_csv, stamp, write_csv
 
     base = {"haptic_thickness": 0.13, "friction": 0.2, "damping": 2e4, "start_ramp": 0.02}
     rows = [{**base, "cartridge_friction": mu, "injector_twist": 180.0, "optic_normal_z": z}

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from eyemech.problems import iol_injection
 from eyemech.problems.run.context import RunOptions
 

@@ -26,6 +26,8 @@ import ufl
 
 pytest.importorskip("ipctk")
 
+from sheets import GAP, two_sheets  # noqa: E402
+
 from eyemech.problems.contact.ipc import SelfContact, SelfContactError  # noqa: E402
 from eyemech.problems.solve.driver import (  # noqa: E402
     NewtonOptions,
@@ -33,7 +35,6 @@ from eyemech.problems.solve.driver import (  # noqa: E402
     Stepping,
     follow_path,
 )
-from sheets import GAP, two_sheets  # noqa: E402
 
 STIFF, FRIC, STEPS = 10.0, 0.2, 2  # two increments: the first would cross without the CCD
 

@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from mpi4py import MPI
+
 from eyemech.problems import iol_speed
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError
-from mpi4py import MPI
 
 QUIET = RunOptions(fields=False, pictures=False)
 TINY = {"mesh_scale": 3.0, "steps": 3, "rtol": 1e-8}

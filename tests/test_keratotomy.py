@@ -9,6 +9,7 @@ depend on the moduli and the mesh and are reported in docs/viscoelastic.md.
 from __future__ import annotations
 
 import pytest
+
 from eyemech.problems import keratotomy
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build

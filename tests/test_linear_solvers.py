@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import pytest
 from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
+
 from eyemech.problems import liquid_sphere
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build

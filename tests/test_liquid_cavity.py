@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from eyemech.meshes.tagged import MeshError
 from eyemech.problems import liquid_sphere as ls
 from eyemech.problems.run.context import RunOptions
@@ -72,8 +73,9 @@ def test_open_wall_is_refused_before_solving():
 def test_axis_volumes_detect_an_open_box():
     import dolfinx
     import ufl
-    from eyemech.problems.solid.cavity import check_closed
     from mpi4py import MPI
+
+    from eyemech.problems.solid.cavity import check_closed
 
     mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_WORLD, 2, 2, 2)
     fdim = mesh.topology.dim - 1

@@ -16,20 +16,20 @@ from __future__ import annotations
 
 import json
 
+import dolfinx
+import dolfinx.fem
+import dolfinx.mesh
 import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
+from petsc4py import PETSc
 
-import dolfinx
-import dolfinx.fem
-import dolfinx.mesh
 from eyemech.problems import sphere_inflation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.results import SOLVER_COUNTS
 from eyemech.problems.solve import driver
 from eyemech.problems.solve.driver import NewtonOptions, NonlinearSolver, Stepping, follow_path
-from petsc4py import PETSc
 
 TINY = {"mesh_size": 4.0}  # the thick sphere in 3 load steps, ~1 s
 STEP_KEYS = ("attempts", "newton_iterations_all", "jacobians", "factorisations",

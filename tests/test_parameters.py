@@ -4,6 +4,7 @@ No solves here — these are the checks that run before anything is built."""
 from __future__ import annotations
 
 import pytest
+
 from eyemech.problems import sphere_inflation as si
 from eyemech.problems.run.parameters import ParameterError, build, describe, load_toml
 
@@ -56,8 +57,9 @@ def test_every_parameter_is_documented():
 def test_a_bug_in_a_solver_hook_is_raised_not_taken_for_divergence():
     import dolfinx
     import ufl
-    from eyemech.problems.solve.driver import NonlinearSolver
     from mpi4py import MPI
+
+    from eyemech.problems.solve.driver import NonlinearSolver
 
     mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))

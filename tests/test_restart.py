@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pytest
 from conftest import BIN, CONTACT_RANKS_RTOL, run_cli
+
 from eyemech.problems import keratotomy, scleral_buckling
 from eyemech.problems.run.checkpoint import latest
 from eyemech.problems.run.context import RunOptions
@@ -220,9 +221,10 @@ def test_latest_skips_uncommitted_and_incomplete_checkpoints(tmp_path):
 
 
 def test_time_based_checkpoints_are_due_after_the_interval(monkeypatch):
+    from mpi4py import MPI
+
     from eyemech.problems.run import checkpoint
     from eyemech.problems.run.results import Result
-    from mpi4py import MPI
 
     clock = [100.0]
     monkeypatch.setattr(checkpoint.time, "monotonic", lambda: clock[0])

@@ -25,6 +25,7 @@ import os
 
 import numpy as np
 import pytest
+
 from eyemech.problems import (
     cantilever_rolling,
     cantilever_vibration,

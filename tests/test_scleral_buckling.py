@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
+
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build

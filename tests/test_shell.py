@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mpi4py import MPI
+
 from eyemech.meshes import MeshError
 from eyemech.problems import (
     cantilever_rolling,
@@ -37,7 +39,6 @@ from eyemech.problems import (
 )
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError
-from mpi4py import MPI
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -118,6 +119,7 @@ def test_bad_input_is_refused_before_solving(module, key, value):
 
 def test_a_mesh_that_is_not_a_surface_is_refused():
     import dolfinx.mesh
+
     from eyemech.meshes.surface import require_surface
 
     flat = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)  # gdim 2: not in 3D
@@ -191,6 +193,7 @@ def test_thickness_as_a_field_matches_the_constant():
     edge terms (averaged across edges); a uniform field must reproduce the constant."""
     import dolfinx.fem
     import ufl
+
     from eyemech.forms.shell import ShellMaterial
     from eyemech.meshes.surface import mapped_surface, tag_boundary
     from eyemech.problems.shell.model import Shell

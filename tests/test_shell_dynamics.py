@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from eyemech.problems import cantilever_vibration
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError

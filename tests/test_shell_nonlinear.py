@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from eyemech.problems import hemisphere_nonlinear, plate_clamped
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.shell import model as shells

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import last_json, run_cli
+
 from eyemech.problems import sphere_inflation as si
 from eyemech.problems.reference import analytic
 from eyemech.problems.run.context import RunOptions

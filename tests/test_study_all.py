@@ -9,9 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+from PIL import Image
+
 from eyemech.problems.studies import studies
 from eyemech.problems.studies._common import stamp
-from PIL import Image
 
 
 def test_study_all_quick_writes_stamped_csv_and_png(tmp_path):

@@ -15,6 +15,7 @@ mesh of the convergence study (docs/cornea.md, docs/studies/tonometry_convergenc
 from __future__ import annotations
 
 import pytest
+
 from eyemech.problems import tonometry
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build

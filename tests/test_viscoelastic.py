@@ -33,12 +33,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import last_json, run_cli
+from scipy.integrate import solve_ivp
+
 from eyemech.problems import sls_creep, uniaxial_relaxation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
 from eyemech.problems.solid.viscous_bar import TooManySteps, UnstableIntegration
 from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure
-from scipy.integrate import solve_ivp
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -86,8 +87,9 @@ def test_ufl_updates_are_the_law():
     Cv − Cv_n = Δt (C̄ − λ Cv)/τ with det Cv = 1 for a scalar multiplier λ."""
     import dolfinx
     import ufl
-    from eyemech.forms import viscoelastic as ve
     from mpi4py import MPI
+
+    from eyemech.forms import viscoelastic as ve
 
     mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1, dolfinx.mesh.CellType.hexahedron)
     rng = np.random.default_rng(6)
@@ -324,8 +326,9 @@ def test_bad_input_on_the_command_line(tmp_path):
 def test_stability_study_quick(tmp_path):
     import csv
 
-    from eyemech.problems.studies import studies
     from mpi4py import MPI
+
+    from eyemech.problems.studies import studies
 
     files = studies()["viscoelastic-stability"].run(out=tmp_path, quick=True, comm=MPI.COMM_WORLD)
     assert {f.suffix for f in files} == {".csv", ".png"}

@@ -16,10 +16,11 @@ import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import pytest
-from eyemech.problems.contact.rigid_wall import NodalContact
-from eyemech.problems.lens.injector import turn_about_x
 from mpi4py import MPI
 from petsc4py import PETSc
+
+from eyemech.problems.contact.rigid_wall import NodalContact
+from eyemech.problems.lens.injector import turn_about_x
 
 STIFFNESS, MU, SLIP = 50.0, 0.4, 1e-3
 

@@ -11,10 +11,11 @@ try:
 except ImportError:
     pass
 import dolfinx
-from eyemech.meshes import MeshError
-from eyemech.problems.solid.zonules import ZonuleBars
 from mpi4py import MPI
 from petsc4py import PETSc
+
+from eyemech.meshes import MeshError
+from eyemech.problems.solid.zonules import ZonuleBars
 
 E, AREA = 100.0, 0.008
 

@@ -66,10 +66,9 @@ from __future__ import annotations
 
 import time
 
+import dolfinx.fem
 import numpy as np
 from petsc4py import PETSc
-
-import dolfinx.fem
 
 # the four flat sub-triangles of a P2 triangle, in basix's node order (edge i is opposite
 # vertex i: 3 = (1, 2), 4 = (0, 2), 5 = (0, 1)); all counter-clockwise like the parent

@@ -42,15 +42,15 @@ from __future__ import annotations
 import dataclasses
 
 import basix
+import dolfinx
+import dolfinx.fem
+import dolfinx.fem.petsc
 import numpy as np
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
-import dolfinx
-import dolfinx.fem
-import dolfinx.fem.petsc
 from eyemech.forms.contact import smoothed_penalty_pressure
 from eyemech.meshes.tagged import MeshError, TaggedMesh
 from eyemech.problems.run.parameters import ParameterError

@@ -4,11 +4,11 @@ refusal of an obstacle that starts inside the body, and the resultant force."""
 
 from __future__ import annotations
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 from mpi4py import MPI
 
-import dolfinx
-import dolfinx.fem
 from eyemech.forms import contact
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.parameters import ParameterError

@@ -39,11 +39,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import dolfinx.fem
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
-
-import dolfinx.fem
 
 from eyemech.forms.contact import smoothed_penalty_pressure
 

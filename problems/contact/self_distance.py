@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 import dolfinx.fem
+import numpy as np
 
 
 def self_distance_probe(u: dolfinx.fem.Function):

@@ -21,9 +21,9 @@ import dataclasses
 import time
 from pathlib import Path
 
+import dolfinx.fem
 import numpy as np
 
-import dolfinx.fem
 from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.contact.self_distance import self_distance_probe
 from eyemech.problems.lens.model import (

@@ -9,12 +9,12 @@ from pathlib import Path
 from typing import Literal
 
 import basix.ufl
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-import dolfinx
-import dolfinx.fem
 from eyemech.forms.dynamics import mass_form
 from eyemech.forms.shell import ShellMaterial, shell_energy, shell_jacobian
 from eyemech.meshes.iol import LensGeometry, intraocular_lens
@@ -326,6 +326,7 @@ def render_frame(shell: LensShell, path: Path, title: str, obstacles: dict,
                  bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
     """The deformed lens (coloured optic / haptic) with the rigid bodies as wireframes."""
     import pyvista
+
     from eyemech.problems.run.output import gather_grid, quiet_vtk
 
     grid = gather_grid(shell.u)

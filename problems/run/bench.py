@@ -15,10 +15,11 @@ import io
 import platform
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import build
 from eyemech.problems.run.results import versions, write_text_atomic
-from mpi4py import MPI
 
 COLUMNS = ("date", "machine", "ranks", "dofs", "cells", "mesh", "form_compilation", "assembly",
            "solve", "contact_search", "output", "total", "peak_memory_mb", "newton_iterations",

@@ -9,6 +9,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from mpi4py import MPI
+
 from eyemech.meshes import MeshError
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
@@ -22,7 +24,6 @@ from eyemech.problems.run.results import (
     write_json_atomic,
 )
 from eyemech.problems.solve.driver import NewtonOptions, SolveFailure
-from mpi4py import MPI
 
 log = logging.getLogger("eyemech")
 

@@ -8,11 +8,10 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.plot
+import numpy as np
+from mpi4py import MPI
 
 
 class FieldWriter:

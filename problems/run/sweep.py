@@ -13,13 +13,14 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from mpi4py import MPI
+
 from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.parameters import ParameterError, build
 from eyemech.problems.run.results import OutputFolder, write_text_atomic
 from eyemech.problems.solve.driver import SolveFailure
-from mpi4py import MPI
 
 log = logging.getLogger("eyemech")
 

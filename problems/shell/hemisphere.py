@@ -14,19 +14,20 @@ from typing import Callable
 
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import SceneParameters, field
 from eyemech.problems.shell.model import (
-    ShellDiscretisation,
     Shell,
+    ShellDiscretisation,
     check_shell_parameters,
     newton_options,
     picture,
 )
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
-from mpi4py import MPI
 
 REFERENCE = 0.093
 

@@ -8,12 +8,12 @@ from pathlib import Path
 from typing import Callable, Literal
 
 import basix.ufl
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-import dolfinx
-import dolfinx.fem
 from eyemech.forms.shell import Kinematics, ShellMaterial, shell_energy
 from eyemech.meshes.surface import (
     Diagonal,

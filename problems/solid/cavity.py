@@ -18,13 +18,14 @@ Before any solve, :func:`check_closed` refuses a wall that does not enclose a vo
 
 from __future__ import annotations
 
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
+import numpy as np
 import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
 from eyemech.forms import (
     axis_volumes,
     enclosed_volume,
@@ -32,7 +33,6 @@ from eyemech.forms import (
     liquid_pressure,
 )
 from eyemech.meshes.tagged import MeshError
-from petsc4py import PETSc
 
 
 def _assemble(form) -> float:

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
+import dolfinx
 import numpy as np
 import ufl
 
-import dolfinx
 from eyemech.forms.elastic import spring_support_energy
 from eyemech.problems.run.parameters import ParameterError
 

@@ -3,12 +3,11 @@ reports (an apex, a pole, suture points, the retina–choroid gap)."""
 
 from __future__ import annotations
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
-
-import dolfinx
-import dolfinx.fem
 
 
 class NodeProbe:

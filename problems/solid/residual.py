@@ -7,9 +7,10 @@ from __future__ import annotations
 from typing import Mapping
 
 import ufl
+
 from eyemech.forms import (
-    deformation_gradient,
     Material,
+    deformation_gradient,
     incompressible_energy_density,
     nearly_incompressible_energy_density,
 )

@@ -7,12 +7,11 @@ import dataclasses
 from typing import Callable, Literal, get_args
 
 import basix.ufl
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
 from mpi4py import MPI
-
-import dolfinx
-import dolfinx.fem
 
 
 @dataclasses.dataclass(frozen=True)

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 
+import dolfinx
 import numpy as np
 
-import dolfinx
 from eyemech.forms.sutures import suture_residual
 from eyemech.problems.solid.probes import NodeProbe
 

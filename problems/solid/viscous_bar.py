@@ -43,6 +43,8 @@ import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
 import ufl
+from mpi4py import MPI
+
 from eyemech.forms import viscoelastic as ve
 from eyemech.forms.kinematics import deformation_gradient
 from eyemech.problems.run.context import RunContext
@@ -55,7 +57,6 @@ from eyemech.problems.solve.driver import (
     StepRecord,
     follow_path,
 )
-from mpi4py import MPI
 
 LOADED_FACE = 1  # facet tag of x = L
 

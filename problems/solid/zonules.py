@@ -24,12 +24,12 @@ bar nodes are gathered every evaluation (a few hundred nodes).
 
 from __future__ import annotations
 
-import numpy as np
-
 import dolfinx
+import numpy as np
+from petsc4py import PETSc
+
 from eyemech.meshes.tagged import MeshError
 from eyemech.problems.solid.spaces import PetscNodeLayout
-from petsc4py import PETSc
 
 
 class ZonuleBars:

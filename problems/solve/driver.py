@@ -31,13 +31,13 @@ import sys
 import time
 from typing import TYPE_CHECKING, Callable, Sequence
 
-import numpy as np
-
 import dolfinx
 import dolfinx.fem.petsc
+import numpy as np
+from petsc4py import PETSc
+
 from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
 from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts, Timings
-from petsc4py import PETSc
 
 if TYPE_CHECKING:
     from eyemech.problems.run.checkpoint import Checkpoints

@@ -40,15 +40,15 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-import numpy as np
-import ufl
-from mpi4py import MPI
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.fem.petsc
-from eyemech.problems.run.parameters import field
+import numpy as np
+import ufl
+from mpi4py import MPI
 from petsc4py import PETSc
+
+from eyemech.problems.run.parameters import field
 
 LinearSolverName = Literal["direct", "iterative"]
 

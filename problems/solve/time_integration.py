@@ -36,10 +36,9 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-import numpy as np
-
 import dolfinx.fem
 import dolfinx.fem.petsc
+import numpy as np
 from petsc4py import PETSc
 
 SchemeName = Literal["backward-euler", "newmark", "newmark-damped"]

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import scleral_buckling
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.sweep import run_sweep
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 BASE = {"resolution": "coarse", "suture_azimuths": "0"}
 GRID = {"buckle": ["encircling+segmental", "encircling", "segmental"],

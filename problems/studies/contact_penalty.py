@@ -5,12 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import hertz
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0)
 QUICK_FACTORS = (10.0, 100.0)

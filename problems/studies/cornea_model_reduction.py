@@ -27,6 +27,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import keratotomy
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
@@ -36,7 +38,6 @@ from eyemech.problems.studies._common import (
     relative_deviations,
     write_csv,
 )
-from mpi4py import MPI
 
 REFERENCE = "whole cornea"
 QUARTER = {"symmetry": "quarter"}

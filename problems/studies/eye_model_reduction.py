@@ -29,6 +29,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import scleral_buckling
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
@@ -38,7 +40,6 @@ from eyemech.problems.studies._common import (
     relative_deviations,
     write_csv,
 )
-from mpi4py import MPI
 
 CASES = {
     "full model": {},

@@ -19,12 +19,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import cook_membrane, liquid_sphere, sphere_inflation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 FAMILIES = ("P2P1", "P2P0", "Q1P0", "Q2P1", "P1")
 SPHERE_SIZES = {"P2P1": (2.0, 1.0, 0.7), "P2P0": (2.0, 1.0, 0.7), "Q1P0": (2.0, 1.0, 0.7, 0.5),

@@ -54,12 +54,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
+
 from eyemech.problems import iol_fold, iol_injection
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 BASE = {"haptic_thickness": 0.13, "friction": 0.2}
 FRICTIONS = (0.0, 0.2, 0.5, 1.0)

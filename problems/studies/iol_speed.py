@@ -17,10 +17,11 @@ import os
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
+
 from eyemech.problems import iol_speed
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
-from mpi4py import MPI
 
 # label, overrides (on top of the common settings)
 VARIANTS = [

@@ -26,14 +26,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import dolfinx.fem
+import dolfinx.fem.petsc
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
+import ufl
 from mpi4py import MPI
 
-import dolfinx.fem
-import dolfinx.fem.petsc
-import ufl
 from eyemech.problems import iol_speed
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv

@@ -19,10 +19,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import keratotomy
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
-from mpi4py import MPI
 
 SALZ_3MM = 9.06  # D, 8 incisions, 3 mm zone (Salz et al. 1985)
 BASE = dict(incisions=8, optical_zone=3.0, incision_depth=0.9, t_end=3600.0, first_dt=3600.0)

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import keratotomy
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 SALZ_ZONES = {3.0: 9.06, 4.0: 6.44, 5.0: 5.23, 6.0: 2.29}
 SALZ_COUNTS = {3: 4.84, 4: 6.08}

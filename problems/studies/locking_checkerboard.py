@@ -18,12 +18,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import dolfinx
+import dolfinx.fem
 import numpy as np
 import ufl
 from mpi4py import MPI
 
-import dolfinx
-import dolfinx.fem
 from eyemech.forms import NeoHooke
 from eyemech.meshes.cook import cook_membrane as cook_mesh
 from eyemech.problems import cook_membrane

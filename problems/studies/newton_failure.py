@@ -20,13 +20,14 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import sphere_inflation
 from eyemech.problems.reference import analytic
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import NewtonOptions, SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.98, 0.995, 1.05)
 QUICK_FRACTIONS = (0.3, 0.9, 1.05)

@@ -16,14 +16,14 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import dolfinx.fem
+import dolfinx.fem.petsc
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 import ufl
 from mpi4py import MPI
 
-import dolfinx.fem
-import dolfinx.fem.petsc
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems import plate_clamped
 from eyemech.problems.run.context import RunOptions

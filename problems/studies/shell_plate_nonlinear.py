@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import plate_clamped
 from eyemech.problems.shell.model import (
     LEVY_CENTER_DEFLECTION,
@@ -23,7 +25,6 @@ from eyemech.problems.shell.model import (
 )
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
-from mpi4py import MPI
 
 
 def _curve(case: str, **overrides) -> list[dict]:

@@ -17,10 +17,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mpi4py import MPI
+
 from eyemech.problems import hemisphere
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
-from mpi4py import MPI
 
 SLENDERNESS = (25, 50, 100, 250, 500, 1000, 2500)  # R / h
 # (degree, divisions): P2 and P3 on the fixed mesh of 16 divisions (80 around), and P2

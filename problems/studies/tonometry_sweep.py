@@ -22,11 +22,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
+
 from eyemech.problems import tonometry
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
-from mpi4py import MPI
 
 EHLERS_SLOPE = 0.071         # mmHg per µm (Ehlers et al. 1975: 0.7 mmHg per 10 µm)
 DOUGHTY_ZAMAN_SLOPE = 0.021  # mmHg per µm (1.1 mmHg per 10 % of 520 µm)

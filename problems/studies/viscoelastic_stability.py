@@ -24,13 +24,14 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
+
 from eyemech.problems import uniaxial_relaxation
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
-from mpi4py import MPI
 
 RATIOS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 1.25, 2.0, 2.5, 5.0, 10.0)
 QUICK_RATIOS = (0.1, 0.5, 2.5)
