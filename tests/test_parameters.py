@@ -26,7 +26,7 @@ def test_overrides_are_typed_from_the_dataclass():
     ({"c10": "0"}, "c10", "> 0"),
     ({"c10": "-1"}, "c10", "> 0"),
     ({"outer_radius": "9"}, "outer_radius", "inner_radius"),
-    ({"mesh_size": "-0.5"}, "mesh_size", "> 0"),
+    ({"mesh_size": "-0.5"}, "mesh_size", ">= 0"),  # 0 = derived from cells_across_wall
     ({"element": "Q9"}, "element", "one of"),
 ])
 def test_bad_input_names_the_key(overrides, key, words):
