@@ -81,7 +81,13 @@ def test_bad_solver_choice_is_refused(overrides, key):
 
 # scleral buckling: the coarse eye (803 Q1P0 cells, 4,248 dofs) keeps this under a
 # minute; the issue's default resolution takes ~3 min iterative on 2 ranks here.
-BUCKLING = ["--set", "resolution=coarse"]
+# The frictionless buckle: with the sutured one (the default since issue 21) the direct
+# solver converges a step of the buckling stage in 10 Newton iterations where the
+# iterative one needs 11 and cuts the step, and the two load paths then end 1.7 % apart in
+# axial length (the sutured eye's result depends on its load path: open, see
+# docs/scleral_buckling.md). This test is about the linear solvers.
+BUCKLING = ["--set", "resolution=coarse", "--set", "buckle_attachment=frictionless",
+            "--set", "indentation=1.0", "--set", "settle=false"]
 QUANTITIES = ("axial_length_change_mm", "buckle_indentation_mm", "iop_mmHg", "cavity_volume_mm3",
               "retina_choroid_gap_min_mm", "retina_choroid_gap_mean_mm", "von_mises_max_MPa",
               "zonule_force_total_N")
