@@ -106,8 +106,12 @@ def test_wheel_installs_and_runs_outside_the_checkout(tmp_path):
     """A wheel built from the project carries every package: installed into a folder of
     its own, imported from another working directory, it lists the scenes and runs one."""
     python = sys.executable
+    # built from a copy: setuptools writes build/ and *.egg-info/ into the tree it builds
+    source = tmp_path / "source"
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(
+        ".venv", ".git", "build", "*.egg-info", "results", "docs", "__pycache__", ".pytest_cache"))
     build = subprocess.run([python, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                            "-w", str(tmp_path / "dist"), str(ROOT)], capture_output=True, text=True)
+                            "-w", str(tmp_path / "dist"), str(source)], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-2000:]
     (wheel,) = (tmp_path / "dist").glob("eyemech-*.whl")
     target = tmp_path / "site"
