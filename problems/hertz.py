@@ -74,7 +74,7 @@ class Parameters(SceneParameters):
     def validate(self) -> None:
         self.require_positive("radius", "youngs_modulus", "indentation", "penalty", "resolution",
                               "far_resolution", "max_cells", "load_steps")
-        self.require_nonnegative("mesh_size", "far_size", "initial_gap")  # a negative gap starts inside the plane
+        self.require_nonnegative("mesh_size", "far_size")
         if not -1.0 < self.poisson_ratio < 0.5:
             raise ParameterError("poisson_ratio", f"must lie in (-1, 0.5), got {self.poisson_ratio}")
         if self.indentation > 0.2 * self.radius:

@@ -78,11 +78,13 @@ class SceneParameters:
             return 4.0 / 3.0 * math.pi * (self.outer_radius ** 3 - self.inner_radius ** 3)
         return None
 
+    @property
     def estimated_cells(self) -> int | None:
-        """Cells of a mesh of ``domain_volume`` with tetrahedra of edge ``mesh_size``
-        (regular tetrahedron: h³/(6√2)); None when the volume is unknown."""
+        """Cells of a mesh of ``domain_volume`` with tetrahedra of edge ``element_size`` (the
+        size a scene derives) or ``mesh_size`` (regular tetrahedron: h³/(6√2)); None when the
+        volume is unknown. Scenes with a mesh of their own (hertz) override it."""
         volume = self.domain_volume()
-        size = getattr(self, "mesh_size", None)
+        size = getattr(self, "element_size", getattr(self, "mesh_size", None))
         if volume is None or not isinstance(size, (int, float)) or not size > 0:
             return None
         return int(volume / (size ** 3 / (6.0 * math.sqrt(2.0))))
@@ -147,11 +149,12 @@ def check_step_count(params: SceneParameters) -> None:
 
 
 def check_cell_count(params: SceneParameters) -> None:
-    cells = params.estimated_cells()
+    cells = params.estimated_cells
     env = os.environ.get(MAX_CELLS_ENV, "").strip()
     limit = int(env) if env.isdigit() and int(env) > 0 else DEFAULT_MAX_CELLS
     if cells is not None and cells > limit:
-        raise ParameterError("mesh_size", f"{params.mesh_size:g} gives about {cells:,} cells, "
+        size = getattr(params, "element_size", getattr(params, "mesh_size", float("nan")))
+        raise ParameterError("mesh_size", f"an element size of {size:g} mm gives about {int(cells):,} cells, "
                              f"more than the limit of {limit:,} (raise it with {MAX_CELLS_ENV})")
 
 
