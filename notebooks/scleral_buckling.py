@@ -46,12 +46,15 @@ for stage in ("after_iop", "after_buckling", "after_suturing"):
 steps = results["steps"]
 load = np.array([s["load"] for s in steps])
 fig, axes = plt.subplots(1, 3, figsize=(13, 3.5))
+# changes are read from the eye before surgery (the end of step 1): step 1's own points
+# have none, and plot as gaps
 for ax, key, label in zip(axes, ("axial_length_change_mm", "iop_mmHg", "retina_choroid_gap_mean_mm"),
-                          ("axial length change (mm)", "IOP (mmHg)", "mean retina–choroid gap (mm)")):
-    ax.plot(load, [s[key] for s in steps], "o-")
-    for boundary in (1, 2):
+                          ("axial length change from before surgery (mm)", "IOP (mmHg)",
+                           "mean retina–choroid gap (mm)")):
+    ax.plot(load, [s.get(key, np.nan) for s in steps], "o-")
+    for boundary in (1, 2, 3):
         ax.axvline(boundary, ls=":", c="grey")
-    ax.set(xlabel="load path (1: IOP, 2: buckled, 3: sutured)", ylabel=label)
+    ax.set(xlabel="load path (1: IOP, 2: buckled, 3: sutured, 4: settled)", ylabel=label)
 fig.tight_layout()
 
 # %% [markdown]
