@@ -112,7 +112,10 @@ def check_finite(params: SceneParameters) -> None:
 
 def time_steps(params: SceneParameters) -> int | None:
     """The number of time steps of a scene with ``t_end`` and ``dt`` or ``first_dt``
-    (growing by ``dt_growth``), or None for other scenes."""
+    (growing by ``dt_growth``), or None for other scenes and for adaptive steps, whose
+    number the solve decides (the step cap stops those at run time, with TooManySteps)."""
+    if getattr(params, "time_stepping", "fixed") == "adaptive":
+        return None
     t_end = getattr(params, "t_end", None)
     dt = getattr(params, "first_dt", getattr(params, "dt", None))
     if not isinstance(t_end, (int, float)) or not isinstance(dt, (int, float)):
