@@ -43,10 +43,11 @@ from eyemech.problems.shell.model import (
     Shell,
     ShellDiscretisation,
     check_shell_parameters,
+    follow_shell_path,
     newton_options,
     picture,
 )
-from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.driver import NonlinearSolver
 
 # Sze, Liu & Lo (2004) table 4: load fraction, W_A (inner point), W_B (outer point)
 # of the loaded slit edge (the levels copied in Project Chrono's demo; see the docstring)
@@ -121,7 +122,6 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             options = dataclasses.replace(options, atol=max(options.atol, 1e-6 * total))
         solver = NonlinearSolver(residual, shell.u, shell.fix("clamped"), options=options,
                                  timings=ctx.timings, residual_hooks=[hook])
-        writer = ctx.field_writer([shell.u])
         loaded_edge = tagged.facets("loaded")
 
         def deflections() -> tuple[float, float]:
@@ -131,25 +131,17 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def apply(value: float, _increment: float) -> None:
             load_factor[0] = value
 
-        def converged(record) -> None:
+        def step_values(record) -> dict:
             w_a, w_b = deflections()
             line_load = record.load * params.line_load
             ref_a, ref_b = sze_reference(line_load)
-            ctx.record_step(step=record.step, load_factor=record.load, line_load=line_load,
-                            deflection_a=w_a, deflection_b=w_b, deflection_a_sze=ref_a,
-                            deflection_b_sze=ref_b, newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
-            with ctx.timings("output"):
-                writer.write(record.load)
+            return dict(line_load=line_load, deflection_a=w_a, deflection_b=w_b,
+                        deflection_a_sze=ref_a, deflection_b_sze=ref_b)
 
         stops = tuple(f * SZE_MAX_LINE_LOAD / params.line_load for f in SZE_LOAD_FRACTION
                       if 0.0 < f * SZE_MAX_LINE_LOAD / params.line_load <= 1.0)
-        steps = 1 if params.kinematics == "linear" else params.load_steps
-        try:
-            follow_path(solver, apply, Stepping(initial_step=1.0 / steps, stops=stops),
-                        on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
-        finally:
-            writer.close()
-            ctx.result.fields = writer.files
+        follow_shell_path(ctx, solver, apply, params.kinematics, params.load_steps, stops,
+                          step_values, SCENE.name)
         w_a, w_b = deflections()
         quantities = ctx.result.quantities
         quantities.update(deflection_a=w_a, deflection_b=w_b, dofs=shell.dofs())

@@ -24,10 +24,11 @@ from eyemech.problems.shell.model import (
     Shell,
     ShellDiscretisation,
     check_shell_parameters,
+    follow_shell_path,
     newton_options,
     picture,
 )
-from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.driver import NonlinearSolver
 
 REFERENCE = 0.093
 
@@ -86,7 +87,6 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
             options = dataclasses.replace(options, atol=max(options.atol, 1e-9 * abs(params.force)))
         solver = NonlinearSolver(residual, shell.u, bcs, options=options,
                                  timings=ctx.timings, residual_hooks=[hook])
-        writer = ctx.field_writer([shell.u])
 
         def radial() -> tuple[float, float]:
             return float(shell.value_at((R, 0, 0))[0]), -float(shell.value_at((0, R, 0))[1])
@@ -94,24 +94,13 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
         def apply(value: float, _increment: float) -> None:
             load_factor[0] = value
 
-        def converged(record) -> None:
+        def step_values(record) -> dict:
             outward_x, inward_y = radial()
-            values = dict(step=record.step, load_factor=record.load, force=record.load * params.force,
-                          radial_displacement_x=outward_x, radial_displacement_y=inward_y,
-                          newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
-            if on_step is not None:
-                on_step(values)
-            ctx.record_step(**values)
-            with ctx.timings("output"):
-                writer.write(record.load)
+            return dict(force=record.load * params.force, radial_displacement_x=outward_x,
+                        radial_displacement_y=inward_y)
 
-        steps = 1 if params.kinematics == "linear" else params.load_steps
-        try:
-            follow_path(solver, apply, Stepping(initial_step=1.0 / steps, stops=tuple(stops)),
-                        on_converged=converged, label=scene_name, quiet=ctx.options.quiet)
-        finally:
-            writer.close()
-            ctx.result.fields = writer.files
+        follow_shell_path(ctx, solver, apply, params.kinematics, params.load_steps, tuple(stops),
+                          step_values, scene_name, on_step=on_step)
         outward_x, inward_y = radial()
         quantities = ctx.result.quantities
         quantities.update(radial_displacement_x=outward_x, radial_displacement_y=inward_y,

@@ -30,6 +30,7 @@ from eyemech.problems.solve.driver import (
     NewtonOptions,
     NonlinearSolver,
     Stepping,
+    StepRecord,
     follow_path,
 )
 
@@ -188,6 +189,34 @@ LEVY_CENTER_DEFLECTION = (0.237, 0.471, 0.695, 0.912, 1.121, 1.323, 1.521, 1.714
 LEVY_POISSON_RATIO = 0.316
 
 
+def follow_shell_path(ctx: RunContext, solver: NonlinearSolver, apply: Callable[[float, float], None],
+                      kinematics: Kinematics, load_steps: int, stops: tuple[float, ...],
+                      step_values: Callable[[StepRecord], dict], label: str,
+                      on_step: Callable[[dict], None] | None = None) -> None:
+    """The load path of a shell benchmark: one step when linear, ``load_steps`` otherwise,
+    landing on ``stops``. Each converged step is recorded (the scene's ``step_values`` and
+    the solver's counts) and its displacement written; the field writer is closed whatever
+    happens, so an interrupted run leaves readable fields."""
+    writer = ctx.field_writer(solver.unknowns)
+
+    def converged(record: StepRecord) -> None:
+        values = dict(step=record.step, load_factor=record.load, **step_values(record),
+                      newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
+        if on_step is not None:
+            on_step(values)
+        ctx.record_step(**values)
+        with ctx.timings("output"):
+            writer.write(record.load)
+
+    steps = 1 if kinematics == "linear" else load_steps
+    try:
+        follow_path(solver, apply, Stepping(initial_step=1.0 / steps, stops=tuple(stops)),
+                    on_converged=converged, label=label, quiet=ctx.options.quiet)
+    finally:
+        writer.close()
+        ctx.result.fields = writer.files
+
+
 def levy_center_deflection(load_parameter: float) -> float:
     """w₀/h of Levy's table at Q = q a⁴/(E h⁴), monotone cubic (PCHIP) through the
     origin and the nine tabulated points; NaN beyond the table (Q > 402)."""
@@ -241,7 +270,6 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
                                  options=newton_options(ctx, params.kinematics),
                                  timings=ctx.timings)
         centre = (L / 2, L / 2, 0.0)
-        writer = ctx.field_writer([shell.u])
 
         def apply(value: float, _increment: float) -> None:
             load.value = value * params.q
@@ -252,25 +280,16 @@ def run_plate(scene_name: str, support: Literal["clamped", "simply-supported"],
             total = abs(params.q) * load_scale
             stops = tuple(stops) + tuple(Q / total for Q in LEVY_LOAD_PARAMETER if Q <= total)
 
-        def converged(record) -> None:
-            values = dict(step=record.step, load_factor=record.load, q=record.load * params.q,
-                          load_parameter=record.load * params.q * load_scale,
-                          center_deflection=float(shell.value_at(centre)[2]),
-                          newton_iterations=record.iterations, cuts=record.cuts, **record.counts())
+        def step_values(record: StepRecord) -> dict:
+            values = dict(q=record.load * params.q, load_parameter=record.load * params.q * load_scale,
+                          center_deflection=float(shell.value_at(centre)[2]))
             reference = levy_center_deflection(abs(values["load_parameter"])) if levy else np.nan
             if np.isfinite(reference):
                 values["center_deflection_levy"] = float(np.sign(params.q) * reference * params.thickness)
-            ctx.record_step(**values)
-            with ctx.timings("output"):
-                writer.write(record.load)
+            return values
 
-        steps = 1 if params.kinematics == "linear" else params.load_steps
-        try:
-            follow_path(solver, apply, Stepping(initial_step=1.0 / steps, stops=tuple(stops)),
-                        on_converged=converged, label=scene_name, quiet=ctx.options.quiet)
-        finally:
-            writer.close()
-            ctx.result.fields = writer.files
+        follow_shell_path(ctx, solver, apply, params.kinematics, params.load_steps, tuple(stops),
+                          step_values, scene_name)
         D = params.youngs_modulus * params.thickness ** 3 / (12 * (1 - params.poisson_ratio ** 2))
         deflection = float(shell.value_at(centre)[2])
         quantities = ctx.result.quantities
