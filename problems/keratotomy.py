@@ -12,7 +12,7 @@ squares sphere through the deformed anterior nodes inside the central ``fit_diam
 ``time_error_estimate`` (incised) and ``intact_time_error_estimate`` are the estimated
 relative stress error of the time steps, from the embedded backward/forward-Euler pair of
 :mod:`eyemech.problems.solid.viscous_bar` (the steps stay the fixed geometric grid; a
-run resumed from a checkpoint restarts the accumulation at its checkpoint).
+run resumed from a checkpoint continues the accumulation: G per point is checkpointed).
 
 Simplification: the incisions exist from the start of loading; cutting a cornea that is
 already pressurised (the surgical sequence) would need the pre-stressed state carried over
@@ -171,7 +171,7 @@ class Cornea:
     def register_checkpoint(self, checkpoints, label: str, series: dict[str, list]) -> None:
         """The state of this cornea's run for checkpoints (docs/restart.md)."""
         for name, f in (("u", self.u), ("p", self.p), ("Cv_n", self.history.Cv_n),
-                        ("Cbar_n", self.history.Cbar_n)):
+                        ("Cbar_n", self.history.Cbar_n), ("G", self.history.error_history)):
             checkpoints.function(f"{label}/{name}", f)
         checkpoints.constant(f"{label}/pressure", self.pressure)
         checkpoints.constant(f"{label}/dt", self.history.dt)

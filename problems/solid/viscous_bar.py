@@ -134,8 +134,21 @@ class ViscousHistory:
         self._distance = dolfinx.fem.Expression(Cbar - self.Cv, points)
         self._strain = dolfinx.fem.Expression(Cbar - ufl.Identity(3), points)
         self.material = material
-        self.global_error = np.zeros(self._scratch.x.array.size // 9)  # G per point
-        self._last_error = self.global_error
+        # G per point, a Function on the same points (one value each, the dof layout of Q
+        # without its block of 9) so that checkpoints carry it as they carry Cv_n
+        self.error_history = dolfinx.fem.Function(dolfinx.fem.functionspace(
+            mesh, basix.ufl.quadrature_element(mesh.basix_cell(), value_shape=(),
+                                               scheme="default", degree=degree)), name="G")
+        self._last_error = np.zeros_like(self.global_error)
+
+    @property
+    def global_error(self) -> np.ndarray:
+        """The accumulated error G at every local point (owned and ghost cells)."""
+        return self.error_history.x.array
+
+    @global_error.setter
+    def global_error(self, values: np.ndarray) -> None:
+        self.error_history.x.array[:] = values
 
     @staticmethod
     def _identity(Q, name: str) -> dolfinx.fem.Function:
