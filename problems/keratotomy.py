@@ -1,18 +1,22 @@
 """``keratotomy``: radial keratotomy on a viscoelastic cornea under intra-ocular pressure,
 creeping over hours (issue 6, item 5 — a first version, see docs/viscoelastic.md).
 
-Two runs on the same mesh (same cells, same time grid): the intact cornea and the cornea
+Two runs on the same mesh (same cells, same output times): the intact cornea and the cornea
 with ``incisions`` real cuts (meshes/cornea.py). Both are loaded at t = 0 by the IOP as a
 follower pressure on the posterior surface (glassy response, Cv = I), the limbus clamped
 (``support`` = clamped) or on distributed springs (``elastic``, ``limbus_stiffness``),
-then creep with backward Euler on a geometric time grid (``first_dt`` growing by
-``dt_growth``) to ``t_end``. The keratometric power is 337.5 / R with R from a least-
+then creep with backward Euler to ``t_end``. The outputs are the geometric grid
+(``first_dt`` growing by ``dt_growth``); ``time_stepping`` = adaptive takes the steps
+between them from the embedded backward/forward-Euler error estimate against
+``time_tolerance`` (the bars' controller, :func:`~eyemech.problems.solid.viscous_bar.march_adaptive`),
+fixed steps on the output grid itself. The keratometric power is 337.5 / R with R from a least-
 squares sphere through the deformed anterior nodes inside the central ``fit_diameter``;
 ``power_change_D`` = incised − intact at the same time and IOP (negative = flattening).
 ``time_error_estimate`` (incised) and ``intact_time_error_estimate`` are the estimated
-relative stress error of the time steps, from the embedded backward/forward-Euler pair of
-:mod:`eyemech.problems.solid.viscous_bar` (the steps stay the fixed geometric grid; a
-run resumed from a checkpoint continues the accumulation: G per point is checkpointed).
+relative stress error of the time steps (in both modes), with ``time_steps`` and
+``rejected_steps``; a run resumed from a checkpoint continues the accumulation (the
+per-point estimate G is checkpointed with Cv_n). Measured against fixed steps:
+docs/viscoelastic.md.
 
 Simplification: the incisions exist from the start of loading; cutting a cornea that is
 already pressurised (the surgical sequence) would need the pre-stressed state carried over

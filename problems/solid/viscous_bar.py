@@ -28,7 +28,9 @@ are both proportional to dt so that no shorter step meets it: the first step is 
 order τ (tol/10)² and then doubles. The next step is
 dt · min(2, max(0.2, 0.9 √(allowed/(μv E/D)))). ``max_steps`` caps the number of steps
 in both modes: an adaptive run that needs more stops with a message naming
-``time_tolerance`` and ``max_steps`` (``TooManySteps``, a ``SolveFailure``).
+``time_tolerance`` and ``max_steps`` (``TooManySteps``, a ``SolveFailure``). The
+controller, :func:`march_adaptive`, works on any :class:`ViscousHistory` and is also the
+cornea's (``keratotomy``), with checkpoints.
 """
 
 from __future__ import annotations
