@@ -33,6 +33,7 @@ if not (run_dir / "results.json").exists():
     eyemech = Path(sys.executable).parent / "eyemech"
     subprocess.run([str(eyemech), "run", "keratotomy", "--set", "mesh_size=2.0",
                     "--set", "t_end=3600", "--set", "first_dt=900", "--set", "dt_growth=1.5",
+                    "--set", "time_stepping=fixed",
                     "--out", str(run_dir), "--quiet"], check=True)
 results = json.loads((run_dir / "results.json").read_text())
 params, q = results["parameters"], results["quantities"]

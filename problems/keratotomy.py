@@ -1,18 +1,22 @@
 """``keratotomy``: radial keratotomy on a viscoelastic cornea under intra-ocular pressure,
 creeping over hours (issue 6, item 5 — a first version, see docs/viscoelastic.md).
 
-Two runs on the same mesh (same cells, same time grid): the intact cornea and the cornea
+Two runs on the same mesh (same cells, same output times): the intact cornea and the cornea
 with ``incisions`` real cuts (meshes/cornea.py). Both are loaded at t = 0 by the IOP as a
 follower pressure on the posterior surface (glassy response, Cv = I), the limbus clamped
 (``support`` = clamped) or on distributed springs (``elastic``, ``limbus_stiffness``),
-then creep with backward Euler on a geometric time grid (``first_dt`` growing by
-``dt_growth``) to ``t_end``. The keratometric power is 337.5 / R with R from a least-
+then creep with backward Euler to ``t_end``. The outputs are the geometric grid
+(``first_dt`` growing by ``dt_growth``); ``time_stepping`` = adaptive takes the steps
+between them from the embedded backward/forward-Euler error estimate against
+``time_tolerance`` (the bars' controller, :func:`~eyemech.problems.solid.viscous_bar.march_adaptive`),
+fixed steps on the output grid itself. The keratometric power is 337.5 / R with R from a least-
 squares sphere through the deformed anterior nodes inside the central ``fit_diameter``;
 ``power_change_D`` = incised − intact at the same time and IOP (negative = flattening).
 ``time_error_estimate`` (incised) and ``intact_time_error_estimate`` are the estimated
-relative stress error of the time steps, from the embedded backward/forward-Euler pair of
-:mod:`eyemech.problems.solid.viscous_bar` (the steps stay the fixed geometric grid; a
-run resumed from a checkpoint restarts the accumulation at its checkpoint).
+relative stress error of the time steps (in both modes), with ``time_steps`` and
+``rejected_steps``; a run resumed from a checkpoint continues the accumulation (the
+per-point estimate G is checkpointed with Cv_n). Measured against fixed steps:
+docs/viscoelastic.md.
 
 Simplification: the incisions exist from the start of loading; cutting a cornea that is
 already pressurised (the surgical sequence) would need the pre-stressed state carried over
@@ -45,7 +49,7 @@ from eyemech.problems.solid.spaces import (
     mixed_displacement_pressure,
     symmetry_bcs,
 )
-from eyemech.problems.solid.viscous_bar import ViscousHistory
+from eyemech.problems.solid.viscous_bar import AdaptiveSteps, ViscousHistory, march_adaptive
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.linear_solvers import SolverChoice
 
@@ -61,8 +65,16 @@ class Parameters(SceneParameters, SolverChoice):
     mu_v: float = field(0.03, "viscous-branch shear modulus μv", "MPa")
     tau: float = field(3600.0, "relaxation time τ", "s")
     t_end: float = field(4 * 3600.0, "end of the creep period", "s")
-    first_dt: float = field(300.0, "first time step (then growing)", "s")
-    dt_growth: float = field(1.6, "growth factor of successive time steps")
+    first_dt: float = field(300.0, "first time step (then growing); the output times are the "
+                            "grid first_dt, first_dt (1 + dt_growth), ... in both modes", "s")
+    dt_growth: float = field(1.6, "growth factor of successive time steps (of output intervals "
+                             "in adaptive mode)")
+    time_stepping: Literal["adaptive", "fixed"] = field(
+        "adaptive", "adaptive: steps from the embedded BE/FE error estimate (module viscous_bar), "
+                    "landing on the output grid; fixed: the output grid is the time grid")
+    time_tolerance: float = field(1e-2, "adaptive mode: allowed relative stress error from the "
+                                        "time steps (embedded BE/FE estimate, module viscous_bar)")
+    max_steps: int = field(20000, "most time steps a creep run may take (adaptive or fixed)")
     anterior_radius: float = field(7.8, "anterior radius of curvature", "mm")
     posterior_radius: float = field(6.5, "posterior apical radius of curvature", "mm")
     central_thickness: float = field(0.52, "central thickness", "mm")
@@ -84,7 +96,7 @@ class Parameters(SceneParameters, SolverChoice):
 
     def validate(self) -> None:
         self.require_positive("mu_inf", "mu_v", "tau", "t_end", "first_dt", "iop_mmHg",
-                              "fit_diameter")
+                              "fit_diameter", "time_tolerance", "max_steps")
         try:
             self.geometry(self.incisions).validate()
         except MeshError as err:
@@ -171,7 +183,7 @@ class Cornea:
     def register_checkpoint(self, checkpoints, label: str, series: dict[str, list]) -> None:
         """The state of this cornea's run for checkpoints (docs/restart.md)."""
         for name, f in (("u", self.u), ("p", self.p), ("Cv_n", self.history.Cv_n),
-                        ("Cbar_n", self.history.Cbar_n)):
+                        ("Cbar_n", self.history.Cbar_n), ("G", self.history.error_history)):
             checkpoints.function(f"{label}/{name}", f)
         checkpoints.constant(f"{label}/pressure", self.pressure)
         checkpoints.constant(f"{label}/dt", self.history.dt)
@@ -210,47 +222,68 @@ def _mirrored(points: np.ndarray, axis: int) -> np.ndarray:
     return np.vstack([points, image])
 
 
-def _simulate(ctx: RunContext, body: Cornea, params: Parameters, label: str) -> dict[str, list]:
-    """IOP at t = 0 (glassy), then creep on the time grid; quantities at every time."""
+def _simulate(ctx: RunContext, body: Cornea, params: Parameters,
+              label: str) -> tuple[dict[str, list], dict[str, float]]:
+    """IOP at t = 0 (glassy), then creep to t_end, fixed or adaptive steps
+    (``params.time_stepping``); quantities at every output time (``params.time_grid()``)
+    and the time-discretisation summary (estimate, steps taken, steps rejected)."""
     solver = body.solver(ctx)
     series: dict[str, list] = {"times": [], "power_D": [], "apex_displacement_mm": [],
                                "wound_gape_mm": [], "time_error_estimate": []}
+    summary = {"time_error_estimate": 0.0, "time_steps": 0, "rejected_steps": 0}
     body.register_checkpoint(ctx.checkpoints, label, series)
+    ctx.checkpoints.value(f"{label}/time_steps", lambda: summary, summary.update)
+    outputs = params.time_grid()
 
     def record(t: float) -> None:
         series["times"].append(t)
         series["power_D"].append(body.power_D())
         series["apex_displacement_mm"].append(body.apex_displacement())
         series["wound_gape_mm"].append(body.gape())
+        series["time_error_estimate"].append(summary["time_error_estimate"])
 
     body.history.dt.value = 0.0
     follow_path(solver, lambda f, _i: setattr(body.pressure, "value", f * params.iop_mmHg * MMHG),
                 Stepping(initial_step=1.0), label=f"{label} IOP", quiet=ctx.options.quiet,
                 checkpoints=ctx.checkpoints)
     record(0.0)
-    series["time_error_estimate"].append(0.0)
     # C̄_n of the loaded cornea: the embedded time-error estimate's forward-Euler half
     # starts from it (backward Euler, which the solution uses, does not read C̄_n)
     body.history.store_strain()
+
+    def accept(step: int, t: float, dt: float, iterations: int, cuts: int, _residuals,
+               errors: tuple[float, float], counts: dict) -> None:
+        # the embedded BE/FE pair of module viscous_bar: errors = (this step's, accumulated)
+        body.history.accept_time_error()
+        summary["time_error_estimate"] = max(summary["time_error_estimate"], errors[1])
+        summary["time_steps"] += 1
+        if any(abs(t - s) <= 1e-12 * params.t_end for s in outputs):
+            record(t)  # before the update: the outputs read Cv_n of this step
+        body.history.update()
+        ctx.record_step(run=label, time=t, dt=dt, newton_iterations=iterations, cuts=cuts,
+                        **counts, krylov_iterations=solver.linear_iterations,
+                        local_time_error=errors[0])
+
+    if params.time_stepping == "adaptive":
+        march_adaptive(body.history, solver,
+                       AdaptiveSteps(params.t_end, params.first_dt, params.time_tolerance,
+                                     params.max_steps, outputs),
+                       lambda _t: None, accept, summary, checkpoints=ctx.checkpoints,
+                       label=f"{label} creep")
+        return series, summary
 
     def apply(t: float, increment: float) -> None:
         body.history.dt.value = increment
 
     def converged(step) -> None:
-        record(step.load)  # before the update: the outputs read Cv_n of this step
-        _, accumulated = body.history.time_error()  # module viscous_bar: embedded BE/FE pair
-        body.history.accept_time_error()
-        series["time_error_estimate"].append(max(accumulated, series["time_error_estimate"][-1]))
-        body.history.update()
-        ctx.record_step(run=label, time=step.load, dt=step.increment,
-                        newton_iterations=step.iterations, cuts=step.cuts, **step.counts(),
-                        krylov_iterations=step.linear_iterations)
+        accept(step.step, step.load, step.increment, step.iterations, step.cuts, step.residuals,
+               body.history.time_error(), step.counts())
 
     follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=1.0,
-                                        max_step=1.0, min_step=1e-6, stops=params.time_grid()),
+                                        max_step=1.0, min_step=1e-6, stops=outputs),
                 on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet,
                 checkpoints=ctx.checkpoints)
-    return series
+    return series, summary
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -259,22 +292,26 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         azimuths = params.geometry(params.incisions).azimuths  # the same cells for both runs
         with ctx.timings("mesh"):
             intact = Cornea(params, 0, ctx.comm, azimuths)
-        reference = _simulate(ctx, intact, params, "intact")
+        reference, steps = _simulate(ctx, intact, params, "intact")
         q = ctx.result.quantities
         q["times"] = reference["times"]
         q["intact_power_D"] = reference["power_D"]
         q["intact_apex_displacement_mm"] = reference["apex_displacement_mm"]
         q["unloaded_power_D"] = 337.5 / params.anterior_radius
-        q["intact_time_error_estimate"] = reference["time_error_estimate"][-1]
+        q["intact_time_error_estimate"] = steps["time_error_estimate"]
+        q["intact_time_steps"] = steps["time_steps"]
+        q["intact_rejected_steps"] = steps["rejected_steps"]
         if params.incisions > 0:
             with ctx.timings("mesh"):
                 incised = Cornea(params, params.incisions, ctx.comm, azimuths)
-            series = _simulate(ctx, incised, params, "incised")
+            series, steps = _simulate(ctx, incised, params, "incised")
             q["power_D"] = series["power_D"]
             q["power_change_D"] = [a - b for a, b in zip(series["power_D"], reference["power_D"])]
             q["apex_displacement_mm"] = series["apex_displacement_mm"]
             q["wound_gape_mm"] = series["wound_gape_mm"]
-            q["time_error_estimate"] = series["time_error_estimate"][-1]
+            q["time_error_estimate"] = steps["time_error_estimate"]
+            q["time_steps"] = steps["time_steps"]
+            q["rejected_steps"] = steps["rejected_steps"]
             q["power_change_initial_D"] = q["power_change_D"][0]
             q["power_change_final_D"] = q["power_change_D"][-1]
             q["creep_power_change_D"] = q["power_change_final_D"] - q["power_change_initial_D"]

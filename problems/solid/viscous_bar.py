@@ -28,7 +28,9 @@ are both proportional to dt so that no shorter step meets it: the first step is 
 order τ (tol/10)² and then doubles. The next step is
 dt · min(2, max(0.2, 0.9 √(allowed/(μv E/D)))). ``max_steps`` caps the number of steps
 in both modes: an adaptive run that needs more stops with a message naming
-``time_tolerance`` and ``max_steps`` (``TooManySteps``, a ``SolveFailure``).
+``time_tolerance`` and ``max_steps`` (``TooManySteps``, a ``SolveFailure``). The
+controller, :func:`march_adaptive`, works on any :class:`ViscousHistory` and is also the
+cornea's (``keratotomy``), with checkpoints.
 """
 
 from __future__ import annotations
@@ -134,8 +136,21 @@ class ViscousHistory:
         self._distance = dolfinx.fem.Expression(Cbar - self.Cv, points)
         self._strain = dolfinx.fem.Expression(Cbar - ufl.Identity(3), points)
         self.material = material
-        self.global_error = np.zeros(self._scratch.x.array.size // 9)  # G per point
-        self._last_error = self.global_error
+        # G per point, a Function on the same points (one value each, the dof layout of Q
+        # without its block of 9) so that checkpoints carry it as they carry Cv_n
+        self.error_history = dolfinx.fem.Function(dolfinx.fem.functionspace(
+            mesh, basix.ufl.quadrature_element(mesh.basix_cell(), value_shape=(),
+                                               scheme="default", degree=degree)), name="G")
+        self._last_error = np.zeros_like(self.global_error)
+
+    @property
+    def global_error(self) -> np.ndarray:
+        """The accumulated error G at every local point (owned and ghost cells)."""
+        return self.error_history.x.array
+
+    @global_error.setter
+    def global_error(self, values: np.ndarray) -> None:
+        self.error_history.x.array[:] = values
 
     @staticmethod
     def _identity(Q, name: str) -> dolfinx.fem.Function:
@@ -178,6 +193,10 @@ class ViscousHistory:
         """G ← G e^(−dt/τc) + E with the E of the last ``time_error``."""
         decay = np.exp(-float(self.dt.value) / self._moduli()[2])
         self.global_error = self.global_error * decay + self._last_error
+
+    def retardation_time(self) -> float:
+        """τc = τ (μ∞ + μv)/μ∞: the slowest decay of an error in Cv."""
+        return self._moduli()[2]
 
     def _moduli(self) -> tuple[float, float, float]:
         """μ∞, μv and the retardation time as numbers (the material may hold Constants)."""
@@ -345,7 +364,10 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
             raise UnstableIntegration(step, t, smallest, dt / params.tau)
 
     if params.time_stepping == "adaptive":
-        _march_adaptive(bar, solver, params, apply_load, accept, summary, extra_stops)
+        march_adaptive(bar.history, solver, AdaptiveSteps(params.t_end, params.dt,
+                                                          params.time_tolerance, params.max_steps,
+                                                          extra_stops),
+                       apply_load, accept, summary)
         return summary
 
     explicit = params.time_scheme == "forward-euler"
@@ -368,26 +390,58 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
     return summary
 
 
-def _march_adaptive(bar: ViscousBar, solver: NonlinearSolver, params: BarParameters,
-                    apply_load: Callable[[float], None], accept, summary: dict,
-                    extra_stops: tuple[float, ...]) -> None:
-    """Backward Euler with steps from the embedded BE/FE estimate (module docstring).
-    A step Newton cannot solve is halved (at most 6 times in a row); a step whose
-    estimate exceeds the tolerance is repeated shorter."""
-    t_end, tol = params.t_end, params.time_tolerance
-    retardation = params.material.retardation_time
-    stops = sorted({t for t in extra_stops if 0 < t < t_end} | {t_end})
-    t, dt, step, cuts = 0.0, min(params.dt, t_end), 0, 0
+@dataclasses.dataclass(frozen=True)
+class AdaptiveSteps:
+    """What the adaptive controller needs to know: the interval, the first step, the
+    tolerance on μv E/D per unit step, the step cap and the times to land on."""
+
+    t_end: float
+    first_dt: float
+    tolerance: float
+    max_steps: int
+    stops: tuple[float, ...] = ()
+
+
+def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: AdaptiveSteps,
+                   apply_load: Callable[[float], None], accept, summary: dict, *,
+                   checkpoints=None, label: str = "") -> None:
+    """Backward Euler from the current state (t = 0) to ``steps.t_end`` with steps from the
+    embedded BE/FE estimate of ``history`` (module docstring). A step Newton cannot solve
+    is halved (at most 6 times in a row); a step whose estimate exceeds the tolerance is
+    repeated shorter. ``accept(step, t, dt, iterations, cuts, residuals, errors, counts)``
+    takes an accepted step (outputs, ``accept_time_error``, ``update``); ``counts`` is the
+    step's whole solver work, its cut and rejected attempts included, and
+    ``summary["rejected_steps"]`` counts the rejections.
+
+    With ``checkpoints`` (the run's, collective) the path is ``label``: a checkpoint is due
+    after each accepted step as in ``follow_path``, and a resumed run continues from the
+    checkpoint's time and step size (the caller registers ``history``'s state, the
+    ``dt`` Constant and ``summary``)."""
+    t_end, tol = steps.t_end, steps.tolerance
+    retardation = history.retardation_time()
+    stops = sorted({t for t in steps.stops if 0 < t < t_end} | {t_end})
+    t, dt, step, cuts = 0.0, min(steps.first_dt, t_end), 0, 0
+    resumed = checkpoints.enter_path(label) if checkpoints is not None else None
+    if resumed is not None:
+        if "skip" in resumed:  # finished before the checkpoint: its state comes later
+            checkpoints.leave_path([])
+            return
+        t, dt, step = resumed["value"], resumed["increment"], resumed["step"]
+    fresh = True
     while t < t_end * (1 - 1e-12):
-        if step >= params.max_steps:
-            raise TooManySteps(step, t, dt, params.max_steps)
-        state = solver.save_state()
+        if fresh:  # a new step: its start state and the work counted from here
+            if step >= steps.max_steps:
+                raise TooManySteps(step, t, dt, steps.max_steps)
+            state, counts_before = solver.save_state(), solver.counts.copy()
+            if checkpoints is not None:
+                checkpoints.watch_step(solver)
+            fresh = False
         next_stop = next(s for s in stops if s > t * (1 + 1e-12) + 1e-300)
         target = min(t + dt, next_stop)
         if next_stop - target < 1e-3 * dt:  # no sliver before a stop
             target = next_stop
         h = target - t
-        bar.dt.value = h
+        history.dt.value = h
         apply_load(target)
         converged, iterations = solver.solve()
         if not converged:
@@ -396,11 +450,11 @@ def _march_adaptive(bar: ViscousBar, solver: NonlinearSolver, params: BarParamet
             cuts += 1
             dt = 0.5 * h
             if cuts > 6:
-                bar.dt.value = 0.0
+                history.dt.value = 0.0
                 apply_load(t)
                 raise SolveFailure(step + 1, target, t, residuals, reason)
             continue
-        errors = bar.time_error()
+        errors = history.time_error()
         relative = errors[0]
         allowed = max(tol * h / retardation, (tol / 10) ** 2)
         ratio = np.sqrt(allowed / relative) if relative > 0 else np.inf
@@ -410,9 +464,17 @@ def _march_adaptive(bar: ViscousBar, solver: NonlinearSolver, params: BarParamet
             dt = h * max(0.2, 0.9 * ratio)
             continue
         step += 1
-        accept(step, target, h, iterations, cuts, list(solver.residual_history), errors)
-        t, cuts = target, 0
+        work = StepRecord.work(solver.counts - counts_before)
+        record = StepRecord(step, target, h, iterations, cuts, list(solver.residual_history),
+                            solver.linear_iterations, **work)
+        accept(step, target, h, iterations, cuts, record.residuals, errors, record.counts())
+        t, cuts, fresh = target, 0, True
         dt = h * min(2.0, max(0.2, 0.9 * ratio))
+        if checkpoints is not None:
+            checkpoints.step_done({"label": label, "step": step, "value": t, "increment": dt,
+                                   "records": []})
+    if checkpoints is not None:
+        checkpoints.leave_path([])
 
 
 def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
