@@ -197,8 +197,15 @@ class Parameters(SceneParameters, SolverChoice):
                               "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height", "contact_smoothing", "indentation", "suture_force",
+        self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
+                                 "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
+        if self.material == "table-1":
+            for key, default in (("c20_sclera", CALIBRATED_C20_SCLERA),
+                                 ("c20_cornea", CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA)):
+                if getattr(self, key) != default:
+                    raise ParameterError(key, "is used only with material=calibrated (table-1 "
+                                         "is neo-Hookean)")
         if not 0 < self.tire_arc_deg <= 360:
             raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
                                  "lie in (0, 360] degrees")

@@ -94,6 +94,37 @@ def test_calibrated_sclera_tangent_modulus_is_physiological():
         assert 1.0 < modulus < 10.0, (thickness, modulus)  # measured 5.2 and 3.1 MPa
 
 
-def test_negative_stiffening_is_refused():
+def test_bad_stiffening_is_refused():
     with pytest.raises(ParameterError, match="c20_sclera"):
         scleral_buckling.Parameters(material="calibrated", c20_sclera=-1.0).validate()
+    # a c20 that table-1 would silently ignore
+    with pytest.raises(ParameterError, match="c20_cornea.*material=calibrated"):
+        scleral_buckling.Parameters(c20_cornea=5.0).validate()
+
+
+@pytest.fixture
+def compilations(monkeypatch):
+    """Calls of FFCx's C compilation (its disk cache is consulted first)."""
+    import ffcx.codegeneration.jit as jit
+
+    calls = []
+    compile_objects = jit._compile_objects
+
+    def counted(*args, **kwargs):
+        calls.extend(str(form)[:300] for form in args[1])
+        return compile_objects(*args, **kwargs)
+
+    monkeypatch.setattr(jit, "_compile_objects", counted)
+    return calls
+
+
+def test_new_stiffening_values_compile_nothing(compilations):
+    """c20 is a cellwise field: a second value (never used before) reuses the kernels."""
+    import random
+
+    for c20 in (40.0 + random.random(), 70.0 + random.random()):
+        inflation_curve(healthy_eye(resolution="coarse", material="calibrated", c20_sclera=c20,
+                                    c20_cornea=0.4 * c20), pressures=(10.0,), comm=MPI.COMM_SELF)
+        if c20 < 70.0:
+            first = len(compilations)
+    assert compilations[first:] == [], compilations[first:]
