@@ -58,6 +58,22 @@ def MooneyRivlin(c10: float, c01: float) -> PolynomialIsochoric:
     return PolynomialIsochoric(((1, 0, c10), (0, 1, c01)))
 
 
+@dataclasses.dataclass(frozen=True)
+class Yeoh:
+    """W = c10 (Ī1 − 3) + c20 (Ī1 − 3)² + c30 (Ī1 − 3)³ (Yeoh 1993): the paper's polynomial
+    with the higher powers of Ī1 that stiffen a collagenous coat with strain. The
+    coefficients may be numbers, Constants or cellwise fields (MPa); with c20 = c30 = 0
+    it is the neo-Hookean law."""
+
+    c10: float | ufl.core.expr.Expr
+    c20: float | ufl.core.expr.Expr = 0.0
+    c30: float | ufl.core.expr.Expr = 0.0
+
+    def strain_energy(self, F):
+        x = isochoric_invariants(F)[0] - 3
+        return self.c10 * x + self.c20 * x**2 + self.c30 * x**3
+
+
 def incompressible_energy_density(material: Material, F, p):
     """Mixed u–p energy density W(F) + p (J − 1); its stationary point is the
     incompressible equilibrium and p the Lagrange multiplier."""

@@ -20,7 +20,10 @@ Three steps along one load path s ∈ [0, 3]:
    pressure back to the IOP of step 1: the liquid volume is released.
 
 Every soft tissue is neo-Hookean, W = c (Ī1 − 3), with c per tissue (paper Table 1) held
-in a cellwise-constant field; incompressibility by a pressure multiplier (Q1P0 as in
+in a cellwise-constant field (``material = "table-1"``). ``material = "calibrated"`` adds a
+Yeoh term c20 (Ī1 − 3)² to the sclera and the cornea, fitted to the living human eye's
+pressure–volume curve (Pallikaris et al. 2005; docs/scleral_buckling.md, "Calibrated
+eye"). Incompressibility by a pressure multiplier (Q1P0 as in
 the paper, or Q2P1). The eye is held at the end of the optic-nerve stub; the
 symmetry plane x = 0 passes through the tear.
 
@@ -53,6 +56,7 @@ from mpi4py import MPI
 
 from eyemech.forms import (
     NeoHooke,
+    Yeoh,
     cauchy_stress,
     deformation_gradient,
     enclosed_volume,
@@ -99,6 +103,13 @@ DIOPTRES_PER_MM = 2.7
 KERATOMETRIC_INDEX = 1.3375
 KERATOMETRY_ZONE = 3.0  # mm from the axis: the central cornea a keratometer reads
 
+# the calibrated coats (material = "calibrated"): c20 of the sclera fitted by least squares to
+# Pallikaris et al. 2005 (IOVS 46:409), ln(P/10 mmHg) = K ΔV with their in vivo mean
+# K = 0.0126 µL⁻¹, over 15-40 mmHg on the default eye (`eyemech study eye-calibration`,
+# docs/scleral_buckling.md "Calibrated eye"); the cornea keeps Table 1's ratio to the sclera
+CALIBRATED_C20_SCLERA = 56.7
+CORNEA_TO_SCLERA = 0.0333 / 0.0833
+
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
 BENCHMARK = {"resolution": "paper"}
 
@@ -117,6 +128,16 @@ class Parameters(SceneParameters, SolverChoice):
     c_retina: float = field(0.0008, "neo-Hooke c of the retina", "MPa")
     c_optic_nerve: float = field(0.05, "neo-Hooke c of the optic nerve", "MPa")
     c_lens: float = field(10.0, "neo-Hooke c of the lens (Table 1)", "MPa")
+    material: Literal["table-1", "calibrated"] = field(
+        "table-1", "laws of the coats: table-1, every tissue neo-Hookean with the c_* above "
+        "(seed 002, Table 1); calibrated, the sclera and the cornea stiffen with strain by "
+        "c20 (Ī1 − 3)² (fitted to the eye's pressure–volume curve, Pallikaris et al. 2005)")
+    c20_sclera: float = field(
+        CALIBRATED_C20_SCLERA, "Yeoh c20 of the sclera (material=calibrated; fitted: "
+        "docs/scleral_buckling.md, Calibrated eye)", "MPa")
+    c20_cornea: float = field(
+        CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA, "Yeoh c20 of the cornea (material=calibrated; "
+        "c20_sclera in Table 1's cornea/sclera ratio 0.4)", "MPa")
     lens: bool = field(True, "model the lens and its zonules (off: the liquid fills its place)")
     lens_diameter: float = field(9.0, "equatorial diameter of the lens (Rosen et al. 2006)", "mm")
     lens_thickness: float = field(4.0, "axial thickness of the lens (Atchison & Smith 2000)", "mm")
@@ -176,8 +197,15 @@ class Parameters(SceneParameters, SolverChoice):
                               "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
-        self.require_nonnegative("buckle_corner_radius", "tire_height", "contact_smoothing", "indentation", "suture_force",
+        self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
+                                 "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
+        if self.material == "table-1":
+            for key, default in (("c20_sclera", CALIBRATED_C20_SCLERA),
+                                 ("c20_cornea", CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA)):
+                if getattr(self, key) != default:
+                    raise ParameterError(key, "is used only with material=calibrated (table-1 "
+                                         "is neo-Hookean)")
         if not 0 < self.tire_arc_deg <= 360:
             raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
                                  "lie in (0, 360] degrees")
@@ -227,6 +255,10 @@ class Parameters(SceneParameters, SolverChoice):
 
     def stiffness(self) -> dict[str, float]:
         return {t: getattr(self, f"c_{t}") for t in TISSUES}
+
+    def stiffening(self) -> dict[str, float]:
+        """Yeoh c20 per tissue of the calibrated coats (0 elsewhere)."""
+        return {"sclera": self.c20_sclera, "cornea": self.c20_cornea}
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -316,7 +348,8 @@ class BucklingModel:
         metadata = {"quadrature_degree": family.quadrature_degree}
         dx, ds = self.eye.dx(metadata), self.eye.ds(metadata)
         self.wall = ds(self.eye.tag("cavity_wall"))
-        self.stiffness = self._stiffness_field()
+        self.stiffness = self._cell_field("c", params.stiffness())
+        self.law = self._material_law()
 
         # step 1 pins P to the ramp; from step 2 on P obeys the liquid law
         self.iop = params.iop_mmHg * MMHG
@@ -366,7 +399,7 @@ class BucklingModel:
             self.zonules.coupling_entries() if self.zonules is not None else 0)
         self._probes()
         self.volume_form = dolfinx.fem.form(enclosed_volume(self.u, self.wall))
-        self.von_mises = CellField(_von_mises(self.u, self.stiffness), mesh, "von_mises")
+        self.von_mises = CellField(_von_mises(self.u, self.law), mesh, "von_mises")
         self.stage_results: dict[int, dict] = {}
         self.reference_positions: dict[str, np.ndarray] = {}
         # the eye before surgery (end of step 1): every change is measured from it
@@ -375,7 +408,7 @@ class BucklingModel:
     def residual(self, tests, dx, ds):
         """The eye's residual, all of it but the node-wise terms:
 
-        R = R_solid(u, p)                    incompressible neo-Hookean tissues (Q1P0 …)
+        R = R_solid(u, p)                    incompressible tissues, neo-Hooke or Yeoh (Q1P0 …)
           + ∫ P J F⁻ᵀN·v dA                 the vitreous pressure P on the cavity wall
           + c · R_liquid + (1 − c) · R_pin   P's row: the liquid law from step 2 (c = 1),
                                              P pinned to the IOP ramp in step 1 (c = 0)
@@ -392,7 +425,7 @@ class BucklingModel:
                                      self.initial_pressure, params.bulk_modulus)
         pinned = self.initial_volume / params.bulk_modulus * (self.P - self.pressure_target) \
             / self.wall_area * qP * self.wall
-        residual = (solid_residual(NeoHooke(self.stiffness), family, self.fields, tests, dx)
+        residual = (solid_residual(self.law, family, self.fields, tests, dx)
                     + follower_pressure(self.P, self.u, v, self.wall)
                     + self.coupled * liquid + (1 - self.coupled) * pinned)
         contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
@@ -407,14 +440,23 @@ class BucklingModel:
         return residual
 
     # -- set-up pieces --------------------------------------------------------------
-    def _stiffness_field(self) -> dolfinx.fem.Function:
+    def _cell_field(self, name: str, values: dict[str, float]) -> dolfinx.fem.Function:
+        """A cellwise-constant coefficient from per-tissue values (0 where none given)."""
         space = dolfinx.fem.functionspace(self.eye.mesh, ("DG", 0))
-        c = dolfinx.fem.Function(space, name="c")
-        for tissue, value in self.params.stiffness().items():
+        c = dolfinx.fem.Function(space, name=name)
+        for tissue, value in values.items():
             if tissue in self.eye.names:
                 cells = self.eye.cells(tissue)
                 c.x.array[space.dofmap.list[cells, 0]] = value
         return c
+
+    def _material_law(self):
+        """The tissues' isochoric law: neo-Hooke with c per tissue (Table 1), or, calibrated,
+        Yeoh with c10 = c and the stiffening c20 (Ī1 − 3)² in the sclera and the cornea.
+        Both coefficients are cellwise fields: new values compile nothing."""
+        if self.params.material == "table-1":
+            return NeoHooke(self.stiffness)
+        return Yeoh(self.stiffness, self._cell_field("c20", self.params.stiffening()))
 
     def _buckle_axial_position(self) -> tuple[float, float]:
         angle = self.geometry.limbus_angle + math.degrees(self.params.buckle_position
@@ -763,10 +805,10 @@ class BucklingModel:
         return out
 
 
-def _von_mises(u, stiffness):
-    """Von Mises stress of the neo-Hookean tissues (c per cell): the deviator of σ is that
-    of the isochoric part, (2c/J) dev(b̄); the pressure multiplier drops out."""
-    return von_mises(cauchy_stress(NeoHooke(stiffness), deformation_gradient(u)))
+def _von_mises(u, law):
+    """Von Mises stress of the tissues' isochoric law: the deviator of σ is that of the
+    isochoric part (neo-Hooke: (2c/J) dev(b̄)); the pressure multiplier drops out."""
+    return von_mises(cauchy_stress(law, deformation_gradient(u)))
 
 
 SCENE = Scene(name="scleral-buckling", kind="scene", parameters=Parameters, run=run,
