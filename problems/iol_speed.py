@@ -34,9 +34,12 @@ step costs when the shared machine is busy with other jobs. Methods:
   kernels, PETSc, MUMPS LU), every method above.
 - ``p1-rotation-free``: the rotation-free P1 triangle of ``problems/lens/rotation_free.py``
   on the same gmsh mesh (its vertices: 1,416 unknowns at the paper's resolution), numba
-  kernels with the exact Hessian, CSR pattern built once, MUMPS LDLᵀ with the symbolic
-  analysis reused; Newton with a fresh Jacobian every iteration (``method=newton``,
-  ``jacobian=fresh``), deformation only (no capsule yet). ``bending``: ``edge`` (default,
+  kernels with the exact Hessian, CSR pattern and PETSc matrix built once (the values
+  written in place), MUMPS LDLᵀ with one symbolic analysis per run; ``method=newton`` from
+  the best-residual predictor (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian
+  and factorisation every iteration) or ``lagged`` (fresh factors at each step's start, kept
+  within the step while an iteration reduces the residual by ``stall``), deformation only
+  (no capsule yet). ``bending``: ``edge`` (default,
   consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
   meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
   Hessian assembly (one kernel pass), ``residual`` the gradient-only passes.
@@ -84,7 +87,8 @@ PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 @dataclasses.dataclass(frozen=True)
 class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
-                                    "triangle: numba kernels, newton/fresh, no contact yet)")
+                                    "triangle: numba kernels, method=newton with jacobian=fresh or "
+                                    "lagged, no contact yet)")
     bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
                                      "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
                                      "too soft on alternating-diagonal meshes)")
@@ -92,7 +96,8 @@ class Parameters(LensParameters):
     jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
     refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
     stall: float = field(0.5, "lagged Newton: a new Jacobian when an iteration reduces the residual "
-                              "by less than this factor")
+                              "by less than this factor (p1-rotation-free: fresh factors at every "
+                              "step's start, kept within the step while this holds)")
     krylov_rtol: float = field(1e-3, "matrix-free: GMRES relative tolerance per Newton iteration")
     krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed")
     steps: int = field(30, "time steps per run")
@@ -122,9 +127,12 @@ class Parameters(LensParameters):
             raise ParameterError("scheme", "generalized-alpha needs the residual at the accepted state "
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
         if self.model == "p1-rotation-free":
-            if (self.method, self.jacobian) != ("newton", "fresh"):
+            if self.method != "newton" or self.jacobian not in ("fresh", "lagged"):
                 raise ParameterError("method", "model=p1-rotation-free runs method=newton with jacobian=fresh "
-                                     "(the other methods are the P2 model's)")
+                                     "or lagged (the other methods are the P2 model's)")
+            if self.jacobian == "lagged" and not 0.0 < self.stall < 1.0:
+                raise ParameterError("stall", "model=p1-rotation-free, jacobian=lagged: a contraction factor "
+                                     "between 0 and 1")
             if self.contact:
                 raise ParameterError("contact", "model=p1-rotation-free has no capsule contact yet: "
                                      "set contact=false")
@@ -408,7 +416,7 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
 
     def timed(steps: int) -> dict:
         try:
-            return release(params, steps, lens)
+            return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None)
         except RuntimeError as err:  # Newton did not converge within max_iterations
             raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
                                  f"from the released roll (Newton: {err}); take a smaller time_step") from err

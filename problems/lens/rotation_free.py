@@ -462,10 +462,11 @@ def bending_scratch(n_nodes):
 
 
 @njit(cache=True)
-def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad, data, want_hess,
-             bending_only):
-    """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``
-    (``positions[t]``: the 18 × 18 element entries' places in it)."""
+def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, scatter_local, scatter_pos,
+             grad, data, want_hess, bending_only):
+    """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``:
+    triangle t adds its element matrix's flat entries ``scatter_local[k]`` at
+    ``data[scatter_pos[k]]`` for k in ``scatter_start[t]:scatter_start[t + 1]`` (``scatter_lists``)."""
     lam = E * nu / (1.0 - nu * nu)
     mu = 0.5 * E / (1.0 + nu)
     energy = 0.0
@@ -491,11 +492,9 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, positions, grad
             for cc in range(3):
                 grad[3 * nodes[t, i] + cc] += gb[3 * i + cc]
         if want_hess:
-            pos = positions[t]
-            for p in range(3 * NP):
-                for q in range(3 * NP):
-                    if pos[p, q] >= 0:
-                        data[pos[p, q]] += hb[p, q]
+            flat = hb.ravel()
+            for k in range(scatter_start[t], scatter_start[t + 1]):
+                data[scatter_pos[k]] += flat[scatter_local[k]]
     return energy
 
 
@@ -513,6 +512,34 @@ def reference_curvature(X, nodes, B, b):
                 Hk += B[t, k, i] * X[nodes[t, i]]
             K0[t, k] = n @ Hk
     return K0
+
+
+def scatter_lists(nodes: np.ndarray, positions: np.ndarray, upper=None):
+    """Where each element matrix entry goes in the CSR values, as flat lists per triangle
+    (``assemble``'s ``scatter_start``, ``scatter_local``, ``scatter_pos``). Stencil slots that
+    repeat an earlier node (padding: zero rows and columns) are left out. ``positions``
+    (n_tri, m, m): the entries' places in the full pattern. ``upper``: (keep, renumber) of the
+    upper-triangle pattern — then only the element's p ≤ q entries are listed, each at its own
+    or its transpose's place in the upper pattern (the element matrices are symmetric), which
+    halves the scatter."""
+    n_tri, n_slots = nodes.shape
+    first = np.ones((n_tri, n_slots), dtype=bool)
+    for i in range(1, n_slots):
+        first[:, i] = ~np.any(nodes[:, :i] == nodes[:, i:i + 1], axis=1)
+    valid = np.repeat(first, 3, axis=1)  # per element dof
+    m = 3 * n_slots
+    both = valid[:, :, None] & valid[:, None, :]
+    if upper is not None:
+        both &= np.triu(np.ones((m, m), dtype=bool))[None]
+    t, p, q = np.nonzero(both)
+    pos = positions[t, p, q]
+    if upper is not None:
+        keep, renumber = upper
+        pos = np.where(keep[pos], renumber[pos], renumber[positions[t, q, p]])
+    order = np.lexsort((pos, t))
+    start = np.zeros(n_tri + 1, dtype=np.int64)
+    np.add.at(start, t + 1, 1)
+    return np.cumsum(start), (p * m + q)[order].astype(np.int32), pos[order].astype(np.int32)
 
 
 # --------------------------------------------------------------------------------------------
@@ -590,9 +617,10 @@ class RotationFreeShell:
         renumber = np.cumsum(keep) - 1
         up_indptr = np.zeros(self.n_dofs + 1, dtype=np.int64)
         np.add.at(up_indptr, r[keep] + 1, 1)
-        self.upper = {"positions": np.where(keep[self.positions], renumber[self.positions], -1),
-                      "indptr": np.cumsum(up_indptr), "indices": c[keep].astype(np.int64),
+        self.upper = {"indptr": np.cumsum(up_indptr), "indices": c[keep].astype(np.int64),
                       "diagonal": renumber[self.diagonal], "mass": self.mass_data[keep]}
+        self.scatter = {False: scatter_lists(self.nodes, self.positions, None),
+                        True: scatter_lists(self.nodes, self.positions, (keep, renumber))}
 
     # -- assembly --------------------------------------------------------------------------
     def new_data(self) -> np.ndarray:
@@ -605,10 +633,10 @@ class RotationFreeShell:
         pattern ``self.upper`` when ``upper``)."""
         x = self.X + u.reshape(-1, 3)
         want = data is not None
-        positions = self.upper["positions"] if upper else self.positions
+        start, local, pos = self.scatter[upper]
         return assemble(x, self.tri, self.nodes, self.B, self.b, self.K0, self.d, self.area, self.thickness,
                         float(self.material.youngs_modulus), float(self.material.poisson_ratio),
-                        positions, grad, data if want else np.zeros(1), want, bending_only)
+                        start, local, pos, grad, data if want else np.zeros(1), want, bending_only)
 
     def energy(self, u: np.ndarray, bending_only: bool = False) -> float:
         return self.evaluate(u, np.zeros(self.n_dofs), bending_only=bending_only)
@@ -663,8 +691,10 @@ class SymmetricSolver:
         self.fixed_diagonal = diagonal[fixed]
         self._indptr = indptr.astype(PETSc.IntType)
         self._indices = indices.astype(PETSc.IntType)
-        self.A = PETSc.Mat().createAIJ((n, n), csr=(self._indptr, self._indices, np.zeros(len(indices))),
-                                       comm=PETSc.COMM_SELF)
+        # the matrix keeps (does not copy) these arrays: `factor` writes the values in place
+        self._values = np.zeros(len(indices))
+        self.A = PETSc.Mat().createAIJWithArrays((n, n), (self._indptr, self._indices, self._values),
+                                                 comm=PETSc.COMM_SELF)
         self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         self.A.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
         self.ksp = PETSc.KSP().create(PETSc.COMM_SELF)
@@ -681,10 +711,11 @@ class SymmetricSolver:
         self.factorisations = 0
 
     def factor(self, data: np.ndarray) -> None:
-        data[self.zero] = 0.0
-        data[self.fixed_diagonal] = 1.0
-        self.A.setValuesCSR(self._indptr, self._indices, data)
-        self.A.assemble()
+        values = self._values
+        values[:] = data
+        values[self.zero] = 0.0
+        values[self.fixed_diagonal] = 1.0
+        self.A.assemble()  # the values changed in place: a new state, so the PC refactorises
         self.ksp.setOperators(self.A)
         self.ksp.setUp()
         self.factorisations += 1
@@ -728,24 +759,30 @@ class Dynamics:
         self.u = np.zeros(shell.n_dofs)
         self.v = np.zeros(shell.n_dofs)
         self.force = np.zeros(shell.n_dofs)
-        self.M = shell.matrix(shell.mass_data)
+        self.M = shell.matrix(shell.mass_data).copy()  # a copy: the pattern arrays are the shell's
+        self.M.eliminate_zeros()  # vertex–vertex blocks only: a fifth of the 12-node pattern
         self.data = np.zeros(len(shell.upper["indices"])) if upper else shell.new_data()
         self.mass_data = shell.upper["mass"] if upper else shell.mass_data
         self.grad = np.zeros(shell.n_dofs)
         self.extra = []
-        # Newton starts from u_n + θ Δt v_n, θ = `predictor`: with θ = 1, 2 iterations a step once
-        # the released lens moves smoothly (3 from u_n), more in the first steps after the
-        # release; over 100 steps of the lens release (patch curvature) θ = 0 / 0.5 / 0.8 / 1 take 326 / 335 /
-        # 332 / 259 Newton iterations
-        self.predictor = 1.0
+        # Newton's start (`_predict`): "select" takes the one of u_n, u_n + Δt v_n and
+        # u_n + Δt (2 v_n − v_{n−1}) with the smallest residual; "previous" takes u_n (statics)
+        self.predictor = "select"
+        self.v_previous: np.ndarray | None = None
+        # None: a fresh Hessian and factorisation every iteration (Newton). A number s: every step
+        # starts with fresh factors, which later iterations of the step reuse while each reduces
+        # the residual to below s times the previous one (else fresh factors at the new iterate;
+        # an iteration on reused factors that does not reduce it is undone first)
+        self.stall: float | None = None
         # energy backtracking (off: it did not lower the iterations of the release)
         self.line_search = False
         self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "other"), 0.0)
-        self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations"), 0)
+        self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations", "rejected"), 0)
 
     def reset(self, u0: np.ndarray, v0: np.ndarray | None = None) -> None:
         self.u = np.array(u0, dtype=float)
         self.v = np.zeros_like(self.u) if v0 is None else np.array(v0, dtype=float)
+        self.v_previous = None
         self.clock = dict.fromkeys(self.clock, 0.0)
         self.counts = dict.fromkeys(self.counts, 0)
 
@@ -796,34 +833,64 @@ class Dynamics:
                 trial = u - alpha * du
         return trial, self._system(trial, u_n, v_n, False)
 
+    def _predict(self, u_n, v_n, r_n) -> tuple[np.ndarray, np.ndarray]:
+        """Newton's start and its residual. ``select``: of u_n (residual r_n), the backward-Euler
+        velocity extrapolation u_n + Δt v_n and its acceleration-corrected form
+        u_n + Δt (2 v_n − v_{n−1}), the one with the smallest residual (two gradient passes, a
+        fraction of a Newton iteration). Right after the release the lens decelerates, so an
+        extrapolation overshoots and u_n is best; once the motion is smooth the
+        acceleration-corrected one is (lens release: 100 instead of 119 Newton iterations in
+        30 steps, 2 → 1 per step in the smooth phase)."""
+        if self.predictor == "previous" or not np.any(v_n):
+            return u_n.copy(), r_n
+        candidates = [u_n + self.dt * v_n]
+        if self.v_previous is not None:
+            candidates.append(u_n + self.dt * (2.0 * v_n - self.v_previous))
+        best, best_r, best_norm = u_n.copy(), r_n, np.linalg.norm(r_n)
+        for u in candidates:
+            r = self._system(u, u_n, v_n, False)
+            if np.linalg.norm(r) < best_norm:
+                best, best_r, best_norm = u, r, np.linalg.norm(r)
+        return best, best_r
+
     def step(self) -> int:
-        """One step from (u, v); returns the Newton iterations. Newton starts from the
-        predictor u_n + θ Δt v_n; the tolerance is relative to the residual at u_n (as in
-        ``iol-speed``'s P2 loop, whose first iterate is u_n). Raises RuntimeError when Newton
-        does not converge (the state is then left at the last converged step)."""
+        """One step from (u, v); returns the Newton iterations (each one linear solve; rejected
+        ones included, but not in the ``max_iterations`` cap: they are undone). The tolerance is relative to the residual at u_n (as in ``iol-speed``'s
+        P2 loop, whose first iterate is u_n): ‖R‖ ≤ max(rtol ‖R(u_n)‖, atol). Raises
+        RuntimeError when Newton does not converge (the state is then left at the last
+        converged step)."""
         u_n, v_n = self.u.copy(), self.v.copy()
-        norm0 = np.linalg.norm(self._system(u_n, u_n, v_n, False))
+        r_n = self._system(u_n, u_n, v_n, False)
+        norm0 = np.linalg.norm(r_n)
         tolerance = max(self.rtol * norm0, self.atol)
-        u = u_n + (self.predictor * self.dt) * v_n
-        r = self._system(u, u_n, v_n, False)
-        norm, iterations = np.linalg.norm(r), 0
+        u, r = self._predict(u_n, v_n, r_n)
+        norm, iterations, rejected, fresh = np.linalg.norm(r), 0, 0, True
         while norm > tolerance:
-            if iterations >= self.max_iterations or not np.isfinite(norm):
+            if iterations - rejected >= self.max_iterations or not np.isfinite(norm):
                 raise RuntimeError(f"rotation-free Newton: no convergence in {iterations} iterations "
                                    f"(residual {norm:.3e} of {norm0:.3e}) at Δt = {self.dt:g} s")
-            self._system(u, u_n, v_n, True)  # the Jacobian (and the same residual again)
+            if fresh:
+                self._system(u, u_n, v_n, True)  # the Jacobian (and the same residual again)
+                t0 = time.process_time()
+                self.solver.factor(self.data)
+                self.clock["factorisation"] += time.process_time() - t0
+                self.counts["factorisations"] += 1
             t0 = time.process_time()
-            self.solver.factor(self.data)
-            t1 = time.process_time()
             du = self.solver.solve(r)
-            self.clock["factorisation"] += t1 - t0
-            self.clock["solve"] += time.process_time() - t1
-            self.counts["factorisations"] += 1
+            self.clock["solve"] += time.process_time() - t0
             iterations += 1
-            u, r = self._line_search(u, du, r, u_n, v_n)
-            norm = np.linalg.norm(r)
+            trial, r_trial = self._line_search(u, du, r, u_n, v_n)
+            new = np.linalg.norm(r_trial)
+            if not fresh and not new < norm:  # the reused factors no longer contract: undo, refresh
+                self.counts["rejected"] += 1
+                rejected += 1
+                fresh = True
+                continue
+            fresh = self.stall is None or new > self.stall * norm
+            u, r, norm = trial, r_trial, new
         self.counts["iterations"] += iterations
         self.u = u
+        self.v_previous = v_n
         self.v = (u - u_n) / self.dt
         return iterations
 
@@ -960,12 +1027,14 @@ class FastLens:
         return (rolled(X, 1.0 / radius) - X).ravel()
 
 
-def release(params, steps: int | None = None, lens: FastLens | None = None) -> dict:
+def release(params, steps: int | None = None, lens: FastLens | None = None, stall: float | None = None) -> dict:
     """The released rolled lens of ``iol-speed`` on the rotation-free model: per step the tip
-    and optic-centre mean displacements, Newton iterations, and the CPU/wall time per phase."""
+    and optic-centre mean displacements, Newton iterations, and the CPU/wall time per phase.
+    ``stall``: ``Dynamics.stall`` (None: a fresh factorisation every Newton iteration)."""
     lens = lens or FastLens.build(params)
     dyn = Dynamics(lens.shell, params.time_step, params.damping, rtol=params.rtol, atol=params.atol,
                    max_iterations=params.max_iterations)
+    dyn.stall = stall
     steps = params.steps if steps is None else steps
     dyn.reset(lens.rolled_displacement(params.roll_radius))
     history = {"tip": [], "optic": [], "iterations": []}
@@ -1104,7 +1173,7 @@ def cantilever_rolling(divisions: int = 32, width_divisions: int = 2, moment_fra
 
     fixed = (3 * np.flatnonzero(root)[:, None] + np.arange(3)).ravel()
     dyn = Dynamics(shell, 1.0, 0.0, fixed=fixed, rtol=1e-8, atol=1e-9, max_iterations=100, upper=False)
-    dyn.predictor = 0.0
+    dyn.predictor = "previous"
     dyn.line_search = line_search
     dyn.extra.append(moment_term)
     for k in range(1, load_steps + 1):
