@@ -343,10 +343,11 @@ def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
 
 
 @njit(cache=True)
-def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
+def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work, mirror=True):
     """Patch bending energy ½ D A [ν (tr κ)² + (1−ν) κ:κ] of one triangle (x: 6 × 3 patch
     positions, vertices 0–2 first); adds its gradient (18) and Hessian (18 × 18). ``work``:
-    scratch (``bending_scratch()``), so the element loop allocates nothing."""
+    scratch (``bending_scratch()``), so the element loop allocates nothing. ``mirror=False``:
+    only the Hessian's p ≤ q entries are guaranteed (what the upper-triangle scatter reads)."""
     Cs, Nn, H, dk, SC, S, M = work
     NP = B.shape[1]
     e1x, e1y, e1z = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
@@ -400,7 +401,7 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
         for q in range(p, 3 * NP):
             v = g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q]
             hess[p, q] += v
-            if q != p:
+            if mirror and q != p:
                 hess[q, p] += v
     # Σ_k m_k ∇²κ_k with y = k_b Σ_k m_k H_k (∇²κ is linear in H)
     y0 = k_b * (m0 * H[0, 0] + m1 * H[1, 0] + m2 * H[2, 0])
@@ -463,10 +464,11 @@ def bending_scratch(n_nodes):
 
 @njit(cache=True)
 def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, scatter_local, scatter_pos,
-             grad, data, want_hess, bending_only):
+             grad, data, want_hess, bending_only, mirror):
     """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``:
     triangle t adds its element matrix's flat entries ``scatter_local[k]`` at
-    ``data[scatter_pos[k]]`` for k in ``scatter_start[t]:scatter_start[t + 1]`` (``scatter_lists``)."""
+    ``data[scatter_pos[k]]`` for k in ``scatter_start[t]:scatter_start[t + 1]`` (``scatter_lists``;
+    ``mirror=False`` when they read only its p ≤ q entries)."""
     lam = E * nu / (1.0 - nu * nu)
     mu = 0.5 * E / (1.0 + nu)
     energy = 0.0
@@ -484,7 +486,7 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, 
         if want_hess:
             hb[:, :] = 0.0
         D = E * h ** 3 / (12.0 * (1.0 - nu * nu))
-        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work)
+        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work, mirror)
         if not bending_only:
             energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gb[:9], hb[:9, :9], want_hess,
                                        a1, a2, dE)
@@ -636,7 +638,7 @@ class RotationFreeShell:
         start, local, pos = self.scatter[upper]
         return assemble(x, self.tri, self.nodes, self.B, self.b, self.K0, self.d, self.area, self.thickness,
                         float(self.material.youngs_modulus), float(self.material.poisson_ratio),
-                        start, local, pos, grad, data if want else np.zeros(1), want, bending_only)
+                        start, local, pos, grad, data if want else np.zeros(1), want, bending_only, not upper)
 
     def energy(self, u: np.ndarray, bending_only: bool = False) -> float:
         return self.evaluate(u, np.zeros(self.n_dofs), bending_only=bending_only)
