@@ -856,8 +856,9 @@ class Dynamics:
         return best, best_r
 
     def step(self) -> int:
-        """One step from (u, v); returns the Newton iterations (each one linear solve; rejected
-        ones included, but not in the ``max_iterations`` cap: they are undone). The tolerance is relative to the residual at u_n (as in ``iol-speed``'s
+        """One step from (u, v); returns the Newton iterations (each one linear solve, rejected
+        ones included; ``max_iterations`` caps those on fresh factors and those on reused
+        ones, each). The tolerance is relative to the residual at u_n (as in ``iol-speed``'s
         P2 loop, whose first iterate is u_n): ‖R‖ ≤ max(rtol ‖R(u_n)‖, atol). Raises
         RuntimeError when Newton does not converge (the state is then left at the last
         converged step)."""
@@ -866,9 +867,10 @@ class Dynamics:
         norm0 = np.linalg.norm(r_n)
         tolerance = max(self.rtol * norm0, self.atol)
         u, r = self._predict(u_n, v_n, r_n)
-        norm, iterations, rejected, fresh = np.linalg.norm(r), 0, 0, True
+        norm, iterations, factorised, fresh = np.linalg.norm(r), 0, 0, True
         while norm > tolerance:
-            if iterations - rejected >= self.max_iterations or not np.isfinite(norm):
+            # the cap bounds the iterations on fresh factors and, separately, those on reused ones
+            if max(factorised, iterations - factorised) >= self.max_iterations or not np.isfinite(norm):
                 raise RuntimeError(f"rotation-free Newton: no convergence in {iterations} iterations "
                                    f"(residual {norm:.3e} of {norm0:.3e}) at Δt = {self.dt:g} s")
             if fresh:
@@ -877,6 +879,7 @@ class Dynamics:
                 self.solver.factor(self.data)
                 self.clock["factorisation"] += time.process_time() - t0
                 self.counts["factorisations"] += 1
+                factorised += 1
             t0 = time.process_time()
             du = self.solver.solve(r)
             self.clock["solve"] += time.process_time() - t0
@@ -885,7 +888,6 @@ class Dynamics:
             new = np.linalg.norm(r_trial)
             if not fresh and not new < norm:  # the reused factors no longer contract: undo, refresh
                 self.counts["rejected"] += 1
-                rejected += 1
                 fresh = True
                 continue
             fresh = self.stall is None or new > self.stall * norm
