@@ -31,6 +31,11 @@ References and tolerances
 - Cantilever vibration: Euler–Bernoulli ω₁ = 1.8751² √(EI/ρA)/L² = 105.8 rad/s (ν = 0, so the
   plate strip's first mode is the beam's); asserted within 0.5 % at 24 × 4 (measured
   −0.08 % structured, −0.06 % gmsh; second order).
+- Solver structure (coarse lens, 250 triangles, 10 steps of the release): PETSc's log counts
+  one symbolic Cholesky factorisation per run and as many numeric ones as the run reports,
+  for fresh and lagged factors. Converged answer: the tip at the Newton tolerance rtol 1e-6
+  against rtol 1e-10 within 1e-8 mm with fresh factors (measured 2.5e-10) and 1e-6 mm with
+  lagged ones (measured 1.5e-8: linear convergence), while the tip moves 0.09 mm.
 - Lens release (``iol-speed``, paper resolution, Δt = 0.01 s): tip and optic-centre
   displacement histories within 0.05 mm of the P2 C0-IP run at every one of 20 steps
   (issue 23; measured ≤ 0.037 mm tip, ≤ 0.009 mm optic).
@@ -226,7 +231,7 @@ def test_one_symbolic_factorisation_per_run():
 
 
 def test_newton_tolerance_and_lagged_factors_give_the_converged_answer():
-    # the release's tip over 10 steps (≈ 0.5 mm of motion) at rtol 1e-6 (fresh and lagged factors)
+    # the release's tip over 10 steps (it moves 0.09 mm) at rtol 1e-6 (fresh and lagged factors)
     # against rtol 1e-10: measured 2.5e-10 mm (fresh) and 1.5e-8 mm (lagged, linear convergence)
     params, lens = _coarse_lens_release()
     tight, _ = _coarse_lens_release(rtol=1e-10)
@@ -234,7 +239,7 @@ def test_newton_tolerance_and_lagged_factors_give_the_converged_answer():
     for stall, bound in ((None, 1e-8), (0.2, 1e-6)):
         tip = np.asarray(rf.release(params, 10, lens, stall)["history"]["tip"])
         assert np.abs(tip - reference).max() < bound
-    assert np.abs(reference[-1]).max() > 0.1  # the lens has moved
+    assert np.linalg.norm(reference[-1] - reference[0]) > 0.05  # the lens has moved (measured 0.09 mm)
 
 
 @pytest.mark.slow
