@@ -673,7 +673,10 @@ class SymmetricSolver:
     Dirichlet dofs become identity rows and columns. The symbolic analysis is done at the
     first factorisation and reused (same nonzero pattern)."""
 
-    def __init__(self, shell: RotationFreeShell, fixed: np.ndarray | None = None, upper: bool = False):
+    def __init__(self, shell: RotationFreeShell, fixed: np.ndarray | None = None, upper: bool = False,
+                 pattern: tuple | None = None):
+        """``pattern``: (indptr, indices, diagonal positions) of an upper-triangle pattern other
+        than the shell's (the shell's grown by contact pairs)."""
         import eyemech.meshes  # noqa: F401, I001  (first: it orders MPI ahead of PETSc for the PyPI wheel)
         from petsc4py import PETSc
 
@@ -684,7 +687,9 @@ class SymmetricSolver:
         self.fixed = fixed
         mask = np.zeros(n, dtype=bool)
         mask[fixed] = True
-        if upper:
+        if pattern is not None:
+            indptr, indices, diagonal = pattern
+        elif upper:
             indptr, indices, diagonal = shell.upper["indptr"], shell.upper["indices"], shell.upper["diagonal"]
         else:
             indptr, indices, diagonal = shell.indptr, shell.indices, shell.diagonal
@@ -757,6 +762,7 @@ class Dynamics:
         self.dt, self.c = time_step, damping
         self.upper = upper
         self.solver = SymmetricSolver(shell, fixed, upper=upper)
+        self._fixed = fixed
         self.rtol, self.atol, self.max_iterations = rtol, atol, max_iterations
         self.u = np.zeros(shell.n_dofs)
         self.v = np.zeros(shell.n_dofs)
@@ -778,8 +784,68 @@ class Dynamics:
         self.stall: float | None = None
         # energy backtracking (off: it did not lower the iterations of the release)
         self.line_search = False
-        self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "other"), 0.0)
-        self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations", "rejected"), 0)
+        self.contact = None
+        self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "contact", "other"), 0.0)
+        self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations", "rejected",
+                                     "pattern_growths", "step_limits"), 0)
+
+    def set_contact(self, contact) -> None:
+        """Self-contact (``surface_contact.SurfaceSelfContact``): its barrier joins the energy,
+        its CCD limits every update; the Jacobian's pattern starts as the shell's upper triangle
+        and grows by the 3 × 3 blocks of vertex pairs a contact Hessian brings (``_grow``)."""
+        if not self.upper or self.extra:
+            raise ValueError("self-contact runs on the upper-triangle Jacobian without extra terms")
+        self.contact = contact
+        self.pattern_reach = 4.0  # the grown pattern holds the pairs within this many d̂
+        n = self.shell.n_dofs
+        up = self.shell.upper
+        self._shell_keys = np.repeat(np.arange(n), np.diff(up["indptr"])) * n + up["indices"]
+        self._keys = self._shell_keys.copy()
+        self._shell_map = np.arange(len(self._keys))
+        self.shell_data = np.zeros(len(self._keys))
+
+    def _grow(self, keys: np.ndarray) -> None:
+        """Add the (upper) 3 × 3 blocks of the vertex pairs of ``keys`` (row · n + col) to the
+        pattern: a new matrix and symbolic factorisation (counted in ``pattern_growths``)."""
+        n = self.shell.n_dofs
+        v = np.sort(np.column_stack([keys // n // 3, keys % n // 3]), axis=1)
+        v = np.unique(v, axis=0)
+        a = 3 * v[:, 0, None, None] + np.arange(3)[None, :, None]
+        b = 3 * v[:, 1, None, None] + np.arange(3)[None, None, :]
+        blocks = (np.minimum(a, b) * n + np.maximum(a, b)).ravel()
+        self._keys = np.union1d(self._keys, blocks)
+        self._shell_map = np.searchsorted(self._keys, self._shell_keys)
+        rows = self._keys // n
+        indptr = np.zeros(n + 1, dtype=np.int64)
+        np.add.at(indptr, rows + 1, 1)
+        pattern = (np.cumsum(indptr), self._keys % n, np.searchsorted(self._keys, np.arange(n) * (n + 1)))
+        self.solver = SymmetricSolver(self.shell, self._fixed, upper=True, pattern=pattern)
+        self.mass_data = np.zeros(len(self._keys))
+        self.mass_data[self._shell_map] = self.shell.upper["mass"]
+        self.data = np.zeros(len(self._keys))
+        self.counts["pattern_growths"] += 1
+
+    def _contact_terms(self, u: np.ndarray, with_jacobian: bool) -> None:
+        """Adds the barrier's gradient to ``grad`` and, with the Jacobian, its Hessian to
+        ``data`` (growing the pattern first when it brings new vertex pairs)."""
+        t0 = time.process_time()
+        x = self.shell.X + u.reshape(-1, 3)
+        self.grad += self.contact.gradient(x)
+        if with_jacobian:
+            hessian = self.contact.hessian(x)
+            if hessian is not None:
+                h = hessian.tocoo()
+                keep = (h.row <= h.col) & (h.data != 0.0)
+                keys = h.row[keep].astype(np.int64) * self.shell.n_dofs + h.col[keep]
+                pos = np.searchsorted(self._keys, keys)
+                if np.any(pos >= len(self._keys)) or np.any(self._keys[np.minimum(pos, len(self._keys) - 1)] != keys):
+                    # a superset: every pair within `pattern_reach` d̂, not only the active ones
+                    self._grow(np.union1d(keys, self.contact.pairs_within(x, self.pattern_reach * self.contact.dhat)))
+                    pos = np.searchsorted(self._keys, keys)
+                self._contact_entries = (pos, h.data[keep])
+            else:
+                self._contact_entries = None
+        self.clock["contact"] += time.process_time() - t0
 
     def reset(self, u0: np.ndarray, v0: np.ndarray | None = None) -> None:
         self.u = np.array(u0, dtype=float)
@@ -790,21 +856,34 @@ class Dynamics:
 
     def _system(self, u, u_n, v_n, with_jacobian: bool) -> np.ndarray:
         coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
-        t0 = time.process_time()
+        t0, contact0 = time.process_time(), self.clock["contact"]  # contact time is booked apart
         self.grad[:] = 0.0
-        if with_jacobian:
+        if with_jacobian and self.contact is not None:
+            self.shell_data[:] = 0.0
+            self.shell.evaluate(u, self.grad, self.shell_data, upper=True)
+            self._contact_terms(u, True)  # may grow the pattern (new data / mass arrays)
+            self.data[:] = 0.0
+            self.data[self._shell_map] = self.shell_data
+            self.data += coefficient * self.mass_data
+            if self._contact_entries is not None:
+                np.add.at(self.data, *self._contact_entries)
+            self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
+            self.counts["jacobians"] += 1
+        elif with_jacobian:
             self.data[:] = 0.0
             self.shell.evaluate(u, self.grad, self.data, upper=self.upper)
             for term in self.extra:
                 term(u, self.grad, self.data)
             self.data += coefficient * self.mass_data
-            self.clock["jacobian"] += time.process_time() - t0
+            self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
             self.counts["jacobians"] += 1
         else:
             self.shell.evaluate(u, self.grad)
             for term in self.extra:
                 term(u, self.grad, None)
-            self.clock["residual"] += time.process_time() - t0
+            if self.contact is not None:
+                self._contact_terms(u, False)
+            self.clock["residual"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
         self.counts["residuals"] += 1
         r = self.grad - self.force + self.M @ (coefficient * (u - u_n) - v_n / self.dt)
         r[self.solver.fixed] = 0.0
@@ -815,7 +894,8 @@ class Dynamics:
         whose gradient is R(u): the backward-Euler step minimises it."""
         coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
         w = u - u_n
-        return (self.shell.energy(u) + sum(term(u, np.zeros_like(u), None) for term in self.extra)
+        barrier = 0.0 if self.contact is None else self.contact.energy(self.shell.X + u.reshape(-1, 3))
+        return (self.shell.energy(u) + barrier + sum(term(u, np.zeros_like(u), None) for term in self.extra)
                 - self.force @ u + w @ (self.M @ (0.5 * coefficient * w - v_n / self.dt)))
 
     def _line_search(self, u, du, r, u_n, v_n):
@@ -835,6 +915,14 @@ class Dynamics:
                 trial = u - alpha * du
         return trial, self._system(trial, u_n, v_n, False)
 
+    def _collision_free_fraction(self, u: np.ndarray, step: np.ndarray) -> float:
+        """The fraction of the straight path u → u + step that is collision-free (CCD)."""
+        t0 = time.process_time()
+        x0 = self.shell.X + u.reshape(-1, 3)
+        fraction = self.contact.step_fraction(x0, x0 + step.reshape(-1, 3))
+        self.clock["contact"] += time.process_time() - t0
+        return fraction
+
     def _predict(self, u_n, v_n, r_n) -> tuple[np.ndarray, np.ndarray]:
         """Newton's start and its residual. ``select``: of u_n (residual r_n), the backward-Euler
         velocity extrapolation u_n + Δt v_n and its acceleration-corrected form
@@ -850,6 +938,8 @@ class Dynamics:
             candidates.append(u_n + self.dt * (2.0 * v_n - self.v_previous))
         best, best_r, best_norm = u_n.copy(), r_n, np.linalg.norm(r_n)
         for u in candidates:
+            if self.contact is not None and self._collision_free_fraction(u_n, u - u_n) < 1.0:
+                continue  # the barrier is not defined past a crossing
             r = self._system(u, u_n, v_n, False)
             if np.linalg.norm(r) < best_norm:
                 best, best_r, best_norm = u, r, np.linalg.norm(r)
@@ -883,6 +973,11 @@ class Dynamics:
             t0 = time.process_time()
             du = self.solver.solve(r)
             self.clock["solve"] += time.process_time() - t0
+            if self.contact is not None:
+                fraction = self._collision_free_fraction(u, -du)
+                if fraction < 1.0:
+                    du = fraction * du
+                    self.counts["step_limits"] += 1
             iterations += 1
             trial, r_trial = self._line_search(u, du, r, u_n, v_n)
             new = np.linalg.norm(r_trial)
