@@ -1126,23 +1126,40 @@ class FastLens:
         return (rolled(X, 1.0 / radius) - X).ravel()
 
 
-def release(params, steps: int | None = None, lens: FastLens | None = None, stall: float | None = None) -> dict:
+def release(params, steps: int | None = None, lens: FastLens | None = None, stall: float | None = None,
+            self_contact: bool = False) -> dict:
     """The released rolled lens of ``iol-speed`` on the rotation-free model: per step the tip
     and optic-centre mean displacements, Newton iterations, and the CPU/wall time per phase.
-    ``stall``: ``Dynamics.stall`` (None: a fresh factorisation every Newton iteration)."""
+    ``stall``: ``Dynamics.stall`` (None: a fresh factorisation every Newton iteration).
+    ``self_contact``: ipctk self-contact on the P1 triangles (d̂ = ``self_contact_distance``,
+    κ = ``self_contact_stiffness``), and ipctk's intersection check after every step (its
+    time booked as contact); ``history["intersecting"]`` counts the steps that intersect."""
     lens = lens or FastLens.build(params)
     dyn = Dynamics(lens.shell, params.time_step, params.damping, rtol=params.rtol, atol=params.atol,
                    max_iterations=params.max_iterations)
     dyn.stall = stall
+    contact = None
+    if self_contact:
+        from eyemech.problems.lens.surface_contact import SurfaceSelfContact
+
+        contact = SurfaceSelfContact(lens.shell.X, lens.shell.tri, params.self_contact_distance,
+                                     params.self_contact_stiffness)
+        dyn.set_contact(contact)
     steps = params.steps if steps is None else steps
     dyn.reset(lens.rolled_displacement(params.roll_radius))
-    history = {"tip": [], "optic": [], "iterations": []}
+    history = {"tip": [], "optic": [], "iterations": [], "intersecting": 0, "min_distance": np.inf}
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
         history["iterations"].append(dyn.step())
         u = dyn.u.reshape(-1, 3)
         history["tip"].append(u[lens.tip_nodes].mean(axis=0).tolist())
         history["optic"].append(u[lens.optic_nodes].mean(axis=0).tolist())
+        if contact is not None:
+            t0 = time.process_time()
+            x = lens.shell.X + u
+            history["intersecting"] += contact.intersecting(x)
+            history["min_distance"] = min(history["min_distance"], contact.min_distance(x))
+            dyn.clock["contact"] += time.process_time() - t0
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     clock = dict(dyn.clock)
     clock["other"] = cpu - sum(v for k, v in clock.items() if k != "other")

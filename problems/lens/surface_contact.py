@@ -32,7 +32,11 @@ class SurfaceSelfContact:
     """ipctk self-contact of the P1 triangle surface (points X (n, 3), triangles (m, 3))."""
 
     def __init__(self, X: np.ndarray, triangles: np.ndarray, dhat: float, stiffness: float,
-                 exclusion: float | None = None):
+                 exclusion: float | None = None, margin: float | None = None):
+        """``margin`` δ (default 4 d̂): the candidate pairs are those within d̂ + δ of each
+        other at the positions x_b of their build (ipctk BVH, boxes inflated by d̂ + δ), reused
+        for every x with max_v |x_v − x_b,v| ≤ δ/2 — no pair outside them can then come within
+        d̂ — and rebuilt otherwise (``rebuilds`` counts them)."""
         import ipctk
         import scipy.sparse
         from scipy.sparse.csgraph import dijkstra
@@ -56,18 +60,36 @@ class SurfaceSelfContact:
         self.barrier = ipctk.BarrierPotential(self.dhat)
         self._ccd = ipctk.AdditiveCCD(conservative_rescaling=0.9)
         self._cache: tuple[np.ndarray, object] | None = None
+        self.margin = 4.0 * self.dhat if margin is None else float(margin)
+        self._candidates, self._x_build = None, None
+        self.rebuilds = 0
         self.step_limits: list[float] = []
         if self.intersecting(self.X) or len(self.collisions(self.X)):
             raise SelfContactError("the reference surface intersects itself or has non-excluded pairs "
                                    f"closer than d̂ = {self.dhat} mm")
 
+    def _covers(self, x: np.ndarray) -> bool:
+        return self._x_build is not None and \
+            float(np.max(np.sum((x - self._x_build) ** 2, axis=1))) <= (0.5 * self.margin) ** 2
+
+    def _candidates_for(self, x: np.ndarray):
+        """Candidates valid at x: the kept ones, or new ones built at x."""
+        if not self._covers(x):
+            self._candidates = self._ipctk.Candidates()
+            self._candidates.build(self.mesh, np.asfortranarray(x), self.dhat + self.margin,
+                                   broad_phase=self._ipctk.BVH())
+            self._x_build = np.array(x)
+            self.rebuilds += 1
+        return self._candidates
+
     def collisions(self, x: np.ndarray):
-        """The pairs closer than d̂ at x (BVH); the last x's are kept (residual and Hessian are
-        asked at the same iterate)."""
+        """The pairs closer than d̂ at x, from the kept candidates; the last x's are kept
+        (residual and Hessian are asked at the same iterate)."""
         if self._cache is not None and np.array_equal(self._cache[0], x):
             return self._cache[1]
+        candidates = self._candidates_for(x)
         collisions = self._ipctk.NormalCollisions()
-        collisions.build(self.mesh, np.asfortranarray(x), self.dhat, broad_phase=self._ipctk.BVH())
+        collisions.build(candidates, self.mesh, np.asfortranarray(x), self.dhat)
         self._cache = (np.array(x), collisions)
         return collisions
 
@@ -103,10 +125,18 @@ class SurfaceSelfContact:
         return h.row.astype(np.int64) * x.size + h.col
 
     def step_fraction(self, x0: np.ndarray, x1: np.ndarray) -> float:
-        """The largest fraction of the straight path x0 → x1 that is collision-free (CCD)."""
-        fraction = float(self._ipctk.compute_collision_free_stepsize(
-            self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), broad_phase=self._ipctk.BVH(),
-            narrow_phase_ccd=self._ccd))
+        """The largest fraction of the straight path x0 → x1 that is collision-free (CCD). With
+        both ends within δ/2 of the candidates' build positions, every point of the path is too
+        (a ball is convex), so the kept candidates hold every pair that can meet on it; else a
+        full BVH sweep."""
+        candidates = self._candidates_for(x0)
+        if self._covers(x1):
+            fraction = float(candidates.compute_collision_free_stepsize(
+                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), narrow_phase_ccd=self._ccd))
+        else:
+            fraction = float(self._ipctk.compute_collision_free_stepsize(
+                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), broad_phase=self._ipctk.BVH(),
+                narrow_phase_ccd=self._ccd))
         if fraction < 1.0:
             self.step_limits.append(fraction)
         return fraction
@@ -115,6 +145,7 @@ class SurfaceSelfContact:
         return bool(self._ipctk.has_intersections(self.mesh, np.asfortranarray(x), broad_phase=self._ipctk.BVH()))
 
     def min_distance(self, x: np.ndarray) -> float:
+        """The smallest distance of the pairs within d̂ (``inf`` when none is)."""
         collisions = self.collisions(x)
         return float(np.sqrt(collisions.compute_minimum_distance(self.mesh, np.asfortranarray(x)))) \
             if len(collisions) else float("inf")
