@@ -38,8 +38,9 @@ step costs when the shared machine is busy with other jobs. Methods:
   written in place), MUMPS LDLᵀ with one symbolic analysis per run; ``method=newton`` from
   the best-residual predictor (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian
   and factorisation every iteration) or ``lagged`` (fresh factors at each step's start, kept
-  within the step while an iteration reduces the residual by ``stall``), deformation only
-  (no capsule yet). ``bending``: ``edge`` (default,
+  within the step while an iteration reduces the residual by ``stall``); no capsule yet;
+  ``surface_contact=true`` adds ipctk self-contact on the P1 triangles
+  (``problems/lens/surface_contact.py``) and an intersection check after every step. ``bending``: ``edge`` (default,
   consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
   meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
   Hessian assembly (one kernel pass), ``residual`` the gradient-only passes.
@@ -89,6 +90,9 @@ class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle: numba kernels, method=newton with jacobian=fresh or "
                                     "lagged, no contact yet)")
+    surface_contact: bool = field(False, "p1-rotation-free: ipctk self-contact on the P1 triangles (barrier "
+                                         "d̂ = self_contact_distance, κ = self_contact_stiffness, CCD-limited "
+                                         "updates, intersection check every step)")
     bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
                                      "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
                                      "too soft on alternating-diagonal meshes)")
@@ -138,6 +142,9 @@ class Parameters(LensParameters):
                                      "set contact=false")
             if self.scheme != "backward-euler":
                 raise ParameterError("scheme", "model=p1-rotation-free integrates with backward-euler only")
+        elif self.surface_contact:
+            raise ParameterError("surface_contact", "the P1 surface's self-contact is model=p1-rotation-free's "
+                                 "(the P2 lens' is iol-injection's)")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
             raise ParameterError("capsule_semi_axes", "three positive semi-axes, mm")
         if self.roll_radius < 0.5 * self.overall_length / np.pi:
@@ -416,7 +423,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
 
     def timed(steps: int) -> dict:
         try:
-            return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None)
+            return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None,
+                           self_contact=params.surface_contact)
         except RuntimeError as err:  # Newton did not converge within max_iterations
             raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
                                  f"from the released roll (Newton: {err}); take a smaller time_step") from err
@@ -438,6 +446,10 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         tip_history=history["tip"], optic_history=history["optic"],
         time=[params.time_step * (i + 1) for i in range(steps)], load_average=os.getloadavg()[0],
         dofs=best["dofs"], cells=best["cells"], nodes=best["nodes"])
+    if params.surface_contact:
+        ctx.result.quantities.update(intersecting_steps=history["intersecting"],
+                                     min_self_distance_mm=history["min_distance"] if np.isfinite(history["min_distance"])
+                                     else None)  # None: no pair came within d̂
 
 
 def _lens(params: Parameters) -> LensShell:

@@ -36,6 +36,9 @@ References and tolerances
   for fresh and lagged factors. Converged answer: the tip at the Newton tolerance rtol 1e-6
   against rtol 1e-10 within 1e-8 mm with fresh factors (measured 2.5e-10) and 1e-6 mm with
   lagged ones (measured 1.5e-8: linear convergence), while the tip moves 0.09 mm.
+- Self-contact on the P1 surface (ipctk): a U-folded strip pressed onto itself by 5× the
+  load that brings its tip to the bottom layer intersects itself without the barrier and
+  never with it (ipctk's exact check after every step), resting within d̂.
 - Lens release (``iol-speed``, paper resolution, Δt = 0.01 s): tip and optic-centre
   displacement histories within 0.05 mm of the P2 C0-IP run at every one of 20 steps
   (issue 23; measured ≤ 0.037 mm tip, ≤ 0.009 mm optic).
@@ -193,6 +196,8 @@ def test_iol_speed_refuses_what_the_fast_model_cannot_do():
         iol_speed.Parameters(model="p1-rotation-free", method="linearised").validate()
     with pytest.raises(ParameterError, match="method"):
         iol_speed.Parameters(model="p1-rotation-free", jacobian="matrix-free").validate()
+    with pytest.raises(ParameterError, match="surface_contact"):
+        iol_speed.Parameters(surface_contact=True).validate()
     with pytest.raises(ParameterError, match="stall"):
         iol_speed.Parameters(model="p1-rotation-free", jacobian="lagged", stall=1.5).validate()
     with pytest.raises(ParameterError, match="haptic_thickness"):
