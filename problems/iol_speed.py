@@ -38,8 +38,9 @@ step costs when the shared machine is busy with other jobs. Methods:
   written in place), MUMPS LDLᵀ with one symbolic analysis per run; ``method=newton`` from
   the best-residual predictor (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian
   and factorisation every iteration) or ``lagged`` (fresh factors at each step's start, kept
-  within the step while an iteration reduces the residual by ``stall``); no capsule yet;
-  ``surface_contact=true`` adds ipctk self-contact on the P1 triangles
+  within the step while an iteration reduces the residual by ``stall``); ``contact=true``:
+  the same capsule, met by the P1 vertices through the same smoothed nodal penalty
+  (``surface_contact.NodalObstacles``); ``surface_contact=true`` adds ipctk self-contact on the P1 triangles
   (``problems/lens/surface_contact.py``) and an intersection check after every step. ``bending``: ``edge`` (default,
   consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
   meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
@@ -137,9 +138,6 @@ class Parameters(LensParameters):
             if self.jacobian == "lagged" and not 0.0 < self.stall < 1.0:
                 raise ParameterError("stall", "model=p1-rotation-free, jacobian=lagged: a contraction factor "
                                      "between 0 and 1")
-            if self.contact:
-                raise ParameterError("contact", "model=p1-rotation-free has no capsule contact yet: "
-                                     "set contact=false")
             if self.scheme != "backward-euler":
                 raise ParameterError("scheme", "model=p1-rotation-free integrates with backward-euler only")
         elif self.surface_contact:
@@ -377,7 +375,11 @@ def make_capsule(shell: LensShell, params: Parameters, u0: np.ndarray) -> Capsul
     are ``capsule_semi_axes`` grown uniformly, if needed, until the rolled lens starts 1 %
     inside it (a start in penetration is a violent, unphysical first step). The lens then
     touches it as it unrolls."""
-    x = shell.node_coordinates() + u0.reshape(-1, 3)
+    return capsule_around(shell.node_coordinates() + u0.reshape(-1, 3), params)
+
+
+def capsule_around(x: np.ndarray, params: Parameters) -> Capsule:
+    """``make_capsule``'s capsule about the lens positions x (n, 3)."""
     centre = 0.5 * (x.min(axis=0) + x.max(axis=0))
     semi = np.asarray(params.capsule_semi_axes, float)
     reach = np.sqrt(np.max(np.sum(((x - centre) / semi) ** 2, axis=1)))
@@ -421,10 +423,15 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         except (MeshInputError, ValueError) as err:
             raise ParameterError("mesh_scale", f"the rotation-free lens cannot use this mesh: {err}") from err
 
+    obstacles = None
+    if params.contact:
+        x = lens.shell.X + lens.rolled_displacement(params.roll_radius).reshape(-1, 3)
+        obstacles = {"capsule": capsule_around(x, params)}
+
     def timed(steps: int) -> dict:
         try:
             return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None,
-                           self_contact=params.surface_contact)
+                           self_contact=params.surface_contact, obstacles=obstacles)
         except RuntimeError as err:  # Newton did not converge within max_iterations
             raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
                                  f"from the released roll (Newton: {err}); take a smaller time_step") from err
@@ -446,6 +453,9 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         tip_history=history["tip"], optic_history=history["optic"],
         time=[params.time_step * (i + 1) for i in range(steps)], load_average=os.getloadavg()[0],
         dofs=best["dofs"], cells=best["cells"], nodes=best["nodes"])
+    if obstacles:
+        ctx.result.quantities.update(max_penetration_mm=max(history["penetration"], default=0.0),
+                                     capsule_semi_axes_mm=obstacles["capsule"].semi_axes.tolist())
     if params.surface_contact:
         ctx.result.quantities.update(intersecting_steps=history["intersecting"],
                                      min_self_distance_mm=history["min_distance"] if np.isfinite(history["min_distance"])

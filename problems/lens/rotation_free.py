@@ -785,24 +785,57 @@ class Dynamics:
         # energy backtracking (off: it did not lower the iterations of the release)
         self.line_search = False
         self.contact = None
+        self.obstacles = None
+        self._keys = None  # the upper pattern as sorted row · n + col (with contact or obstacles)
         self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "contact", "other"), 0.0)
         self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations", "rejected",
                                      "pattern_growths", "step_limits"), 0)
 
     def set_contact(self, contact) -> None:
         """Self-contact (``surface_contact.SurfaceSelfContact``): its barrier joins the energy,
-        its CCD limits every update; the Jacobian's pattern starts as the shell's upper triangle
+        its CCD limits every update, the energy line search is on; the Jacobian's pattern starts as the shell's upper triangle
         and grows by the 3 × 3 blocks of vertex pairs a contact Hessian brings (``_grow``)."""
         if not self.upper or self.extra:
             raise ValueError("self-contact runs on the upper-triangle Jacobian without extra terms")
         self.contact = contact
+        # full Newton steps cycle against the barrier (a folded strip pressed onto itself:
+        # residuals alternating 1e-7 / 1e-6 for 60 iterations, or 45 iterations in its first
+        # step); the Armijo backtracking on the incremental potential, barrier included (IPC's
+        # energy line search), takes 11 there
+        self.line_search = True
         self.pattern_reach = 4.0  # the grown pattern holds the pairs within this many d̂
-        n = self.shell.n_dofs
-        up = self.shell.upper
-        self._shell_keys = np.repeat(np.arange(n), np.diff(up["indptr"])) * n + up["indices"]
-        self._keys = self._shell_keys.copy()
+        self._init_keys()
         self._shell_map = np.arange(len(self._keys))
         self.shell_data = np.zeros(len(self._keys))
+
+    def set_obstacles(self, obstacles) -> None:
+        """Rigid obstacles met by the vertices (``surface_contact.NodalObstacles``): their
+        penalty joins the energy; its Hessian blocks sit on the vertices' own 3 × 3 diagonal
+        blocks, which the shell's pattern holds."""
+        if not self.upper:
+            raise ValueError("rigid obstacles run on the upper-triangle Jacobian")
+        self.obstacles = obstacles
+        self._init_keys()
+
+    def _init_keys(self) -> None:
+        if self._keys is None:
+            n = self.shell.n_dofs
+            up = self.shell.upper
+            self._shell_keys = np.repeat(np.arange(n), np.diff(up["indptr"])) * n + up["indices"]
+            self._keys = self._shell_keys.copy()
+
+    def _obstacle_terms(self, u: np.ndarray, with_jacobian: bool) -> None:
+        t0 = time.process_time()
+        x = self.shell.X + u.reshape(-1, 3)
+        self.grad += self.obstacles.gradient(x)
+        if with_jacobian:
+            nodes, blocks = self.obstacles.blocks(x)
+            if len(nodes):
+                a, c = np.triu_indices(3)
+                n = self.shell.n_dofs
+                keys = (3 * nodes[:, None] + a) * n + 3 * nodes[:, None] + c
+                np.add.at(self.data, np.searchsorted(self._keys, keys.ravel()), blocks[:, a, c].ravel())
+        self.clock["contact"] += time.process_time() - t0
 
     def _grow(self, keys: np.ndarray) -> None:
         """Add the (upper) 3 × 3 blocks of the vertex pairs of ``keys`` (row · n + col) to the
@@ -867,6 +900,8 @@ class Dynamics:
             self.data += coefficient * self.mass_data
             if self._contact_entries is not None:
                 np.add.at(self.data, *self._contact_entries)
+            if self.obstacles is not None:
+                self._obstacle_terms(u, True)
             self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
             self.counts["jacobians"] += 1
         elif with_jacobian:
@@ -875,6 +910,8 @@ class Dynamics:
             for term in self.extra:
                 term(u, self.grad, self.data)
             self.data += coefficient * self.mass_data
+            if self.obstacles is not None:
+                self._obstacle_terms(u, True)
             self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
             self.counts["jacobians"] += 1
         else:
@@ -883,6 +920,8 @@ class Dynamics:
                 term(u, self.grad, None)
             if self.contact is not None:
                 self._contact_terms(u, False)
+            if self.obstacles is not None:
+                self._obstacle_terms(u, False)
             self.clock["residual"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
         self.counts["residuals"] += 1
         r = self.grad - self.force + self.M @ (coefficient * (u - u_n) - v_n / self.dt)
@@ -894,7 +933,9 @@ class Dynamics:
         whose gradient is R(u): the backward-Euler step minimises it."""
         coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
         w = u - u_n
-        barrier = 0.0 if self.contact is None else self.contact.energy(self.shell.X + u.reshape(-1, 3))
+        x = self.shell.X + u.reshape(-1, 3)
+        barrier = (0.0 if self.contact is None else self.contact.energy(x)) + \
+            (0.0 if self.obstacles is None else self.obstacles.energy(x))
         return (self.shell.energy(u) + barrier + sum(term(u, np.zeros_like(u), None) for term in self.extra)
                 - self.force @ u + w @ (self.M @ (0.5 * coefficient * w - v_n / self.dt)))
 
@@ -1127,13 +1168,15 @@ class FastLens:
 
 
 def release(params, steps: int | None = None, lens: FastLens | None = None, stall: float | None = None,
-            self_contact: bool = False) -> dict:
+            self_contact: bool = False, obstacles: dict | None = None) -> dict:
     """The released rolled lens of ``iol-speed`` on the rotation-free model: per step the tip
     and optic-centre mean displacements, Newton iterations, and the CPU/wall time per phase.
     ``stall``: ``Dynamics.stall`` (None: a fresh factorisation every Newton iteration).
     ``self_contact``: ipctk self-contact on the P1 triangles (d̂ = ``self_contact_distance``,
     κ = ``self_contact_stiffness``), and ipctk's intersection check after every step (its
-    time booked as contact); ``history["intersecting"]`` counts the steps that intersect."""
+    time booked as contact); ``history["intersecting"]`` counts the steps that intersect.
+    ``obstacles``: rigid ones (name → gap/normal obstacle, e.g. the capsule) met through the
+    nodal penalty of stiffness ``contact_stiffness``; ``history["penetration"]`` per step."""
     lens = lens or FastLens.build(params)
     dyn = Dynamics(lens.shell, params.time_step, params.damping, rtol=params.rtol, atol=params.atol,
                    max_iterations=params.max_iterations)
@@ -1145,9 +1188,16 @@ def release(params, steps: int | None = None, lens: FastLens | None = None, stal
         contact = SurfaceSelfContact(lens.shell.X, lens.shell.tri, params.self_contact_distance,
                                      params.self_contact_stiffness)
         dyn.set_contact(contact)
+    walls = None
+    if obstacles:
+        from eyemech.problems.lens.surface_contact import NodalObstacles
+
+        walls = NodalObstacles(obstacles, params.contact_stiffness)
+        dyn.set_obstacles(walls)
     steps = params.steps if steps is None else steps
     dyn.reset(lens.rolled_displacement(params.roll_radius))
-    history = {"tip": [], "optic": [], "iterations": [], "intersecting": 0, "min_distance": np.inf}
+    history = {"tip": [], "optic": [], "iterations": [], "intersecting": 0, "min_distance": np.inf,
+               "penetration": []}
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
         history["iterations"].append(dyn.step())
@@ -1160,6 +1210,8 @@ def release(params, steps: int | None = None, lens: FastLens | None = None, stal
             history["intersecting"] += contact.intersecting(x)
             history["min_distance"] = min(history["min_distance"], contact.min_distance(x))
             dyn.clock["contact"] += time.process_time() - t0
+        if walls is not None:
+            history["penetration"].append(walls.max_penetration(lens.shell.X + u))
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     clock = dict(dyn.clock)
     clock["other"] = cpu - sum(v for k, v in clock.items() if k != "other")

@@ -149,3 +149,54 @@ class SurfaceSelfContact:
         collisions = self.collisions(x)
         return float(np.sqrt(collisions.compute_minimum_distance(self.mesh, np.asfortranarray(x)))) \
             if len(collisions) else float("inf")
+
+
+class NodalObstacles:
+    """Rigid obstacles (``problems/lens/injector.py``: a signed gap g, its normal n and where
+    it acts, per vertex) met by the P1 vertices through the smoothed nodal penalty of
+    ``problems/contact/rigid_wall.NodalContact``: Π_c = Σ_v φ(g_v), p = −φ′ = k⟨−g⟩ smoothed
+    over ±ε (``forms.contact.smoothed_penalty_pressure``), force −p n, Hessian −p′ n⊗n (the
+    curvature term k g ∂n/∂x left out, as there: a quasi-Newton tangent)."""
+
+    def __init__(self, obstacles: dict, stiffness: float, smoothing: float = 2e-3):
+        if not stiffness > 0:
+            raise ValueError(f"the obstacles' stiffness must be > 0, got {stiffness!r}")
+        self.obstacles, self.stiffness, self.smoothing = obstacles, float(stiffness), float(smoothing)
+
+    def _pressed(self, x: np.ndarray):
+        for obstacle in self.obstacles.values():
+            gap, normal, acts = obstacle.gap_normal(x)
+            hit = np.flatnonzero(acts & (gap < self.smoothing))
+            if len(hit):
+                yield hit, gap[hit], normal[hit]
+
+    def energy(self, x: np.ndarray) -> float:
+        """Σ φ(g): k (ε − g)³/(12ε) for |g| < ε, ½ k g² + k ε²/6 below (C², φ′ = −p)."""
+        k, eps, total = self.stiffness, self.smoothing, 0.0
+        for _, g, _ in self._pressed(x):
+            total += float(np.sum(np.where(g <= -eps, 0.5 * k * g ** 2 + k * eps ** 2 / 6,
+                                           k * (eps - g) ** 3 / (12 * eps))))
+        return total
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        from eyemech.forms.contact import smoothed_penalty_pressure
+
+        grad = np.zeros_like(x)
+        for nodes, g, n in self._pressed(x):
+            pressure, _ = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
+            np.add.at(grad, nodes, -pressure[:, None] * n)
+        return grad.ravel()
+
+    def blocks(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, their 3 × 3 Hessian blocks −p′ n⊗n)."""
+        from eyemech.forms.contact import smoothed_penalty_pressure
+
+        nodes, blocks = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 3, 3))]
+        for hit, g, n in self._pressed(x):
+            _, slope = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
+            nodes.append(hit)
+            blocks.append(-slope[:, None, None] * np.einsum("ni,nj->nij", n, n))
+        return np.concatenate(nodes), np.concatenate(blocks)
+
+    def max_penetration(self, x: np.ndarray) -> float:
+        return max([float(-g.min()) for _, g, _ in self._pressed(x)] + [0.0])
