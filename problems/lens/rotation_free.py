@@ -943,10 +943,17 @@ class Dynamics:
         """u − α du with α = 1, halved (at most 10 times) until the incremental potential Φ
         falls (Armijo, 10⁻⁴): large rotation increments of a displacement-only shell stretch
         the membrane when linearised, and Φ, not ‖R‖, tells a better state. The full step is
-        taken when −du is not a descent direction of Φ (an indefinite Jacobian)."""
+        taken when −du is not a descent direction of Φ (an indefinite Jacobian). With
+        self-contact it runs only where the barrier acts (a pair within d̂ at u or at u − du):
+        elsewhere the full step is the plain Newton one, as without contact."""
         trial = u - du
         slope = r @ du
-        if self.line_search and slope > 0.0:
+        search = self.line_search and slope > 0.0
+        if search and self.contact is not None:
+            X = self.shell.X
+            search = bool(len(self.contact.collisions(X + u.reshape(-1, 3)))
+                          or len(self.contact.collisions(X + trial.reshape(-1, 3))))
+        if search:
             phi0 = self.incremental_potential(u, u_n, v_n)
             alpha = 1.0
             for _ in range(10):
