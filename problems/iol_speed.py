@@ -35,16 +35,18 @@ step costs when the shared machine is busy with other jobs. Methods:
 - ``p1-rotation-free``: the rotation-free P1 triangle of ``problems/lens/rotation_free.py``
   on the same gmsh mesh (its vertices: 1,416 unknowns at the paper's resolution), numba
   kernels with the exact Hessian, CSR pattern and PETSc matrix built once (the values
-  written in place), MUMPS LDLᵀ with one symbolic analysis per run; ``method=newton`` from
-  the best-residual predictor (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian
-  and factorisation every iteration) or ``lagged`` (fresh factors at each step's start, kept
-  within the step while an iteration reduces the residual by ``stall``); ``contact=true``:
-  the same capsule, met by the P1 vertices through the same smoothed nodal penalty
-  (``surface_contact.NodalObstacles``); ``surface_contact=true`` adds ipctk self-contact on the P1 triangles
-  (``problems/lens/surface_contact.py``) and an intersection check after every step. ``bending``: ``edge`` (default,
-  consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
-  meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
-  Hessian assembly (one kernel pass), ``residual`` the gradient-only passes.
+  written in place), MUMPS LDLᵀ with one symbolic analysis per run (more only where
+  self-contact grows the pattern); ``method=newton`` from the best-residual predictor
+  (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian and factorisation every
+  iteration) or ``lagged`` (fresh factors at each step's start, kept within the step while
+  an iteration reduces the residual by ``stall``). ``contact=true``: the same capsule, met
+  by the P1 vertices through the same smoothed nodal penalty
+  (``surface_contact.NodalObstacles``); ``surface_contact=true``: ipctk self-contact on the
+  P1 triangles (``problems/lens/surface_contact.py``) and an intersection check after every
+  step. ``bending``: ``edge`` (default, consistent on every mesh) or ``patch`` (faster, too
+  soft on alternating-diagonal meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
+  Hessian assembly (one kernel pass), ``residual`` the gradient-only passes, ``contact``
+  the barrier, CCD, obstacles and intersection checks.
 
 Quantities: steps per second (wall, min over ``repeats``; and CPU), the per-phase split, the
 history of the tip and optic-centre displacement (``tip_history``, ``optic_history`` at
@@ -90,7 +92,8 @@ PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle: numba kernels, method=newton with jacobian=fresh or "
-                                    "lagged, no contact yet)")
+                                    "lagged; contact=true: the capsule by nodal penalty; surface_contact=true: ipctk "
+                                    "self-contact on its triangles)")
     surface_contact: bool = field(False, "p1-rotation-free: ipctk self-contact on the P1 triangles (barrier "
                                          "d̂ = self_contact_distance, κ = self_contact_stiffness, CCD-limited "
                                          "updates, intersection check every step)")
