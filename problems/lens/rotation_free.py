@@ -751,8 +751,12 @@ def solve_linear(shell: RotationFreeShell, force: np.ndarray, fixed) -> np.ndarr
 class Dynamics:
     """Backward Euler with mass-proportional damping c (as ``ImplicitDynamics``), Newton on
     R(u) = ∇Π(u) − f + M[(1/Δt² + c/Δt)(u − u_n) − v_n/Δt] with the exact Hessian.
-    ``extra``: callables (u, grad, data or None) → energy adding more terms (contact), on
-    the full pattern; without them the Jacobian is kept as its upper triangle (``upper``)."""
+    ``extra``: callables (u, grad, data or None) → energy adding more terms, on the full
+    pattern; without them the Jacobian is kept as its upper triangle (``upper``), which
+    ``set_contact`` (ipctk self-contact, growing the pattern) and ``set_obstacles`` (rigid
+    walls, nodal penalty) build on. Counts: iterations (linear solves), residual and Jacobian
+    passes, numeric factorisations, rejected reused-factor iterations, pattern growths (each a
+    new symbolic factorisation) and CCD-limited updates."""
 
     def __init__(self, shell: RotationFreeShell, time_step: float, damping: float, fixed=None,
                  rtol: float = 1e-6, atol: float = 1e-11, max_iterations: int = 25, upper: bool = True):
