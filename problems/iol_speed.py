@@ -34,12 +34,19 @@ step costs when the shared machine is busy with other jobs. Methods:
   kernels, PETSc, MUMPS LU), every method above.
 - ``p1-rotation-free``: the rotation-free P1 triangle of ``problems/lens/rotation_free.py``
   on the same gmsh mesh (its vertices: 1,416 unknowns at the paper's resolution), numba
-  kernels with the exact Hessian, CSR pattern built once, MUMPS LDLᵀ with the symbolic
-  analysis reused; Newton with a fresh Jacobian every iteration (``method=newton``,
-  ``jacobian=fresh``), deformation only (no capsule yet). ``bending``: ``edge`` (default,
-  consistent on every mesh) or ``patch`` (twice as fast, too soft on alternating-diagonal
-  meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
-  Hessian assembly (one kernel pass), ``residual`` the gradient-only passes.
+  kernels with the exact Hessian, CSR pattern and PETSc matrix built once (the values
+  written in place), MUMPS LDLᵀ with one symbolic analysis per run (more only where
+  self-contact grows the pattern); ``method=newton`` from the best-residual predictor
+  (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian and factorisation every
+  iteration) or ``lagged`` (fresh factors at each step's start, kept within the step while
+  an iteration reduces the residual by ``stall``). ``contact=true``: the same capsule, met
+  by the P1 vertices through the same smoothed nodal penalty
+  (``surface_contact.NodalObstacles``); ``surface_contact=true``: ipctk self-contact on the
+  P1 triangles (``problems/lens/surface_contact.py``) and an intersection check after every
+  step. ``bending``: ``edge`` (default, consistent on every mesh) or ``patch`` (faster, too
+  soft on alternating-diagonal meshes: docs/iol.md §4b). Phases: ``jacobian`` is residual +
+  Hessian assembly (one kernel pass), ``residual`` the gradient-only passes, ``contact``
+  the barrier, CCD, obstacles and intersection checks.
 
 Quantities: steps per second (wall, min over ``repeats``; and CPU), the per-phase split, the
 history of the tip and optic-centre displacement (``tip_history``, ``optic_history`` at
@@ -84,7 +91,12 @@ PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 @dataclasses.dataclass(frozen=True)
 class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
-                                    "triangle: numba kernels, newton/fresh, no contact yet)")
+                                    "triangle: numba kernels, method=newton with jacobian=fresh or "
+                                    "lagged; contact=true: the capsule by nodal penalty; surface_contact=true: ipctk "
+                                    "self-contact on its triangles)")
+    surface_contact: bool = field(False, "p1-rotation-free: ipctk self-contact on the P1 triangles (barrier "
+                                         "d̂ = self_contact_distance, κ = self_contact_stiffness, CCD-limited "
+                                         "updates, intersection check every step)")
     bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
                                      "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
                                      "too soft on alternating-diagonal meshes)")
@@ -92,7 +104,8 @@ class Parameters(LensParameters):
     jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
     refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
     stall: float = field(0.5, "lagged Newton: a new Jacobian when an iteration reduces the residual "
-                              "by less than this factor")
+                              "by less than this factor (p1-rotation-free: fresh factors at every "
+                              "step's start, kept within the step while this holds)")
     krylov_rtol: float = field(1e-3, "matrix-free: GMRES relative tolerance per Newton iteration")
     krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed")
     steps: int = field(30, "time steps per run")
@@ -122,14 +135,17 @@ class Parameters(LensParameters):
             raise ParameterError("scheme", "generalized-alpha needs the residual at the accepted state "
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
         if self.model == "p1-rotation-free":
-            if (self.method, self.jacobian) != ("newton", "fresh"):
+            if self.method != "newton" or self.jacobian not in ("fresh", "lagged"):
                 raise ParameterError("method", "model=p1-rotation-free runs method=newton with jacobian=fresh "
-                                     "(the other methods are the P2 model's)")
-            if self.contact:
-                raise ParameterError("contact", "model=p1-rotation-free has no capsule contact yet: "
-                                     "set contact=false")
+                                     "or lagged (the other methods are the P2 model's)")
+            if self.jacobian == "lagged" and not 0.0 < self.stall < 1.0:
+                raise ParameterError("stall", "model=p1-rotation-free, jacobian=lagged: a contraction factor "
+                                     "between 0 and 1")
             if self.scheme != "backward-euler":
                 raise ParameterError("scheme", "model=p1-rotation-free integrates with backward-euler only")
+        elif self.surface_contact:
+            raise ParameterError("surface_contact", "the P1 surface's self-contact is model=p1-rotation-free's "
+                                 "(the P2 lens' is iol-injection's)")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
             raise ParameterError("capsule_semi_axes", "three positive semi-axes, mm")
         if self.roll_radius < 0.5 * self.overall_length / np.pi:
@@ -362,7 +378,11 @@ def make_capsule(shell: LensShell, params: Parameters, u0: np.ndarray) -> Capsul
     are ``capsule_semi_axes`` grown uniformly, if needed, until the rolled lens starts 1 %
     inside it (a start in penetration is a violent, unphysical first step). The lens then
     touches it as it unrolls."""
-    x = shell.node_coordinates() + u0.reshape(-1, 3)
+    return capsule_around(shell.node_coordinates() + u0.reshape(-1, 3), params)
+
+
+def capsule_around(x: np.ndarray, params: Parameters) -> Capsule:
+    """``make_capsule``'s capsule about the lens positions x (n, 3)."""
     centre = 0.5 * (x.min(axis=0) + x.max(axis=0))
     semi = np.asarray(params.capsule_semi_axes, float)
     reach = np.sqrt(np.max(np.sum(((x - centre) / semi) ** 2, axis=1)))
@@ -406,9 +426,15 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         except (MeshInputError, ValueError) as err:
             raise ParameterError("mesh_scale", f"the rotation-free lens cannot use this mesh: {err}") from err
 
+    obstacles = None
+    if params.contact:
+        x = lens.shell.X + lens.rolled_displacement(params.roll_radius).reshape(-1, 3)
+        obstacles = {"capsule": capsule_around(x, params)}
+
     def timed(steps: int) -> dict:
         try:
-            return release(params, steps, lens)
+            return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None,
+                           self_contact=params.surface_contact, obstacles=obstacles)
         except RuntimeError as err:  # Newton did not converge within max_iterations
             raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
                                  f"from the released roll (Newton: {err}); take a smaller time_step") from err
@@ -430,6 +456,13 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         tip_history=history["tip"], optic_history=history["optic"],
         time=[params.time_step * (i + 1) for i in range(steps)], load_average=os.getloadavg()[0],
         dofs=best["dofs"], cells=best["cells"], nodes=best["nodes"])
+    if obstacles:
+        ctx.result.quantities.update(max_penetration_mm=max(history["penetration"], default=0.0),
+                                     capsule_semi_axes_mm=obstacles["capsule"].semi_axes.tolist())
+    if params.surface_contact:
+        ctx.result.quantities.update(intersecting_steps=history["intersecting"],
+                                     min_self_distance_mm=history["min_distance"] if np.isfinite(history["min_distance"])
+                                     else None)  # None: no pair came within d̂
 
 
 def _lens(params: Parameters) -> LensShell:

@@ -1,0 +1,202 @@
+r"""Self-contact of the rotation-free P1 shell on its own triangles (issue 23, item 3): the
+ipctk barrier and continuous collision detection of ``problems/contact/ipc.py`` (IPC, Li et
+al. 2020), with the shell's vertices as the collision vertices and its triangles as the
+collision faces — no sub-triangles and no gathering across ranks (one process, numpy arrays).
+
+**Potential** (N·mm): Π_s(x) = κ Σ_k b(d_k², d̂²), b(s, ŝ) = −(s − ŝ)² ln(s/ŝ) for s < ŝ,
+over the point–triangle and edge–edge pairs closer than d̂ whose vertices are not all within
+``exclusion`` of each other along the reference surface (default d̂ + 2 × the longest edge:
+the flat sheet's neighbours are barrier-free; checked at construction). Gradient and the exact
+Hessian (not PSD-projected, as ``problems/contact/ipc.py``: the projection makes Newton linear).
+
+**Non-penetration**: the reference state is checked intersection-free; ``step_fraction``
+scales every Newton update so that the straight path stays collision-free (ipctk's additive
+CCD, which stops with ≥ 10 % of the gap left); Π_s → ∞ as d → 0. So every iterate is
+intersection-free (``tests/test_rotation_free.py``: a folded sheet pressed onto itself).
+
+**Pattern.** The contact Hessian couples vertices the shell's stencil does not; ``Dynamics``
+grows its sparsity pattern by the 3 × 3 blocks of the new vertex pairs when a Hessian brings
+them, and keeps it (a new symbolic factorisation only then, counted as ``symbolic``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class SelfContactError(RuntimeError):
+    """A state the barrier cannot start from (intersecting, or pairs within d̂ at rest)."""
+
+
+class SurfaceSelfContact:
+    """ipctk self-contact of the P1 triangle surface (points X (n, 3), triangles (m, 3))."""
+
+    def __init__(self, X: np.ndarray, triangles: np.ndarray, dhat: float, stiffness: float,
+                 exclusion: float | None = None, margin: float | None = None):
+        """``margin`` δ (default 4 d̂): the candidate pairs are those within d̂ + δ of each
+        other at the positions x_b of their build (ipctk BVH, boxes inflated by d̂ + δ), reused
+        for every x with max_v |x_v − x_b,v| ≤ δ/2 — no pair outside them can then come within
+        d̂ — and rebuilt otherwise (``rebuilds`` counts them)."""
+        import ipctk
+        import scipy.sparse
+        from scipy.sparse.csgraph import dijkstra
+
+        if not dhat > 0 or not stiffness > 0:
+            raise ValueError(f"self-contact needs d̂ > 0 and a stiffness > 0, got {dhat!r}, {stiffness!r}")
+        self._ipctk = ipctk
+        self.dhat, self.stiffness = float(dhat), float(stiffness)
+        self.X = np.asfortranarray(X, dtype=float)
+        self.faces = np.asfortranarray(np.asarray(triangles, dtype=np.int32))
+        self.edges = np.asfortranarray(ipctk.edges(self.faces))
+        self.mesh = ipctk.CollisionMesh(self.X, self.edges, self.faces)
+        i, j = self.edges[:, 0], self.edges[:, 1]
+        lengths = np.linalg.norm(self.X[i] - self.X[j], axis=1)
+        self.exclusion = float(exclusion) if exclusion is not None else self.dhat + 2.0 * float(lengths.max())
+        n = len(self.X)
+        graph = scipy.sparse.coo_matrix((lengths, (i, j)), shape=(n, n)).tocsr()
+        near = np.argwhere(np.isfinite(dijkstra(graph, directed=False, limit=self.exclusion)))
+        near = near[near[:, 0] < near[:, 1]]
+        self.mesh.can_collide = ipctk.SparseCanCollide({(int(a), int(b)): False for a, b in near}, True)
+        self.barrier = ipctk.BarrierPotential(self.dhat)
+        self._ccd = ipctk.AdditiveCCD(conservative_rescaling=0.9)
+        self._cache: tuple[np.ndarray, object] | None = None
+        self.margin = 4.0 * self.dhat if margin is None else float(margin)
+        self._candidates, self._x_build = None, None
+        self.rebuilds = 0
+        self.step_limits: list[float] = []
+        if self.intersecting(self.X) or len(self.collisions(self.X)):
+            raise SelfContactError("the reference surface intersects itself or has non-excluded pairs "
+                                   f"closer than d̂ = {self.dhat} mm")
+
+    def _covers(self, x: np.ndarray) -> bool:
+        return self._x_build is not None and \
+            float(np.max(np.sum((x - self._x_build) ** 2, axis=1))) <= (0.5 * self.margin) ** 2
+
+    def _candidates_for(self, x: np.ndarray):
+        """Candidates valid at x: the kept ones, or new ones built at x."""
+        if not self._covers(x):
+            self._candidates = self._ipctk.Candidates()
+            self._candidates.build(self.mesh, np.asfortranarray(x), self.dhat + self.margin,
+                                   broad_phase=self._ipctk.BVH())
+            self._x_build = np.array(x)
+            self.rebuilds += 1
+        return self._candidates
+
+    def collisions(self, x: np.ndarray):
+        """The pairs closer than d̂ at x, from the kept candidates; the last x's are kept
+        (residual and Hessian are asked at the same iterate)."""
+        if self._cache is not None and np.array_equal(self._cache[0], x):
+            return self._cache[1]
+        candidates = self._candidates_for(x)
+        collisions = self._ipctk.NormalCollisions()
+        collisions.build(candidates, self.mesh, np.asfortranarray(x), self.dhat)
+        self._cache = (np.array(x), collisions)
+        return collisions
+
+    def energy(self, x: np.ndarray) -> float:
+        return self.stiffness * float(self.barrier(self.collisions(x), self.mesh, np.asfortranarray(x)))
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        """∇Π_s, dofs 3 v + c."""
+        collisions = self.collisions(x)
+        if not len(collisions):
+            return np.zeros(x.size)
+        return self.stiffness * self.barrier.gradient(collisions, self.mesh, np.asfortranarray(x))
+
+    def hessian(self, x: np.ndarray):
+        """∇²Π_s (scipy sparse, exact), or None without active pairs."""
+        collisions = self.collisions(x)
+        if not len(collisions):
+            return None
+        none = self._ipctk.PSDProjectionMethod.NONE
+        return self.stiffness * self.barrier.hessian(collisions, self.mesh, np.asfortranarray(x), none)
+
+    def pairs_within(self, x: np.ndarray, reach: float) -> np.ndarray:
+        """The (row · 3n + col) keys of the Hessian entries of every pair closer than ``reach``
+        (a barrier of that reach: its Hessian's pattern) — the superset a growing Jacobian
+        pattern takes, so that the pairs coming within d̂ over the next iterations are in it."""
+        x = np.asfortranarray(x)
+        collisions = self._ipctk.NormalCollisions()
+        collisions.build(self.mesh, x, reach, broad_phase=self._ipctk.BVH())
+        if not len(collisions):
+            return np.zeros(0, dtype=np.int64)
+        h = self._ipctk.BarrierPotential(reach).hessian(collisions, self.mesh, x,
+                                                        self._ipctk.PSDProjectionMethod.NONE).tocoo()
+        return h.row.astype(np.int64) * x.size + h.col
+
+    def step_fraction(self, x0: np.ndarray, x1: np.ndarray) -> float:
+        """The largest fraction of the straight path x0 → x1 that is collision-free (CCD). With
+        both ends within δ/2 of the candidates' build positions, every point of the path is too
+        (a ball is convex), so the kept candidates hold every pair that can meet on it; else a
+        full BVH sweep."""
+        candidates = self._candidates_for(x0)
+        if self._covers(x1):
+            fraction = float(candidates.compute_collision_free_stepsize(
+                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), narrow_phase_ccd=self._ccd))
+        else:
+            fraction = float(self._ipctk.compute_collision_free_stepsize(
+                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), broad_phase=self._ipctk.BVH(),
+                narrow_phase_ccd=self._ccd))
+        if fraction < 1.0:
+            self.step_limits.append(fraction)
+        return fraction
+
+    def intersecting(self, x: np.ndarray) -> bool:
+        return bool(self._ipctk.has_intersections(self.mesh, np.asfortranarray(x), broad_phase=self._ipctk.BVH()))
+
+    def min_distance(self, x: np.ndarray) -> float:
+        """The smallest distance of the pairs within d̂ (``inf`` when none is)."""
+        collisions = self.collisions(x)
+        return float(np.sqrt(collisions.compute_minimum_distance(self.mesh, np.asfortranarray(x)))) \
+            if len(collisions) else float("inf")
+
+
+class NodalObstacles:
+    """Rigid obstacles (``problems/lens/injector.py``: a signed gap g, its normal n and where
+    it acts, per vertex) met by the P1 vertices through the smoothed nodal penalty of
+    ``problems/contact/rigid_wall.NodalContact``: Π_c = Σ_v φ(g_v), p = −φ′ = k⟨−g⟩ smoothed
+    over ±ε (``forms.contact.smoothed_penalty_pressure``), force −p n, Hessian −p′ n⊗n (the
+    curvature term k g ∂n/∂x left out, as there: a quasi-Newton tangent)."""
+
+    def __init__(self, obstacles: dict, stiffness: float, smoothing: float = 2e-3):
+        if not stiffness > 0:
+            raise ValueError(f"the obstacles' stiffness must be > 0, got {stiffness!r}")
+        self.obstacles, self.stiffness, self.smoothing = obstacles, float(stiffness), float(smoothing)
+
+    def _pressed(self, x: np.ndarray):
+        for obstacle in self.obstacles.values():
+            gap, normal, acts = obstacle.gap_normal(x)
+            hit = np.flatnonzero(acts & (gap < self.smoothing))
+            if len(hit):
+                yield hit, gap[hit], normal[hit]
+
+    def energy(self, x: np.ndarray) -> float:
+        """Σ φ(g): k (ε − g)³/(12ε) for |g| < ε, ½ k g² + k ε²/6 below (C², φ′ = −p)."""
+        k, eps, total = self.stiffness, self.smoothing, 0.0
+        for _, g, _ in self._pressed(x):
+            total += float(np.sum(np.where(g <= -eps, 0.5 * k * g ** 2 + k * eps ** 2 / 6,
+                                           k * (eps - g) ** 3 / (12 * eps))))
+        return total
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        from eyemech.forms.contact import smoothed_penalty_pressure
+
+        grad = np.zeros_like(x)
+        for nodes, g, n in self._pressed(x):
+            pressure, _ = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
+            np.add.at(grad, nodes, -pressure[:, None] * n)
+        return grad.ravel()
+
+    def blocks(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, their 3 × 3 Hessian blocks −p′ n⊗n)."""
+        from eyemech.forms.contact import smoothed_penalty_pressure
+
+        nodes, blocks = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 3, 3))]
+        for hit, g, n in self._pressed(x):
+            _, slope = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
+            nodes.append(hit)
+            blocks.append(-slope[:, None, None] * np.einsum("ni,nj->nij", n, n))
+        return np.concatenate(nodes), np.concatenate(blocks)
+
+    def max_penetration(self, x: np.ndarray) -> float:
+        return max([float(-g.min()) for _, g, _ in self._pressed(x)] + [0.0])
