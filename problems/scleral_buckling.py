@@ -323,6 +323,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
                     residuals=record.residuals, **values)
     model.sutures.update_directions(model.u, model.suture_anchors())
     model.update_suture_pull()
+    if record.load >= 2.0 - 1e-12:
+        model.release_tire_from_band()
     if abs(record.load - round(record.load)) < 1e-12:
         model.stage_results[int(round(record.load))] = values
     writer.state(record.load, stage, picture=abs(record.load - round(record.load)) < 1e-12)
@@ -458,12 +460,12 @@ class BucklingModel:
         return residual
 
     def _tire_row(self, contact, test, measure):
-        """The tire travel's row: free = 1 (loop, from step 3 on) balances the sclera's
-        contact force on the tire, ∂Π_c/∂δ, against the sutures' inward resultant and the
-        band's push on it (the band keeps its prescribed travel); a tire without a band
-        is held at the end of step 2 by a force released over step 3 (the surgeon's
-        instrument handing the tire over to the sutures). free = 0 pins δ to the band's
-        travel."""
+        """The tire travel's row: free = 1 (loop) balances the sclera's contact force on
+        the tire, ∂Π_c/∂δ, against the sutures' inward resultant and the band's push on
+        it (the band keeps its prescribed travel; :meth:`release_tire_from_band`); a tire
+        without a band is free from the end of step 2, held by a force released over
+        step 3 (the surgeon's instrument handing the tire over to the sutures).
+        free = 0 pins δ to the band's travel."""
         inward = self.suture_pull + self.tire_hold
         if self.params.buckle_shape().has_band:
             inward = inward + band_stop_force(self.tire_travel, self.indentation, self.tire_stiffness)
@@ -521,14 +523,30 @@ class BucklingModel:
         holds it there is measured, to be released over step 3. A tire that does not
         touch the sclera (travel within the clearance) has no contact force to balance
         its row (∂Π_c/∂δ ≡ 0 would make the Jacobian singular): it keeps its travel."""
+        if self.params.buckle_shape().has_band:
+            return  # the band holds it: see release_tire_from_band
         force = self.tire_contact_force()
         if force <= 0.0:
             return
-        # with a band, the band holds the tire from here on (its stop is active from the
-        # first iterate: starting on the stop's kink, Newton stalled on the default mesh)
-        self.held_force = 0.0 if self.params.buckle_shape().has_band else force
+        self.held_force = force
         self.tire_free.value = 1.0
         self.tire_hold.value = self.held_force
+
+    def release_tire_from_band(self) -> None:
+        """With a band (loop): the band holds the tire at its travel while the sclera
+        pushes the tire out harder than the sutures pull it in. Once the pull exceeds the
+        sclera's contact force (checked after every converged step of steps 3-4, lagged
+        by one step as the suture directions are), the tire's travel is free and the
+        band's push becomes the unilateral stop of its row, which takes the tire back if
+        the pull drops. Freed on the stop's kink with the pull winning, Newton starts on
+        the side where the stop is inactive; freed with the contact winning, Newton
+        stalled there on the default mesh (residual constant at 2.3e-4), and a
+        frictionless 1 mm buckle stalled in step 3 on the coarse eye."""
+        if not (self.tire_loop and self.params.buckle_shape().has_band) \
+                or float(self.tire_free.value) == 1.0:
+            return
+        if float(self.suture_pull.value) > self.tire_contact_force():
+            self.tire_free.value = 1.0
 
     # -- set-up pieces --------------------------------------------------------------
     def _stiffness_field(self) -> dolfinx.fem.Function:
@@ -783,6 +801,7 @@ class BucklingModel:
             "tire_travel_mm": self.tire_travel_value(),
             "tire_contact_force_N": 2.0 * self.tire_contact_force(),
             "tire_suture_pull_N": 2.0 * float(self.suture_pull.value),
+            "tire_free": bool(float(self.tire_free.value)),
             "subretinal_drained": float(self.drained.value),
             "iop_mmHg": self.cavity_pressure() / MMHG,
             "cavity_volume_mm3": 2.0 * self.volume(),
