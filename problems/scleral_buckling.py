@@ -519,8 +519,8 @@ class BucklingModel:
         self.suture_pull.value = pull if self.tire_loop else 0.0
 
     def free_tire(self) -> None:
-        """End of step 2 (loop): the tire's travel becomes an unknown; the force that
-        holds it there is measured, to be released over step 3. A tire that does not
+        """End of step 2 (loop, no band): the tire's travel becomes an unknown; the force
+        that holds it there is measured, to be released over step 3. A tire that does not
         touch the sclera (travel within the clearance) has no contact force to balance
         its row (∂Π_c/∂δ ≡ 0 would make the Jacobian singular): it keeps its travel."""
         if self.params.buckle_shape().has_band:

@@ -67,3 +67,20 @@ def test_drainage_without_a_detachment_exits_2(tmp_path):
                            "--set", "detachment_height=0", "--out", str(tmp_path))
     assert code == 2
     assert "drainage" in err
+
+
+def test_sutures_lift_the_tire_off_a_shallow_band():
+    # band and tire pressed only 0.3 mm (0.25 mm past the clearance): the sclera's push on
+    # the tire is weaker than the 0.3 N suture's loop, so the band lets the tire go
+    # deeper than itself in step 3, and with the band's stop inactive the tire's row is
+    # the balance contact force = pull. Measured: held by the band while the pull (0.12,
+    # 0.23 N) is below the contact force (0.14, 0.19 N); freed, 0.41, 0.44, 0.48 mm at
+    # 0.17 ... 0.28 N and 0.464 mm at 0.3 N (0.456 N of contact and pull), band at 0.3 mm
+    result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
+                                              indentation="0.3", suture_force="0.3",
+                                              settle="false")), options=QUIET)
+    after = result.quantities["after_suturing"]
+    assert result.quantities["after_buckling"]["tire_free"] is False
+    assert after["tire_free"] is True
+    assert after["tire_travel_mm"] > after["buckle_travel_mm"] + 0.05
+    assert after["tire_contact_force_N"] == pytest.approx(after["tire_suture_pull_N"], rel=1e-6)
