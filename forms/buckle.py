@@ -12,9 +12,10 @@ kinds (``kind``) are the operations surgeons perform:
   (seed 002 §3, the paper's operation).
 
 Both elements start with their inner faces at ``base_radius`` (the clearance from the
-inflated sclera) and move radially inward by ``indentation`` (the band tightened,
-the tire pressed in by it); where the tire lies the band runs over it, so the
-obstacle is the union of the two, and its signed distance the smaller one.
+inflated sclera) and move radially inward: the band by ``indentation`` (tightened),
+the tire by ``tire_indentation`` (pressed in by the band and by its sutures; the band's
+travel when not given); where the tire lies the band runs over it, so the obstacle is
+the union of the two, and its signed distance the smaller one.
 
 An arc-limited tire is the intersection of the swept ring with the wedge
 |φ| ≤ φ₀/2 about the axis; its signed distance is approximated by the larger of
@@ -26,6 +27,12 @@ Sutured buckle: the sclera under the buckle's footprint is tied to it tangential
 (:func:`tangential_tie_energy`): sutures hold band and tire on the sclera, which
 must not slide along them (with a frictionless obstacle it does: the eye is
 squeezed forward through the band).
+
+Force-driven tire (:func:`tire_travel_residual`): a suture is a loop through the
+sclera at two bites and over the tire; its tension T pulls each bite towards the tire
+and pushes the tire inward with the resultant of T turning over it. The tire's radial
+travel δ is then one more unknown, whose equation is the balance of the contact force
+the sclera exerts on the tire against that inward pull (plus the band's push).
 """
 
 from __future__ import annotations
@@ -86,9 +93,11 @@ def _abs_azimuth(x):
     return ufl.atan2(ufl.sqrt(x[0] ** 2 + 1e-24), x[1])
 
 
-def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indentation):
-    """(tire, band) ring obstacles (both at ``base_radius``); ``base_radius`` and
-    ``indentation`` may be Constants."""
+def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indentation,
+                 tire_indentation=None):
+    """(tire, band) ring obstacles (both at ``base_radius``); ``base_radius`` and the
+    travels may be Constants or Real-space Functions; the tire's travel is the band's
+    unless ``tire_indentation`` is given."""
     height = max(shape.tire_height, 1e-6)
     tire = RoundedRectangle(center=(base_radius + 0.5 * height, axial_position),
                             width=height, height=shape.tire_width,
@@ -96,7 +105,8 @@ def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indenta
     band = RoundedRectangle(center=(base_radius + 0.5 * shape.band_thickness, axial_position),
                             width=shape.band_thickness, height=shape.band_width,
                             corner_radius=min(shape.corner_radius, 0.5 * shape.band_thickness))
-    return Ring(indentation=indentation, profile=tire), Ring(indentation=indentation, profile=band)
+    tire_travel = indentation if tire_indentation is None else tire_indentation
+    return Ring(indentation=tire_travel, profile=tire), Ring(indentation=indentation, profile=band)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,10 +118,11 @@ class Buckle:
     axial_position: float
     base_radius: object
     indentation: object
+    tire_indentation: object | None = None  # None: the tire moves with the band
 
     def gap(self, x):
         tire, band = buckle_rings(self.shape, self.axial_position, self.base_radius,
-                                  self.indentation)
+                                  self.indentation, self.tire_indentation)
         gaps = []
         if self.shape.has_tire:
             g = tire.gap(x)
@@ -180,3 +191,28 @@ def slip(x0: np.ndarray, du: np.ndarray) -> np.ndarray:
     rho = np.hypot(x0[:, 0], x0[:, 1])
     around = (x0[:, 0] * du[:, 1] - x0[:, 1] * du[:, 0]) / rho
     return np.hypot(du[:, 2], around)
+
+
+def band_stop_force(tire_travel, band_travel, stiffness):
+    """The band's push on the tire it runs over: a unilateral penalty k ⟨δ_band − δ_tire⟩
+    (the band is rigid and cannot pull the tire out; the tire may go deeper than it)."""
+    return stiffness * ufl.max_value(band_travel - tire_travel, 0.0)
+
+
+def tire_travel_residual(contact_energy, tire_travel, test, inward_force, measure, area):
+    """Row of the tire's radial travel δ (a Real-space unknown with test function ``test``):
+
+        r_δ = ∂Π_c/∂δ − F_in = 0,
+
+    ∂Π_c/∂δ = ∫ α ⟨−g⟩ (−∂g/∂δ) dA the sclera's contact force on the tire along its
+    inward travel (Π_c the buckle's penalty energy, which depends on δ through the
+    tire's obstacle only), F_in the inward force on the tire from everything else (the
+    sutures' resultant, the band's push): a UFL scalar, spread over ``measure`` of
+    reference ``area`` so that the row is one form."""
+    return ufl.derivative(contact_energy, tire_travel, test) - inward_force / area * test * measure
+
+
+def pinned_travel_residual(tire_travel, target, test, stiffness, measure, area):
+    """Row of a prescribed tire travel: k (δ − δ_target) = 0, k a stiffness of the size
+    of the free row's so that switching between the two keeps the Jacobian's scale."""
+    return stiffness * (tire_travel - target) / area * test * measure

@@ -104,10 +104,11 @@ def _buckle_outline(model):
     shape = model.params.buckle_shape()
     z0 = model.axial_position
     polygons = []
-    if shape.on_tire(0.0):  # the tire at the tear, the band (if any) running over it
-        polygons.append([(base, -shape.tire_width / 2), (base + shape.tire_height, -shape.tire_width / 2),
-                         (base + shape.tire_height, shape.tire_width / 2), (base, shape.tire_width / 2)])
-        bottom = base + shape.tire_height
+    if shape.on_tire(0.0):  # the tire at the tear (at its own travel), the band over it
+        tire = float(model.base_radius.value) - model.tire_travel_value()
+        polygons.append([(tire, -shape.tire_width / 2), (tire + shape.tire_height, -shape.tire_width / 2),
+                         (tire + shape.tire_height, shape.tire_width / 2), (tire, shape.tire_width / 2)])
+        bottom = max(base, tire + shape.tire_height)
     else:
         bottom = base
     if shape.has_band:

@@ -64,8 +64,17 @@ from eyemech.forms import (
     liquid_law_residual,
     von_mises,
 )
-from eyemech.forms.buckle import Buckle, BuckleShape, slip, tangential_tie_energy
+from eyemech.forms.buckle import (
+    Buckle,
+    BuckleShape,
+    band_stop_force,
+    pinned_travel_residual,
+    slip,
+    tangential_tie_energy,
+    tire_travel_residual,
+)
 from eyemech.forms.contact import default_penalty, smoothed_penalty_energy
+from eyemech.forms.sutures import bite_weight
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems import buckling_output
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
@@ -167,6 +176,16 @@ class Parameters(SceneParameters, SolverChoice):
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm")
     suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
                                                "suture meridians, degrees from the tear", "deg")
+    suture_model: Literal["loop", "bites"] = field(
+        "loop", "loop: a suture is a loop over the tire; its tension pulls the bites and pushes "
+        "the tire in, whose radial travel in steps 3-4 balances the sclera's contact force "
+        "(the band keeps its prescribed travel); bites: the pull acts on the bites only and "
+        "the tire keeps the band's travel")
+    drainage: Literal["none", "external"] = field(
+        "none", "external: the subretinal fluid is drained in step 4 (with the settled state): "
+        "the subretinal faces lose the liquid pressure, the vitreous pressure presses the "
+        "detached retina onto the choroid. Does not converge yet: Newton stalls within the "
+        "first 10 % of the drainage (docs/scleral_buckling.md, Subretinal drainage)")
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm")
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm")
@@ -209,6 +228,12 @@ class Parameters(SceneParameters, SolverChoice):
         if not 0 < self.tire_arc_deg <= 360:
             raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
                                  "lie in (0, 360] degrees")
+        if self.drainage != "none" and self.detachment_height == 0:
+            raise ParameterError("drainage", "there is no subretinal fluid to drain: the retina "
+                                 "is attached (detachment_height = 0)")
+        if self.drainage != "none" and not self.settle:
+            raise ParameterError("drainage", "drainage acts in step 4 (the settled state, where "
+                                 "the liquid volume is free): it needs settle = true")
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
@@ -319,6 +344,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
     stage = model.stage_of(record.load)
     if abs(record.load - 1.0) < 1e-12:
         model.couple_liquid()
+    if abs(record.load - 2.0) < 1e-12 and model.tire_loop:
+        model.free_tire()
     if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
         model.release_liquid()
     values = model.measure()
@@ -327,6 +354,9 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
                     krylov_iterations=record.linear_iterations,
                     residuals=record.residuals, **values)
     model.sutures.update_directions(model.u, model.suture_anchors())
+    model.update_suture_pull()
+    if record.load >= 2.0 - 1e-12:
+        model.release_tire_from_band()
     if abs(record.load - round(record.load)) < 1e-12:
         model.stage_results[int(round(record.load))] = values
     writer.state(record.load, stage, picture=abs(record.load - round(record.load)) < 1e-12)
@@ -343,8 +373,11 @@ class BucklingModel:
         family = ELEMENTS[params.element]
         self.family = family
         mesh = self.eye.mesh
-        fields, tests = solid_fields(mesh, family, real_pressure_space(mesh))
-        self.fields, self.u, self.P = fields, fields[0], fields[-1]
+        # [u, p, P, δ_tire]: the cavity pressure and the tire's radial travel are Real unknowns
+        fields, tests = solid_fields(mesh, family, real_pressure_space(mesh),
+                                     real_pressure_space(mesh))
+        self.fields, self.u, self.P, self.tire_travel = fields, fields[0], fields[-2], fields[-1]
+        self.P.name, self.tire_travel.name = "P", "tire_travel"
         metadata = {"quadrature_degree": family.quadrature_degree}
         dx, ds = self.eye.dx(metadata), self.eye.ds(metadata)
         self.wall = ds(self.eye.tag("cavity_wall"))
@@ -367,9 +400,16 @@ class BucklingModel:
         # the buckle: placed after step 1 at the clearance from the inflated sclera
         self.axial_position, self.buckle_angle = self._buckle_axial_position()
         self.base_radius = dolfinx.fem.Constant(mesh, 2 * self.geometry.sclera_radius)
-        self.indentation = dolfinx.fem.Constant(mesh, 0.0)
+        self.indentation = dolfinx.fem.Constant(mesh, 0.0)  # the band's (prescribed) travel
         self.buckle = Buckle(params.buckle_shape(), self.axial_position, self.base_radius,
-                             self.indentation)
+                             self.indentation, tire_indentation=self.tire_travel)
+        # the force-driven tire (suture_model = loop): its travel is free from step 3 on
+        self.tire_loop = params.suture_model == "loop" and params.buckle_shape().has_tire
+        self.tire_free = dolfinx.fem.Constant(mesh, 0.0)
+        self.tire_hold = dolfinx.fem.Constant(mesh, 0.0)    # no band: released over step 3
+        self.suture_pull = dolfinx.fem.Constant(mesh, 0.0)  # sutures' inward resultant
+        self.held_force = 0.0  # the sclera's force on the tire at the end of step 2
+        self.drained = dolfinx.fem.Constant(mesh, 0.0)      # subretinal pressure removed
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
@@ -378,6 +418,7 @@ class BucklingModel:
         self.tied = dolfinx.fem.Constant(mesh, 0.0)
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
                                     self.sclera_nodes, params.suture_bite_radius)
+        self._tire_scales(ds(self.eye.tag("sclera_outer")))
         residual = self.residual(tests, dx, ds)
 
         self.bcs = self._boundary_conditions()
@@ -416,11 +457,17 @@ class BucklingModel:
           + δΠ_tie                           sutured buckle: the sclera under its footprint
                                              tied tangentially (from step 2 on)
           + R_sutures                        suture forces at the bites (lagged directions)
+          + r_δ                              the tire's travel δ: prescribed (steps 1-2, and
+                                             always with suture_model = bites), or the
+                                             balance of the sclera's contact force with the
+                                             sutures' loop and the band (steps 3-4, loop)
+          − ∫ d P J F⁻ᵀN·v dA               drainage: the subretinal faces lose the liquid
+                                             pressure over step 4 (d from 0 to 1)
 
         The zonule bars and the retina–choroid contact are added node-wise by hooks of the
         nonlinear solver (:meth:`_zonules`, :meth:`_retina_contact`)."""
         params, family = self.params, self.family
-        v, qP = tests[0], tests[-1]
+        v, qP, q_tire = tests[0], tests[-2], tests[-1]
         liquid = liquid_law_residual(self.P, qP, self.u, self.wall, self.wall_area, self.initial_volume,
                                      self.initial_pressure, params.bulk_modulus)
         pinned = self.initial_volume / params.bulk_modulus * (self.P - self.pressure_target) \
@@ -431,13 +478,108 @@ class BucklingModel:
         contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
         contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
                                           contact_ds(self.eye.tag("sclera_outer")))
+        self.contact_energy = contact
         residual += ufl.derivative(contact, self.u, v)
+        residual += self._tire_row(contact, q_tire, contact_ds(self.eye.tag("sclera_outer")))
+        if params.drainage != "none":
+            subretinal = ds(tuple(self.eye.tag(name) for name in ("retina_detached",
+                                                                  "choroid_detached")))
+            residual += follower_pressure(-self.drained * self.P, self.u, v, subretinal)
         if params.buckle_attachment == "sutured":
             tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.penalty,
                                         contact_ds(self.eye.tag("sclera_outer")))
             residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
         return residual
+
+    def _tire_row(self, contact, test, measure):
+        """The tire travel's row: free = 1 (loop) balances the sclera's contact force on
+        the tire, ∂Π_c/∂δ, against the sutures' inward resultant and the band's push on
+        it (the band keeps its prescribed travel; :meth:`release_tire_from_band`); a tire
+        without a band is free from the end of step 2, held by a force released over
+        step 3 (the surgeon's instrument handing the tire over to the sutures).
+        free = 0 pins δ to the band's travel."""
+        inward = self.suture_pull + self.tire_hold
+        if self.params.buckle_shape().has_band:
+            inward = inward + band_stop_force(self.tire_travel, self.indentation, self.tire_stiffness)
+        free = tire_travel_residual(contact, self.tire_travel, test, inward, measure, self.sclera_area)
+        pinned = pinned_travel_residual(self.tire_travel, self.indentation, test,
+                                        self.tire_stiffness, measure, self.sclera_area)
+        return self.tire_free * free + (1 - self.tire_free) * pinned
+
+    def _tire_scales(self, measure) -> None:
+        """Constants of the tire's row, from the reference configuration: the sclera's
+        outer area (the row's constant terms are spread over it), the stiffness of the
+        band's push and of the pinned row (the buckle's penalty over the tire's
+        footprint: as stiff as the sclera's contact with it), and ∫ w_s dA of each
+        suture's bite (the share of its pull the half model carries: ½ on the
+        symmetry plane), which makes the reaction on the tire the exact opposite of the
+        bite loads."""
+        mesh = self.eye.mesh
+        X = ufl.SpatialCoordinate(mesh)
+        one = dolfinx.fem.Constant(mesh, 1.0)
+        self.sclera_area = _assemble(one * measure, self.ctx.comm)
+        footprint = _assemble(self.buckle.footprint_weight(X) * measure, self.ctx.comm)
+        self.tire_stiffness = self.penalty * max(footprint, 1.0)
+        self.bite_shares = np.array([
+            _assemble(bite_weight(X, ufl.as_vector(p.centre), self.params.suture_bite_radius)
+                      * measure, self.ctx.comm) for p in self.sutures.points])
+        shape = self.params.buckle_shape()
+        self.on_tire = np.array([shape.on_tire(p.azimuth_deg) for p in self.sutures.points])
+
+    def tire_contact_force(self) -> float:
+        """∂Π_c/∂δ: the sclera's contact force on the tire along its inward travel (half
+        model, N)."""
+        if not hasattr(self, "_tire_force_form"):
+            direction = dolfinx.fem.Function(self.tire_travel.function_space)
+            direction.x.array[:] = 1.0
+            self._tire_force_form = dolfinx.fem.form(
+                ufl.derivative(self.contact_energy, self.tire_travel, direction))
+        return _assemble(self._tire_force_form, self.ctx.comm)
+
+    def update_suture_pull(self) -> None:
+        """The sutures' inward radial resultant on the tire (half model, N): each tire
+        suture's loop turns over the tire, which takes the opposite of its bite loads,
+        −F_s ∫w_s dA, whose inward (−e_ρ) component is |F| ∫w_s dA d_s·e_ρ at its
+        meridian (d_s from the bite to the tire's corner: lagged, as the bite loads)."""
+        pull = 0.0
+        for point, direction, share, on_tire in zip(self.sutures.points, self.sutures.directions,
+                                                    self.bite_shares, self.on_tire):
+            if on_tire:
+                psi = math.radians(point.azimuth_deg)
+                pull += self.sutures.magnitude * share * float(
+                    direction[0] * math.sin(psi) + direction[1] * math.cos(psi))
+        self.suture_pull.value = pull if self.tire_loop else 0.0
+
+    def free_tire(self) -> None:
+        """End of step 2 (loop, no band): the tire's travel becomes an unknown; the force
+        that holds it there is measured, to be released over step 3. A tire that does not
+        touch the sclera (travel within the clearance) has no contact force to balance
+        its row (∂Π_c/∂δ ≡ 0 would make the Jacobian singular): it keeps its travel."""
+        if self.params.buckle_shape().has_band:
+            return  # the band holds it: see release_tire_from_band
+        force = self.tire_contact_force()
+        if force <= 0.0:
+            return
+        self.held_force = force
+        self.tire_free.value = 1.0
+        self.tire_hold.value = self.held_force
+
+    def release_tire_from_band(self) -> None:
+        """With a band (loop): the band holds the tire at its travel while the sclera
+        pushes the tire out harder than the sutures pull it in. Once the pull exceeds the
+        sclera's contact force (checked after every converged step of steps 3-4, lagged
+        by one step as the suture directions are), the tire's travel is free and the
+        band's push becomes the unilateral stop of its row, which takes the tire back if
+        the pull drops. Freed on the stop's kink with the pull winning, Newton starts on
+        the side where the stop is inactive; freed with the contact winning, Newton
+        stalled there on the default mesh (residual constant at 2.3e-4), and a
+        frictionless 1 mm buckle stalled in step 3 on the coarse eye."""
+        if not (self.tire_loop and self.params.buckle_shape().has_band) \
+                or float(self.tire_free.value) == 1.0:
+            return
+        if float(self.suture_pull.value) > self.tire_contact_force():
+            self.tire_free.value = 1.0
 
     # -- set-up pieces --------------------------------------------------------------
     def _cell_field(self, name: str, values: dict[str, float]) -> dolfinx.fem.Function:
@@ -566,6 +708,13 @@ class BucklingModel:
             self.pressure_target.value = (1 - f) * float(self.acute_pressure.value) + f * self.iop
         self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
         self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
+        self.update_suture_pull()
+        if float(self.tire_free.value) == 0.0:  # prescribed: start Newton at the target
+            self.tire_travel.x.array[:] = float(self.indentation.value)
+        else:
+            self.tire_hold.value = (1.0 - float(np.clip(load - 2.0, 0.0, 1.0))) * self.held_force
+        self.drained.value = float(np.clip(load - 3.0, 0.0, 1.0)) \
+            if self.params.drainage != "none" else 0.0
 
     def couple_liquid(self) -> None:
         """End of step 1: V_ini and P_ini from the inflated eye, liquid law on, and the
@@ -615,6 +764,8 @@ class BucklingModel:
             width, height = shape.element_at(point.azimuth_deg)
             rho = float(self.base_radius.value) - float(self.indentation.value) + height
             psi = math.radians(point.azimuth_deg)
+            if self.tire_loop and shape.on_tire(point.azimuth_deg):  # the tire's own travel
+                rho += float(self.indentation.value) - self.tire_travel_value()
             z = self.axial_position + point.side * 0.5 * width
             anchors.append([rho * math.sin(psi), rho * math.cos(psi), z])
         return np.array(anchors)
@@ -623,17 +774,20 @@ class BucklingModel:
         """Everything a restart needs besides the load (docs/restart.md): the unknowns,
         the liquid's P_ini/V_ini and switch, the buckle, the sutures' directions, the
         line search chosen in step 2, the contact's sticky memory, the stage results."""
-        for name, f in zip(("u", "p", "P"), self.fields):
+        for name, f in zip(("u", "p", "P", "tire_travel"), self.fields):
             checkpoints.function(name, f)
         checkpoints.function("u_tied", self.u_tied)
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
-                     "base_radius", "indentation", "tied", "acute_pressure"):
+                     "base_radius", "indentation", "tied", "acute_pressure", "tire_free",
+                     "tire_hold", "suture_pull", "drained"):
             checkpoints.constant(name, getattr(self, name))
         checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
                                               "magnitude": self.sutures.magnitude},
                           self._restore_sutures)
         checkpoints.value("reference_positions", lambda: self.reference_positions,
                           lambda saved: setattr(self, "reference_positions", saved))
+        checkpoints.value("held_force", lambda: self.held_force,
+                          lambda saved: setattr(self, "held_force", float(saved)))
         checkpoints.value("preoperative", lambda: self.preoperative,
                           lambda saved: setattr(self, "preoperative", dict(saved)))
         checkpoints.value("stage_results", lambda: self.stage_results,
@@ -652,6 +806,11 @@ class BucklingModel:
     # -- measurements ---------------------------------------------------------------
     def volume(self) -> float:
         return self.ctx.comm.allreduce(dolfinx.fem.assemble_scalar(self.volume_form), op=MPI.SUM)
+
+    def tire_travel_value(self) -> float:
+        owned = self.tire_travel.function_space.dofmap.index_map.size_local
+        return float(self.ctx.comm.allreduce(float(np.sum(self.tire_travel.x.array[:owned])),
+                                             op=MPI.SUM))
 
     def cavity_pressure(self) -> float:
         owned = self.P.function_space.dofmap.index_map.size_local
@@ -679,6 +838,13 @@ class BucklingModel:
             "axial_length_change_from_unloaded_mm": axial - reference_axial,
             "buckle_indentation_mm": indentation,
             "buckle_travel_mm": float(self.indentation.value),
+            # the tire's radial travel (= the band's unless the sutures' loop drives it), the
+            # sclera's contact force on it and the sutures' inward pull (whole eye)
+            "tire_travel_mm": self.tire_travel_value(),
+            "tire_contact_force_N": 2.0 * self.tire_contact_force(),
+            "tire_suture_pull_N": 2.0 * float(self.suture_pull.value),
+            "tire_free": bool(float(self.tire_free.value)),
+            "subretinal_drained": float(self.drained.value),
             "iop_mmHg": self.cavity_pressure() / MMHG,
             "cavity_volume_mm3": 2.0 * self.volume(),
             "retina_choroid_gap_min_mm": float(gaps.min()),
@@ -803,6 +969,11 @@ class BucklingModel:
         if self.retina is not None:
             out["retina_contact_penalty"] = self.retina.penalty
         return out
+
+
+def _assemble(form, comm: MPI.Comm) -> float:
+    compiled = form if isinstance(form, dolfinx.fem.Form) else dolfinx.fem.form(form)
+    return comm.allreduce(dolfinx.fem.assemble_scalar(compiled), op=MPI.SUM)
 
 
 def _von_mises(u, law):

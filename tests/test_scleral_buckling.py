@@ -106,6 +106,12 @@ def test_the_tear_closes_after_suturing(coarse):
     assert sutured["retina_contact_area_mm2"] > 0.0
     assert sutured["retina_pressed_nodes"] >= 1
     assert sutured["max_penetration_mm"] < 1e-3
+    # the sutures' loop (suture_model = loop) presses the tire in with less than the
+    # sclera pushes it out (measured 0.26 N against 1.20 N, whole eye): the band holds
+    # the tire at its travel, so the closure is the bites' pull, not a deeper tire
+    assert 0.0 < sutured["tire_suture_pull_N"] < sutured["tire_contact_force_N"]
+    assert sutured["tire_free"] is False
+    assert sutured["tire_travel_mm"] == sutured["buckle_travel_mm"] == 1.5
     # the retina approaches the choroid through step 2: the smallest normal gap at the
     # end of step 2 is below its pre-operative value
     assert q["after_buckling"]["retina_choroid_gap_nts_min_mm"] < \

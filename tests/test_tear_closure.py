@@ -1,0 +1,86 @@
+"""The force-driven tire and subretinal drainage (issue 21), on the coarse eye: a suture's
+loop over the tire pushes it in until the sclera's contact force balances the pull, and
+its travel grows with the pull; drainage without a detachment (or without the settled
+step it acts in) is refused. Tear closure after suturing at the defaults is checked by
+``test_scleral_buckling.test_the_tear_closes_after_suturing``. Drainage itself does not
+converge yet (docs/scleral_buckling.md, "Subretinal drainage"): no test of its effect."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import run_cli
+
+from eyemech.problems import scleral_buckling as sb
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
+
+QUIET = RunOptions(fields=False, pictures=False)
+
+# a tire alone with one suture over it, pressed 0.2 mm in step 2 (0.15 mm past the
+# clearance): the sutures' 0.3 N then carry it deeper, with no band to lean on
+SEWN = dict(resolution="coarse", buckle="segmental", suture_azimuths="0", indentation="0.2",
+            suture_force="0.3", settle="false")
+
+
+@pytest.fixture(scope="module")
+def sewn():
+    return sb.run(build(sb.Parameters, SEWN), options=QUIET)
+
+
+def test_sutures_drive_the_tire_until_the_sclera_balances_them(sewn):
+    steps = [s for s in sewn.steps if s["stage"] == 3]
+    force = [s["suture_force_N"] for s in steps]
+    travel = [s["tire_travel_mm"] for s in steps]
+    assert len(steps) >= 2
+    # the tire goes deeper with the pull: measured 0.327, 0.404, 0.443, 0.467, 0.483 mm at
+    # 0.056 ... 0.28 N, then 0.474 mm at 0.3 N. That last dip is the lagged suture
+    # directions (seed 002 §2.2: from the last converged state): as the tire sinks, the
+    # loop's legs turn tangential and the radial pull per newton drops (1.65 -> 1.54 per
+    # N over that step). So the check is across forces at least twice apart
+    pairs = [(i, j) for i in range(len(steps)) for j in range(len(steps))
+             if force[j] >= 2 * force[i] > 0]
+    assert len(pairs) >= 2
+    for i, j in pairs:
+        assert travel[j] > travel[i], (force[i], travel[i], force[j], travel[j])
+    after = sewn.quantities["after_suturing"]
+    assert after["tire_travel_mm"] > sewn.quantities["after_buckling"]["tire_travel_mm"] + 0.1
+    # at the end of step 3 the holding force is released and there is no band: the
+    # tire's row is the balance ∂Π_c/∂δ = F_sutures itself (Newton's tolerance)
+    assert after["tire_contact_force_N"] == pytest.approx(after["tire_suture_pull_N"], rel=1e-6)
+    # the pull is the opposite of the bite loads' radial part: between 0 and 2 legs of
+    # 0.3 N on the one (whole) suture over the tire
+    assert 0.0 < after["tire_suture_pull_N"] < 2 * 0.3
+
+
+@pytest.mark.parametrize("overrides", [
+    {"drainage": "external", "detachment_height": "0"},
+    {"drainage": "external", "settle": "false"},
+])
+def test_drainage_needs_a_detachment_and_the_settled_step(overrides):
+    with pytest.raises(ParameterError) as info:
+        build(sb.Parameters, overrides)
+    assert info.value.key == "drainage"
+
+
+def test_drainage_without_a_detachment_exits_2(tmp_path):
+    code, _, err = run_cli("run", "scleral-buckling", "--set", "drainage=external",
+                           "--set", "detachment_height=0", "--out", str(tmp_path))
+    assert code == 2
+    assert "drainage" in err
+
+
+def test_sutures_lift_the_tire_off_a_shallow_band():
+    # band and tire pressed only 0.3 mm (0.25 mm past the clearance): the sclera's push on
+    # the tire is weaker than the 0.3 N suture's loop, so the band lets the tire go
+    # deeper than itself in step 3, and with the band's stop inactive the tire's row is
+    # the balance contact force = pull. Measured: held by the band while the pull (0.12,
+    # 0.23 N) is below the contact force (0.14, 0.19 N); freed, 0.41, 0.44, 0.48 mm at
+    # 0.17 ... 0.28 N and 0.464 mm at 0.3 N (0.456 N of contact and pull), band at 0.3 mm
+    result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
+                                              indentation="0.3", suture_force="0.3",
+                                              settle="false")), options=QUIET)
+    after = result.quantities["after_suturing"]
+    assert result.quantities["after_buckling"]["tire_free"] is False
+    assert after["tire_free"] is True
+    assert after["tire_travel_mm"] > after["buckle_travel_mm"] + 0.05
+    assert after["tire_contact_force_N"] == pytest.approx(after["tire_suture_pull_N"], rel=1e-6)
