@@ -29,7 +29,7 @@ import dataclasses
 import logging
 import sys
 import time
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Literal, Sequence
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -73,6 +73,14 @@ class NewtonOptions:
     max_it: int = 15
     linear_solver: str = "mumps"  # mumps | superlu_dist | petsc (LU) | iterative via petsc
     petsc: dict[str, str] = dataclasses.field(default_factory=dict)
+    # modified Newton: the last Jacobian (and its factorisation) is kept while Newton
+    # contracts, ‖F_k‖ ≤ θ ‖F_k−1‖, and across solves until ``NonlinearSolver.
+    # invalidate_jacobian``; 0 = a fresh Jacobian every iteration (full Newton)
+    reuse_contraction: float = 0.0
+    # keep the last converged solve's Jacobian for the next solve's first iteration (off:
+    # on the eye a load step started on it failed more often than it saved, see
+    # docs/bench/scleral-buckling.md)
+    reuse_across_solves: bool = False
 
     def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
         """SNES options, then the KSP/PC options: MUMPS LU, or ``linear`` (an iterative
@@ -163,6 +171,9 @@ class NonlinearSolver:
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
         self._jacobians = 0  # Jacobian assemblies so far
+        self._jacobian_valid = False  # the matrix holds a Jacobian a next solve may keep
+        self._kept_iterations = 0  # Newton iterations on a kept Jacobian, this solve
+        self._reuse_enabled = True  # off for the fresh-Jacobian retry of a failed solve
         self._wrap_callbacks()
         self._set_options(prefix)
         if iterative is not None:
@@ -199,8 +210,14 @@ class NonlinearSolver:
             self.timings.add("assembly", time.perf_counter() - start)
 
         def jacobian(snes, x, mat, pmat):
+            if self._keep_jacobian():
+                # the matrix is left as it is: PCSetUp sees its state unchanged and
+                # keeps the factorisation (counted by PETSc's events, not here)
+                self._kept_iterations += 1
+                return
             start = time.perf_counter()
             self._jacobians += 1
+            self._jacobian_valid = True
             with self._remember_errors():
                 j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
                 for hook in self.jacobian_hooks:
@@ -270,11 +287,64 @@ class NonlinearSolver:
         info = self.problem.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)
         return int(info["nz_allocated"])
 
+    # -- modified Newton --------------------------------------------------------
+    def invalidate_jacobian(self) -> None:
+        """The system changed beyond what the kept Jacobian describes (a new stage, a
+        switched constraint): the next iteration assembles and factorises afresh."""
+        self._jacobian_valid = False
+
+    def _keep_jacobian(self) -> bool:
+        """Modified Newton's choice at the Jacobian of iteration k (``residual_history``
+        holds ‖F_0‖ … ‖F_k‖ by then): keep the matrix at k = 0 if it is still valid
+        (a converged solve's last Jacobian), later while the last iteration contracted
+        the residual by θ = ``options.reuse_contraction`` or better."""
+        theta = self.options.reuse_contraction
+        if theta <= 0 or not self._reuse_enabled or not self._jacobian_valid:
+            return False
+        history = self.residual_history
+        if len(history) < 2:
+            return self.options.reuse_across_solves
+        return history[-1] <= theta * history[-2]
+
+    def residual_norm(self) -> float:
+        """‖F‖ at the current unknowns (one residual assembly, its hooks included)."""
+        x = self.problem.x
+        dolfinx.fem.petsc.assign(self.problem.u, x)
+        b = self.snes.getFunction()[0]
+        self.snes.computeFunction(x, b)
+        return float(b.norm())
+
     # -- solve ------------------------------------------------------------------
-    def solve(self) -> tuple[bool, int]:
-        """One Newton solve from the current unknowns; (converged, iterations). Its work,
-        converged or not, is added to ``counts`` and to the process's ``SOLVER_COUNTS``."""
+    def solve(self, reference_norm: float | None = None) -> tuple[bool, int]:
+        """One Newton solve from the current unknowns; (converged, iterations).
+
+        ``reference_norm``: converge at ‖F‖ ≤ rtol · reference_norm (the residual the
+        reference method would start from, e.g. before a predictor moved the unknowns)
+        rather than rtol · ‖F_0‖; a predicted start is not held to a tighter tolerance.
+        With modified Newton (``options.reuse_contraction``), a solve that fails after
+        keeping a Jacobian is repeated once from the same start with fresh Jacobians
+        (both attempts counted)."""
+        start_state = self.save_state() if self.options.reuse_contraction > 0 else None
+        converged, iterations = self._solve_once(reference_norm)
+        if not converged and self._kept_iterations and start_state is not None:
+            log.info("modified Newton failed (%s) after %d kept Jacobians: fresh Jacobians",
+                     self.reason(), self._kept_iterations)
+            self.restore_state(start_state)
+            self._jacobian_valid = False
+            self._reuse_enabled = False
+            try:
+                converged, iterations = self._solve_once(reference_norm)
+            finally:
+                self._reuse_enabled = True
+        if not converged:
+            self._jacobian_valid = False
+        return converged, iterations
+
+    def _solve_once(self, reference_norm: float | None) -> tuple[bool, int]:
+        """One SNES solve; its work, converged or not, is added to ``counts`` and to the
+        process's ``SOLVER_COUNTS``."""
         self.residual_history = []
+        self._kept_iterations = 0
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
@@ -283,6 +353,9 @@ class NonlinearSolver:
         converged = False
         # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
         self._insert_options()
+        rtol, atol, stol, max_it = self.snes.getTolerances()
+        if reference_norm is not None:
+            self.snes.setTolerances(atol=max(atol, rtol * reference_norm))
         try:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
@@ -291,6 +364,7 @@ class NonlinearSolver:
             if self._callback_error is not None:
                 raise self._callback_error from None
         finally:
+            self.snes.setTolerances(atol=atol)
             self._forget_options()
             self._tally(converged, numeric_before, symbolic_before, jacobians_before)
         elapsed = time.perf_counter() - start
@@ -335,7 +409,21 @@ class Stepping:
     grow: float = 1.5
     easy_iterations: int = 6
     max_cuts: int = 10
+    # a converged step whose effort exceeds ``hard_iterations`` shrinks the next increment
+    # by ``shrink`` (None: only a failed solve cuts it); the effort that ``easy_iterations``
+    # and ``hard_iterations`` bound is the step's Newton iterations, or its numeric
+    # factorisations, failed attempts included (``effort="factorisations"``: with modified
+    # Newton an iteration on a kept factorisation costs a residual and a back-substitution)
+    hard_iterations: int | None = None
+    shrink: float = 0.5
+    effort: Literal["iterations", "factorisations"] = "iterations"
+    # start each load step from a prediction: "secant" extrapolates the last two converged
+    # states of the stage linearly in the path value ("none": from the last converged state)
+    predictor: Literal["none", "secant"] = "none"
     stops: tuple[float, ...] = ()  # values the path must land on exactly (outputs, stages)
+    # the largest step of each stage (the intervals between the stops, in order), as a
+    # fraction of the span like max_step; () = max_step everywhere
+    stage_max_steps: tuple[float, ...] = ()
     # what the path value is, for the failure message: "load factor", "time" (unit "s"),
     # "depth" ("mm"); None: "load factor" on the default path 0 -> 1, else "path value"
     quantity: str | None = None
@@ -347,6 +435,28 @@ class Stepping:
         if (self.start, self.end) == (0.0, 1.0):
             return "load factor", self.unit
         return "path value", self.unit
+
+    def effort_of(self, record: "StepRecord") -> int:
+        return record.factorisations if self.effort == "factorisations" else record.iterations
+
+    def largest_step(self, value: float) -> float:
+        """max_step, or the stage's own, for the step that starts at ``value``."""
+        if not self.stage_max_steps:
+            return self.max_step
+        span = self.end - self.start
+        stage = sum(1 for s in sorted(self.stops) if s <= value + 1e-12 * span)
+        return self.stage_max_steps[min(stage, len(self.stage_max_steps) - 1)]
+
+    def next_increment(self, increment: float, record: "StepRecord", value: float) -> float:
+        """The increment after a converged step that ended at ``value``: grown after an
+        easy step (no cut), shrunk after a hard one, within [min_step, largest_step]."""
+        span = self.end - self.start
+        effort = self.effort_of(record)
+        if record.cuts == 0 and effort <= self.easy_iterations:
+            increment *= self.grow
+        elif self.hard_iterations is not None and effort > self.hard_iterations:
+            increment *= self.shrink
+        return min(max(increment, self.min_step * span), self.largest_step(value) * span)
 
 
 @dataclasses.dataclass
@@ -401,7 +511,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     stops = sorted(s for s in set(stepping.stops) | {stepping.end}
                    if stepping.start < s <= stepping.end)
     value = stepping.start
-    increment = stepping.initial_step * span
+    increment = min(stepping.initial_step, stepping.largest_step(stepping.start)) * span
     records: list[StepRecord] = []
     step = 0
     resumed = checkpoints.enter_path(label) if checkpoints is not None else None
@@ -415,6 +525,9 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         records = [StepRecord(**r) for r in resumed["records"]]
         apply(value, records[-1].increment if records else 0.0)
     bar = _progress(solver, label, quiet)
+    predictor = _SecantPredictor(solver) if stepping.predictor == "secant" else None
+    if predictor is not None:
+        predictor.converged(value)
     while value < stepping.end - 1e-12 * span:
         step += 1
         state = solver.save_state()
@@ -428,7 +541,12 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             if next_stop - target < 1e-3 * increment:  # avoid a sliver before a stop
                 target = next_stop
             apply(target, target - value)
-            converged, iterations = solver.solve()
+            reference = None
+            if predictor is not None and predictor.ready:
+                # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
+                reference = solver.residual_norm()
+                predictor.predict(target)
+            converged, iterations = solver.solve(reference)
             if converged:
                 break
             history = list(solver.residual_history)
@@ -449,11 +567,18 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         if on_converged is not None:
             on_converged(record)
         bar.update((target - stepping.start) / span - bar.n)
-        if cuts == 0 and iterations <= stepping.easy_iterations:
-            increment = min(increment * stepping.grow, stepping.max_step * span)
+        increment = stepping.next_increment(increment, record, value)
+        if predictor is not None:
+            predictor.converged(value)
         if any(abs(target - s) <= 1e-12 * span for s in stops):
-            # a new stage (or output interval) starts: its difficulty is not the last one's
-            increment = max(increment, stepping.initial_step * span)
+            # a new stage (or output interval) starts: its difficulty is not the last one's,
+            # its path not the last one's continuation, its system perhaps not the last one's
+            # (on_converged may switch terms on): no secant across it, no kept Jacobian
+            increment = min(max(increment, stepping.initial_step * span),
+                            stepping.largest_step(value) * span)
+            solver.invalidate_jacobian()
+            if predictor is not None:
+                predictor.restart(value)
         if checkpoints is not None:
             try:
                 checkpoints.step_done({"label": label, "step": step, "value": value,
@@ -466,6 +591,30 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     if checkpoints is not None:
         checkpoints.leave_path([dataclasses.asdict(r) for r in records])
     return records
+
+
+class _SecantPredictor:
+    """u(s) ≈ u_n + (s − s_n)/(s_n − s_n−1) · (u_n − u_n−1): the line through the last
+    two converged states of the current stage, evaluated at the target."""
+
+    def __init__(self, solver: NonlinearSolver) -> None:
+        self.solver = solver
+        self.states: list[tuple[float, list[np.ndarray]]] = []
+
+    @property
+    def ready(self) -> bool:
+        return len(self.states) == 2
+
+    def converged(self, value: float) -> None:
+        self.states = [*self.states[-1:], (value, self.solver.save_state())]
+
+    def restart(self, value: float) -> None:
+        self.states = [(value, self.solver.save_state())]
+
+    def predict(self, target: float) -> None:
+        (s0, x0), (s1, x1) = self.states
+        factor = (target - s1) / (s1 - s0)
+        self.solver.restore_state([b + factor * (b - a) for a, b in zip(x0, x1)])
 
 
 class _NoBar:
