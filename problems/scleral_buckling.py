@@ -86,6 +86,7 @@ from eyemech.problems.solid.sutures import SutureForces, SuturePoint
 from eyemech.problems.solid.zonules import ZonuleBars
 from eyemech.problems.solve.driver import (
     NonlinearSolver,
+    SecantPredictor,
     SolveFailure,
     Stepping,
     follow_path,
@@ -168,21 +169,21 @@ class Parameters(SceneParameters, SolverChoice):
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
     # Newton's budget (docs/bench/scleral-buckling.md); the reference method: predictor=none,
-    # jacobian_reuse=0, step_effort=iterations
+    # jacobian_reuse=0, buckle_step=0.25, step_effort=iterations, hard_step_effort=0
     predictor: Literal["secant", "none"] = field(
-        "none", "start each load step from the secant through the stage's last two converged "
+        "secant", "start each load step from the secant through the stage's last two converged "
         "states (none: from the last converged state)")
     jacobian_reuse: float = field(
-        0.0, "modified Newton: keep the Jacobian and its factorisation while each iteration "
-        "reduces the residual by this factor or more, and from one load step to the next "
-        "within a stage (0: full Newton, a fresh factorisation every iteration)")
+        0.5, "modified Newton: keep the Jacobian and its factorisation while each iteration "
+        "reduces the residual by this factor or more, once it is below 1 % of the solve's "
+        "first (0: full Newton, a fresh factorisation every iteration)")
     buckle_step: float = field(
-        0.25, "largest buckle travel per load step of step 2, as a fraction of the buckle's "
+        0.125, "largest buckle travel per load step of step 2, as a fraction of the buckle's "
         "radial thickness (the other steps keep a quarter)")
     step_effort: Literal["iterations", "factorisations"] = field(
-        "iterations", "what sizes the next load step: grown after <= 6, halved after > "
+        "factorisations", "what sizes the next load step: grown after <= 6, halved after > "
         "hard_step_effort of the step's Newton iterations or its factorisations")
-    hard_step_effort: int = field(0, "effort above which the next load step is halved "
+    hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
 
     def validate(self) -> None:
@@ -261,8 +262,11 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer = buckling_output.Writer(model, ctx)
         writer.state(0.0, stage=0)
         model.register_checkpoint(ctx.checkpoints)
+        predictor = SecantPredictor(model.solver) if params.predictor == "secant" else None
+        if predictor is not None:
+            predictor.register(ctx.checkpoints)
         try:
-            follow_path(model.solver, model.apply, _stepping(params),
+            follow_path(model.solver, model.apply, _stepping(params), predictor=predictor,
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
         except SolveFailure:

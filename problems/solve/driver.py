@@ -77,6 +77,13 @@ class NewtonOptions:
     # contracts, ‖F_k‖ ≤ θ ‖F_k−1‖, and across solves until ``NonlinearSolver.
     # invalidate_jacobian``; 0 = a fresh Jacobian every iteration (full Newton)
     reuse_contraction: float = 0.0
+    # ... and only near convergence, once ‖F_k‖ ≤ reuse_below · ‖F_0‖: earlier, while contact
+    # switches, an iterate on a kept Jacobian led Newton into creeping (≈ 0.9 per iteration)
+    # more often than it saved a factorisation (docs/bench/scleral-buckling.md)
+    reuse_below: float = 1e-2
+    # the iteration limit of a modified-Newton solve: its iterations on a kept
+    # factorisation cost a residual and a back-substitution each
+    reuse_max_it: int = 25
     # keep the last converged solve's Jacobian for the next solve's first iteration (off:
     # on the eye a load step started on it failed more often than it saved, see
     # docs/bench/scleral-buckling.md)
@@ -91,7 +98,7 @@ class NewtonOptions:
             "snes_rtol": self.rtol,
             "snes_atol": self.atol,
             "snes_stol": self.stol,
-            "snes_max_it": self.max_it,
+            "snes_max_it": self.reuse_max_it if self.reuse_contraction > 0 else self.max_it,
             "snes_error_if_not_converged": False,
             "ksp_type": "preonly",
             "pc_type": "lu",
@@ -304,7 +311,8 @@ class NonlinearSolver:
         history = self.residual_history
         if len(history) < 2:
             return self.options.reuse_across_solves
-        return history[-1] <= theta * history[-2]
+        return (history[-1] <= theta * history[-2]
+                and history[-1] <= self.options.reuse_below * history[0])
 
     def residual_norm(self) -> float:
         """‖F‖ at the current unknowns (one residual assembly, its hooks included)."""
@@ -327,8 +335,9 @@ class NonlinearSolver:
         start_state = self.save_state() if self.options.reuse_contraction > 0 else None
         converged, iterations = self._solve_once(reference_norm)
         if not converged and self._kept_iterations and start_state is not None:
-            log.info("modified Newton failed (%s) after %d kept Jacobians: fresh Jacobians",
-                     self.reason(), self._kept_iterations)
+            log.info("modified Newton failed (%s) after %d kept Jacobians, residuals %s: "
+                     "fresh Jacobians", self.reason(), self._kept_iterations,
+                     " ".join(f"{r:.2e}" for r in self.residual_history))
             self.restore_state(start_state)
             self._jacobian_valid = False
             self._reuse_enabled = False
@@ -493,7 +502,8 @@ class StepRecord:
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 stepping: Stepping, *, on_converged: Callable[[StepRecord], None] | None = None,
                 label: str = "", quiet: bool = False,
-                checkpoints: "Checkpoints | None" = None) -> list[StepRecord]:
+                checkpoints: "Checkpoints | None" = None,
+                predictor: SecantPredictor | None = None) -> list[StepRecord]:
     """Solve along the path: ``apply(value, increment)`` sets loads (or time) for the
     target value, Newton solves, and ``on_converged`` records and updates history
     variables. A failed solve restores the last converged state and halves the
@@ -504,7 +514,13 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     and a resumed run skips the paths finished before its checkpoint and continues the
     path it is in. ``apply`` must then depend on its arguments only (it is called again
     with the checkpoint's value); any other state must be registered with the
-    checkpoints."""
+    checkpoints, the predictor's too (``stepping.predictor = "secant"``: pass a
+    :class:`SecantPredictor` registered with them; one made here starts a resumed path
+    without a secant).
+
+    The predictor (``stepping.predictor``) moves the unknowns before each attempt; its
+    solve then converges at ‖F‖ ≤ rtol ‖F(u_n, target)‖, the residual the unpredicted
+    start has (:meth:`NonlinearSolver.solve`'s ``reference_norm``)."""
     span = stepping.end - stepping.start
     if span <= 0:
         raise ValueError("stepping.end must be greater than stepping.start")
@@ -525,9 +541,12 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         records = [StepRecord(**r) for r in resumed["records"]]
         apply(value, records[-1].increment if records else 0.0)
     bar = _progress(solver, label, quiet)
-    predictor = _SecantPredictor(solver) if stepping.predictor == "secant" else None
-    if predictor is not None:
-        predictor.converged(value)
+    if stepping.predictor == "none":
+        predictor = None
+    elif predictor is None:
+        predictor = SecantPredictor(solver)
+    if predictor is not None and resumed is None:
+        predictor.restart(value)
     while value < stepping.end - 1e-12 * span:
         step += 1
         state = solver.save_state()
@@ -569,7 +588,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         bar.update((target - stepping.start) / span - bar.n)
         increment = stepping.next_increment(increment, record, value)
         if predictor is not None:
-            predictor.converged(value)
+            predictor.converged(value, state)
         if any(abs(target - s) <= 1e-12 * span for s in stops):
             # a new stage (or output interval) starts: its difficulty is not the last one's,
             # its path not the last one's continuation, its system perhaps not the last one's
@@ -593,28 +612,44 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     return records
 
 
-class _SecantPredictor:
+class SecantPredictor:
     """u(s) ≈ u_n + (s − s_n)/(s_n − s_n−1) · (u_n − u_n−1): the line through the last
-    two converged states of the current stage, evaluated at the target."""
+    two converged states of the current stage, evaluated at the target.
+
+    u_n is the solver's unknowns at the step's start; u_n−1 is kept in Functions of the
+    unknowns' spaces, so that :meth:`register` can put it in a checkpoint and a resumed
+    run predicts its first step as the uninterrupted run did."""
 
     def __init__(self, solver: NonlinearSolver) -> None:
         self.solver = solver
-        self.states: list[tuple[float, list[np.ndarray]]] = []
+        self.previous = [dolfinx.fem.Function(u.function_space) for u in solver.unknowns]
+        self.values = [float("nan"), float("nan")]  # s_n−1 (nan: none in this stage), s_n
+
+    def register(self, checkpoints: "Checkpoints", name: str = "predictor") -> None:
+        for i, f in enumerate(self.previous):
+            checkpoints.function(f"{name}_{i}", f)
+        checkpoints.value(f"{name}_values", lambda: list(self.values),
+                          lambda saved: setattr(self, "values", [float(v) for v in saved]))
 
     @property
     def ready(self) -> bool:
-        return len(self.states) == 2
+        return bool(np.isfinite(self.values).all())
 
-    def converged(self, value: float) -> None:
-        self.states = [*self.states[-1:], (value, self.solver.save_state())]
+    def converged(self, value: float, state: list[np.ndarray]) -> None:
+        """A step converged at ``value``; ``state``: the unknowns at its start (u_n−1)."""
+        for f, values in zip(self.previous, state):
+            f.x.array[:] = values
+        self.values = [self.values[1], value]
 
     def restart(self, value: float) -> None:
-        self.states = [(value, self.solver.save_state())]
+        """A new stage starts at ``value``: no secant across its start."""
+        self.values = [float("nan"), value]
 
     def predict(self, target: float) -> None:
-        (s0, x0), (s1, x1) = self.states
+        (s0, s1), x1 = self.values, self.solver.save_state()
         factor = (target - s1) / (s1 - s0)
-        self.solver.restore_state([b + factor * (b - a) for a, b in zip(x0, x1)])
+        self.solver.restore_state([b + factor * (b - a.x.array)
+                                   for a, b in zip(self.previous, x1)])
 
 
 class _NoBar:
