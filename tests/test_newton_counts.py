@@ -253,9 +253,9 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
     """The scene's defaults (secant predictor, modified Newton, 0.2 mm buckle steps,
     load steps sized by factorisations) against the reference method on the coarse eye:
     the quantities of interest after buckling and after suturing within 1 % (measured:
-    ≤ 0.01 %), the tear rim's gap within 0.01 mm (1 % of its 1.03 mm after step 1;
+    ≤ 1e-6 relative), the tear rim's gap within 0.01 mm (1 % of its 1.03 mm after step 1;
     measured 0.0000 mm after buckling, 0.00004 mm after suturing), with at most half the
-    numeric factorisations (measured: FILL)."""
+    numeric factorisations (measured: 49 in 16 load steps against 201 in 22)."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     reference = scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE, **REFERENCE_METHOD),
                                      options=options)

@@ -565,7 +565,8 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
                 reference = solver.residual_norm()
                 predictor.predict(target)
-            converged, iterations = solver.solve(reference)
+            converged, iterations = solver.solve(reference) if reference is not None \
+                else solver.solve()
             if converged:
                 break
             history = list(solver.residual_history)
