@@ -271,3 +271,14 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
     assert counts["factorisations"] <= 0.5 * ref_counts["factorisations"]
     # modified Newton: iterations on kept factorisations, all of them counted
     assert counts["factorisations"] == counts["jacobians"] < counts["newton_iterations_all"]
+
+
+@pytest.mark.parametrize("key, value", [("jacobian_reuse", 1.0), ("jacobian_reuse", -0.1),
+                                        ("buckle_step", 0.5), ("buckle_step", 0.0),
+                                        ("hard_step_effort", -1)])
+def test_budget_parameters_out_of_range_are_refused(key, value):
+    from eyemech.problems.run.parameters import ParameterError
+
+    with pytest.raises(ParameterError) as refused:
+        scleral_buckling.Parameters(resolution="coarse", **{key: value}).validate()
+    assert refused.value.key == key
