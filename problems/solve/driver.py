@@ -20,6 +20,12 @@ Design notes
   changes, e.g. when contact pairs change; a fieldsplit's inner solvers and GAMG's
   levels at their set-up). In between they are removed, so that they do not pile up over
   a study's many solvers and options an override made moot are not reported as unused.
+- Fewer factorisations, each piece off by default (measured on the eye in
+  docs/scleral_buckling.md, "Newton's budget"): a secant predictor per load step
+  (:class:`SecantPredictor`) whose solve keeps the unpredicted start's tolerance; modified
+  Newton (``NewtonOptions.reuse_contraction``: the Jacobian callback leaves the matrix as it
+  is, so PCSetUp keeps the factorisation); load steps sized by the step's factorisations
+  (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``).
 """
 
 from __future__ import annotations
@@ -302,9 +308,10 @@ class NonlinearSolver:
 
     def _keep_jacobian(self) -> bool:
         """Modified Newton's choice at the Jacobian of iteration k (``residual_history``
-        holds ‖F_0‖ … ‖F_k‖ by then): keep the matrix at k = 0 if it is still valid
-        (a converged solve's last Jacobian), later while the last iteration contracted
-        the residual by θ = ``options.reuse_contraction`` or better."""
+        holds ‖F_0‖ … ‖F_k‖ by then): at k = 0 keep the matrix if ``reuse_across_solves``
+        and it is still valid (a converged solve's last Jacobian); later while the last
+        iteration contracted the residual by θ = ``options.reuse_contraction`` or better
+        and ‖F_k‖ ≤ ``reuse_below`` ‖F_0‖."""
         theta = self.options.reuse_contraction
         if theta <= 0 or not self._reuse_enabled or not self._jacobian_valid:
             return False
