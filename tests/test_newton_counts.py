@@ -282,3 +282,22 @@ def test_budget_parameters_out_of_range_are_refused(key, value):
     with pytest.raises(ParameterError) as refused:
         scleral_buckling.Parameters(resolution="coarse", **{key: value}).validate()
     assert refused.value.key == key
+
+
+def test_load_steps_follow_the_effort_and_each_stage_limit():
+    """Sized by factorisations: 20 iterations on 3 factorisations is an easy step (grown
+    ×1.5), 12 factorisations a hard one (halved); at a stop the next stage's own limit
+    caps the increment and its first step."""
+    stepping = Stepping(0.0, 2.0, initial_step=0.25, max_step=0.5, stops=(1.0,),
+                        stage_max_steps=(0.5, 0.1), effort="factorisations", hard_iterations=10)
+
+    def record(factorisations: int) -> driver.StepRecord:
+        return driver.StepRecord(step=1, load=0.5, increment=0.4, iterations=20, cuts=0,
+                                 residuals=[], factorisations=factorisations)
+
+    assert stepping.next_increment(0.4, record(3), 0.5) == pytest.approx(0.6)
+    assert stepping.next_increment(0.8, record(3), 0.5) == pytest.approx(1.0)  # 0.5 of the span
+    assert stepping.next_increment(0.4, record(12), 0.5) == pytest.approx(0.2)
+    assert stepping.next_increment(0.4, record(8), 1.0) == pytest.approx(0.2)  # 0.1 of the span
+    assert stepping.first_step(1.0) == pytest.approx(0.1)
+    assert Stepping(initial_step=0.5, max_step=0.25).first_step(0.0) == 0.5  # no stage limits

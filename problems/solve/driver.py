@@ -463,16 +463,25 @@ class Stepping:
         stage = sum(1 for s in sorted(self.stops) if s <= value + 1e-12 * span)
         return self.stage_max_steps[min(stage, len(self.stage_max_steps) - 1)]
 
+    def first_step(self, value: float) -> float:
+        """A stage's first step: ``initial_step``, within the stage's own largest step
+        when ``stage_max_steps`` gives one (otherwise as given, even above max_step)."""
+        if not self.stage_max_steps:
+            return self.initial_step
+        return min(self.initial_step, self.largest_step(value))
+
     def next_increment(self, increment: float, record: "StepRecord", value: float) -> float:
         """The increment after a converged step that ended at ``value``: grown after an
         easy step (no cut), shrunk after a hard one, within [min_step, largest_step]."""
         span = self.end - self.start
+        largest = self.largest_step(value) * span
         effort = self.effort_of(record)
         if record.cuts == 0 and effort <= self.easy_iterations:
-            increment *= self.grow
+            increment = min(increment * self.grow, largest)
         elif self.hard_iterations is not None and effort > self.hard_iterations:
-            increment *= self.shrink
-        return min(max(increment, self.min_step * span), self.largest_step(value) * span)
+            increment = max(increment * self.shrink, self.min_step * span)
+        # a stage of its own limit (the next one, at a stop) caps what was carried over
+        return min(increment, largest) if self.stage_max_steps else increment
 
 
 @dataclasses.dataclass
@@ -534,7 +543,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     stops = sorted(s for s in set(stepping.stops) | {stepping.end}
                    if stepping.start < s <= stepping.end)
     value = stepping.start
-    increment = min(stepping.initial_step, stepping.largest_step(stepping.start)) * span
+    increment = stepping.first_step(stepping.start) * span
     records: list[StepRecord] = []
     step = 0
     resumed = checkpoints.enter_path(label) if checkpoints is not None else None
@@ -601,8 +610,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             # a new stage (or output interval) starts: its difficulty is not the last one's,
             # its path not the last one's continuation, its system perhaps not the last one's
             # (on_converged may switch terms on): no secant across it, no kept Jacobian
-            increment = min(max(increment, stepping.initial_step * span),
-                            stepping.largest_step(value) * span)
+            increment = max(increment, stepping.first_step(value) * span)
             solver.invalidate_jacobian()
             if predictor is not None:
                 predictor.restart(value)
