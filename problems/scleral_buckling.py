@@ -99,6 +99,7 @@ from eyemech.problems.solid.sutures import SutureForces, SuturePoint
 from eyemech.problems.solid.zonules import ZonuleBars
 from eyemech.problems.solve.driver import (
     NonlinearSolver,
+    SecantPredictor,
     SolveFailure,
     Stepping,
     follow_path,
@@ -207,6 +208,23 @@ class Parameters(SceneParameters, SolverChoice):
                          "the IOP to its pre-operative value (the liquid volume is released)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
+    # Newton's budget (docs/bench/scleral-buckling.md); the reference method: predictor=none,
+    # jacobian_reuse=0, buckle_step=0.25, step_effort=iterations, hard_step_effort=0
+    predictor: Literal["secant", "none"] = field(
+        "secant", "start each load step from the secant through the stage's last two converged "
+        "states (none: from the last converged state)")
+    jacobian_reuse: float = field(
+        0.5, "modified Newton: keep the Jacobian and its factorisation while each iteration "
+        "reduces the residual by this factor or more, once it is below 1 % of the solve's "
+        "first (0: full Newton, a fresh factorisation every iteration)")
+    buckle_step: float = field(
+        0.125, "largest buckle travel per load step of step 2, as a fraction of the buckle's "
+        "radial thickness (the other steps keep a quarter)")
+    step_effort: Literal["iterations", "factorisations"] = field(
+        "factorisations", "what sizes the next load step: grown after <= 6, halved after > "
+        "hard_step_effort of the step's Newton iterations or its factorisations")
+    hard_step_effort: int = field(10, "effort above which the next load step is halved "
+                                  "(0: only a failed solve cuts it)")
 
     def validate(self) -> None:
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
@@ -216,6 +234,14 @@ class Parameters(SceneParameters, SolverChoice):
                               "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
                               "tear_closure_tolerance", "retina_thickness")
+        if not 0 <= self.jacobian_reuse < 1:
+            raise ParameterError("jacobian_reuse", f"{self.jacobian_reuse}: a contraction factor "
+                                 "in [0, 1) (0: full Newton)")
+        if not 0 < self.buckle_step <= 0.25:
+            raise ParameterError("buckle_step", f"{self.buckle_step}: a fraction in (0, 0.25] of "
+                                 "the buckle's thickness (deeper jumps throw the sclera through it)")
+        if self.hard_step_effort < 0:
+            raise ParameterError("hard_step_effort", f"{self.hard_step_effort}: must be >= 0")
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
                                  "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
@@ -293,11 +319,11 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer = buckling_output.Writer(model, ctx)
         writer.state(0.0, stage=0)
         model.register_checkpoint(ctx.checkpoints)
+        predictor = SecantPredictor(model.solver) if params.predictor == "secant" else None
+        if predictor is not None:
+            predictor.register(ctx.checkpoints)
         try:
-            follow_path(model.solver, model.apply, Stepping(0.0, model.last_stage,
-                                                            initial_step=min(0.25 / _span(params), _max_step(params)),
-                                                            max_step=_max_step(params),
-                                                            stops=(1.0, 2.0, 3.0)),
+            follow_path(model.solver, model.apply, _stepping(params), predictor=predictor,
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
         except SolveFailure:
@@ -310,18 +336,32 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     return ctx.result
 
 
-def _max_step(params: Parameters) -> float:
+def _stepping(params: Parameters) -> Stepping:
+    """The load path 0 → ``_span`` with a stop at each stage's end, stepped as the
+    budget parameters (``predictor``, ``buckle_step``, ``step_effort``,
+    ``hard_step_effort``) say."""
+    largest = _max_step(params)
+    stages = [largest] * int(_span(params))
+    stages[1] = _max_step(params, params.buckle_step)
+    return Stepping(0.0, _span(params), initial_step=min(0.25 / _span(params), largest),
+                    max_step=largest, stops=(1.0, 2.0, 3.0), stage_max_steps=tuple(stages),
+                    predictor=params.predictor, effort=params.step_effort,
+                    hard_iterations=params.hard_step_effort or None)
+
+
+def _max_step(params: Parameters, buckle_step: float = 0.25) -> float:
     """Largest step as a fraction of the path (``span`` stages): three quarters of a stage, and
-    never a buckle travel of more than a quarter of the buckle's radial thickness.
-    A deeper jump starts Newton with sclera nodes deep inside the buckle, and its
+    never a buckle travel of more than ``buckle_step`` (a quarter) of the buckle's radial
+    thickness. A deeper jump starts Newton with sclera nodes deep inside the buckle, and its
     first iterate throws them through it (measured: a 0.64 mm jump with the default
     1.6 mm buckle left the sclera outside the tire, or "converged" in no iteration
-    with the buckle inside the eye)."""
+    with the buckle inside the eye). Step 2's own limit is ``buckle_step``'s
+    (:func:`_stepping`)."""
     thickness = params.tire_height + params.band_thickness
     span = _span(params)
     if params.indentation <= 0:
         return 0.75 / span
-    return min(0.75 / span, 0.25 * thickness / params.indentation / span)
+    return min(0.75 / span, buckle_step * thickness / params.indentation / span)
 
 
 def _span(params: Parameters) -> float:
@@ -423,8 +463,9 @@ class BucklingModel:
 
         self.bcs = self._boundary_conditions()
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
+        newton = dataclasses.replace(ctx.options.newton, reuse_contraction=params.jacobian_reuse)
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
-                                      options=ctx.options.newton, timings=ctx.timings,
+                                      options=newton, timings=ctx.timings,
                                       iterative=params.linear_solver(2 * self.stiffness, dx))
         self.element_size = element_size
         self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries

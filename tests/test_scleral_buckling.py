@@ -10,6 +10,7 @@ from conftest import CONTACT_RANKS_RTOL, last_json, run_cli
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
+from eyemech.problems.solve.driver import NewtonOptions
 
 COARSE = dict(resolution="coarse")
 
@@ -139,7 +140,9 @@ def test_retina_lands_on_the_choroid_without_passing_through(closing):
     assert after["max_penetration_mm"] < 1e-3
     assert after["retina_choroid_gap_nts_min_mm"] > -1e-3
     assert q["after_iop"]["retina_pressed_nodes"] == 0
-    assert max(s["newton_iterations"] for s in closing.steps) <= 15
+    # within the solve's iteration limit: 25 with modified Newton (the scene's default
+    # jacobian_reuse), whose iterations on a kept factorisation are cheap
+    assert max(s["newton_iterations"] for s in closing.steps) <= NewtonOptions().reuse_max_it
 
 
 @pytest.mark.mpi

@@ -20,6 +20,12 @@ Design notes
   changes, e.g. when contact pairs change; a fieldsplit's inner solvers and GAMG's
   levels at their set-up). In between they are removed, so that they do not pile up over
   a study's many solvers and options an override made moot are not reported as unused.
+- Fewer factorisations, each piece off by default (measured on the eye in
+  docs/scleral_buckling.md, "Newton's budget"): a secant predictor per load step
+  (:class:`SecantPredictor`) whose solve keeps the unpredicted start's tolerance; modified
+  Newton (``NewtonOptions.reuse_contraction``: the Jacobian callback leaves the matrix as it
+  is, so PCSetUp keeps the factorisation); load steps sized by the step's factorisations
+  (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``).
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ import dataclasses
 import logging
 import sys
 import time
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Literal, Sequence
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -73,6 +79,21 @@ class NewtonOptions:
     max_it: int = 15
     linear_solver: str = "mumps"  # mumps | superlu_dist | petsc (LU) | iterative via petsc
     petsc: dict[str, str] = dataclasses.field(default_factory=dict)
+    # modified Newton: the last Jacobian (and its factorisation) is kept while Newton
+    # contracts, ‖F_k‖ ≤ θ ‖F_k−1‖, and across solves until ``NonlinearSolver.
+    # invalidate_jacobian``; 0 = a fresh Jacobian every iteration (full Newton)
+    reuse_contraction: float = 0.0
+    # ... and only near convergence, once ‖F_k‖ ≤ reuse_below · ‖F_0‖: earlier, while contact
+    # switches, an iterate on a kept Jacobian led Newton into creeping (≈ 0.9 per iteration)
+    # more often than it saved a factorisation (docs/bench/scleral-buckling.md)
+    reuse_below: float = 1e-2
+    # the iteration limit of a modified-Newton solve: its iterations on a kept
+    # factorisation cost a residual and a back-substitution each
+    reuse_max_it: int = 25
+    # keep the last converged solve's Jacobian for the next solve's first iteration (off:
+    # on the eye a load step started on it failed more often than it saved, see
+    # docs/bench/scleral-buckling.md)
+    reuse_across_solves: bool = False
 
     def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
         """SNES options, then the KSP/PC options: MUMPS LU, or ``linear`` (an iterative
@@ -83,7 +104,7 @@ class NewtonOptions:
             "snes_rtol": self.rtol,
             "snes_atol": self.atol,
             "snes_stol": self.stol,
-            "snes_max_it": self.max_it,
+            "snes_max_it": self.reuse_max_it if self.reuse_contraction > 0 else self.max_it,
             "snes_error_if_not_converged": False,
             "ksp_type": "preonly",
             "pc_type": "lu",
@@ -163,6 +184,9 @@ class NonlinearSolver:
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
         self._jacobians = 0  # Jacobian assemblies so far
+        self._jacobian_valid = False  # the matrix holds a Jacobian a next solve may keep
+        self._kept_iterations = 0  # Newton iterations on a kept Jacobian, this solve
+        self._reuse_enabled = True  # off for the fresh-Jacobian retry of a failed solve
         self._wrap_callbacks()
         self._set_options(prefix)
         if iterative is not None:
@@ -199,8 +223,14 @@ class NonlinearSolver:
             self.timings.add("assembly", time.perf_counter() - start)
 
         def jacobian(snes, x, mat, pmat):
+            if self._keep_jacobian():
+                # the matrix is left as it is: PCSetUp sees its state unchanged and
+                # keeps the factorisation (counted by PETSc's events, not here)
+                self._kept_iterations += 1
+                return
             start = time.perf_counter()
             self._jacobians += 1
+            self._jacobian_valid = True
             with self._remember_errors():
                 j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
                 for hook in self.jacobian_hooks:
@@ -270,11 +300,67 @@ class NonlinearSolver:
         info = self.problem.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)
         return int(info["nz_allocated"])
 
+    # -- modified Newton --------------------------------------------------------
+    def invalidate_jacobian(self) -> None:
+        """The system changed beyond what the kept Jacobian describes (a new stage, a
+        switched constraint): the next iteration assembles and factorises afresh."""
+        self._jacobian_valid = False
+
+    def _keep_jacobian(self) -> bool:
+        """Modified Newton's choice at the Jacobian of iteration k (``residual_history``
+        holds ‖F_0‖ … ‖F_k‖ by then): at k = 0 keep the matrix if ``reuse_across_solves``
+        and it is still valid (a converged solve's last Jacobian); later while the last
+        iteration contracted the residual by θ = ``options.reuse_contraction`` or better
+        and ‖F_k‖ ≤ ``reuse_below`` ‖F_0‖."""
+        theta = self.options.reuse_contraction
+        if theta <= 0 or not self._reuse_enabled or not self._jacobian_valid:
+            return False
+        history = self.residual_history
+        if len(history) < 2:
+            return self.options.reuse_across_solves
+        return (history[-1] <= theta * history[-2]
+                and history[-1] <= self.options.reuse_below * history[0])
+
+    def residual_norm(self) -> float:
+        """‖F‖ at the current unknowns (one residual assembly, its hooks included)."""
+        x = self.problem.x
+        dolfinx.fem.petsc.assign(self.problem.u, x)
+        b = self.snes.getFunction()[0]
+        self.snes.computeFunction(x, b)
+        return float(b.norm())
+
     # -- solve ------------------------------------------------------------------
-    def solve(self) -> tuple[bool, int]:
-        """One Newton solve from the current unknowns; (converged, iterations). Its work,
-        converged or not, is added to ``counts`` and to the process's ``SOLVER_COUNTS``."""
+    def solve(self, reference_norm: float | None = None) -> tuple[bool, int]:
+        """One Newton solve from the current unknowns; (converged, iterations).
+
+        ``reference_norm``: converge at ‖F‖ ≤ rtol · reference_norm (the residual the
+        reference method would start from, e.g. before a predictor moved the unknowns)
+        rather than rtol · ‖F_0‖; a predicted start is not held to a tighter tolerance.
+        With modified Newton (``options.reuse_contraction``), a solve that fails after
+        keeping a Jacobian is repeated once from the same start with fresh Jacobians
+        (both attempts counted)."""
+        start_state = self.save_state() if self.options.reuse_contraction > 0 else None
+        converged, iterations = self._solve_once(reference_norm)
+        if not converged and self._kept_iterations and start_state is not None:
+            log.info("modified Newton failed (%s) after %d kept Jacobians, residuals %s: "
+                     "fresh Jacobians", self.reason(), self._kept_iterations,
+                     " ".join(f"{r:.2e}" for r in self.residual_history))
+            self.restore_state(start_state)
+            self._jacobian_valid = False
+            self._reuse_enabled = False
+            try:
+                converged, iterations = self._solve_once(reference_norm)
+            finally:
+                self._reuse_enabled = True
+        if not converged:
+            self._jacobian_valid = False
+        return converged, iterations
+
+    def _solve_once(self, reference_norm: float | None) -> tuple[bool, int]:
+        """One SNES solve; its work, converged or not, is added to ``counts`` and to the
+        process's ``SOLVER_COUNTS``."""
         self.residual_history = []
+        self._kept_iterations = 0
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
@@ -283,6 +369,9 @@ class NonlinearSolver:
         converged = False
         # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
         self._insert_options()
+        rtol, atol, stol, max_it = self.snes.getTolerances()
+        if reference_norm is not None:
+            self.snes.setTolerances(atol=max(atol, rtol * reference_norm))
         try:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
@@ -291,6 +380,7 @@ class NonlinearSolver:
             if self._callback_error is not None:
                 raise self._callback_error from None
         finally:
+            self.snes.setTolerances(atol=atol)
             self._forget_options()
             self._tally(converged, numeric_before, symbolic_before, jacobians_before)
         elapsed = time.perf_counter() - start
@@ -335,7 +425,21 @@ class Stepping:
     grow: float = 1.5
     easy_iterations: int = 6
     max_cuts: int = 10
+    # a converged step whose effort exceeds ``hard_iterations`` shrinks the next increment
+    # by ``shrink`` (None: only a failed solve cuts it); the effort that ``easy_iterations``
+    # and ``hard_iterations`` bound is the step's Newton iterations, or its numeric
+    # factorisations, failed attempts included (``effort="factorisations"``: with modified
+    # Newton an iteration on a kept factorisation costs a residual and a back-substitution)
+    hard_iterations: int | None = None
+    shrink: float = 0.5
+    effort: Literal["iterations", "factorisations"] = "iterations"
+    # start each load step from a prediction: "secant" extrapolates the last two converged
+    # states of the stage linearly in the path value ("none": from the last converged state)
+    predictor: Literal["none", "secant"] = "none"
     stops: tuple[float, ...] = ()  # values the path must land on exactly (outputs, stages)
+    # the largest step of each stage (the intervals between the stops, in order), as a
+    # fraction of the span like max_step; () = max_step everywhere
+    stage_max_steps: tuple[float, ...] = ()
     # what the path value is, for the failure message: "load factor", "time" (unit "s"),
     # "depth" ("mm"); None: "load factor" on the default path 0 -> 1, else "path value"
     quantity: str | None = None
@@ -347,6 +451,37 @@ class Stepping:
         if (self.start, self.end) == (0.0, 1.0):
             return "load factor", self.unit
         return "path value", self.unit
+
+    def effort_of(self, record: "StepRecord") -> int:
+        return record.factorisations if self.effort == "factorisations" else record.iterations
+
+    def largest_step(self, value: float) -> float:
+        """max_step, or the stage's own, for the step that starts at ``value``."""
+        if not self.stage_max_steps:
+            return self.max_step
+        span = self.end - self.start
+        stage = sum(1 for s in sorted(self.stops) if s <= value + 1e-12 * span)
+        return self.stage_max_steps[min(stage, len(self.stage_max_steps) - 1)]
+
+    def first_step(self, value: float) -> float:
+        """A stage's first step: ``initial_step``, within the stage's own largest step
+        when ``stage_max_steps`` gives one (otherwise as given, even above max_step)."""
+        if not self.stage_max_steps:
+            return self.initial_step
+        return min(self.initial_step, self.largest_step(value))
+
+    def next_increment(self, increment: float, record: "StepRecord", value: float) -> float:
+        """The increment after a converged step that ended at ``value``: grown after an
+        easy step (no cut), shrunk after a hard one, within [min_step, largest_step]."""
+        span = self.end - self.start
+        largest = self.largest_step(value) * span
+        effort = self.effort_of(record)
+        if record.cuts == 0 and effort <= self.easy_iterations:
+            increment = min(increment * self.grow, largest)
+        elif self.hard_iterations is not None and effort > self.hard_iterations:
+            increment = max(increment * self.shrink, self.min_step * span)
+        # a stage of its own limit (the next one, at a stop) caps what was carried over
+        return min(increment, largest) if self.stage_max_steps else increment
 
 
 @dataclasses.dataclass
@@ -383,7 +518,8 @@ class StepRecord:
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 stepping: Stepping, *, on_converged: Callable[[StepRecord], None] | None = None,
                 label: str = "", quiet: bool = False,
-                checkpoints: "Checkpoints | None" = None) -> list[StepRecord]:
+                checkpoints: "Checkpoints | None" = None,
+                predictor: SecantPredictor | None = None) -> list[StepRecord]:
     """Solve along the path: ``apply(value, increment)`` sets loads (or time) for the
     target value, Newton solves, and ``on_converged`` records and updates history
     variables. A failed solve restores the last converged state and halves the
@@ -394,14 +530,20 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     and a resumed run skips the paths finished before its checkpoint and continues the
     path it is in. ``apply`` must then depend on its arguments only (it is called again
     with the checkpoint's value); any other state must be registered with the
-    checkpoints."""
+    checkpoints, the predictor's too (``stepping.predictor = "secant"``: pass a
+    :class:`SecantPredictor` registered with them; one made here starts a resumed path
+    without a secant).
+
+    The predictor (``stepping.predictor``) moves the unknowns before each attempt; its
+    solve then converges at ‖F‖ ≤ rtol ‖F(u_n, target)‖, the residual the unpredicted
+    start has (:meth:`NonlinearSolver.solve`'s ``reference_norm``)."""
     span = stepping.end - stepping.start
     if span <= 0:
         raise ValueError("stepping.end must be greater than stepping.start")
     stops = sorted(s for s in set(stepping.stops) | {stepping.end}
                    if stepping.start < s <= stepping.end)
     value = stepping.start
-    increment = stepping.initial_step * span
+    increment = stepping.first_step(stepping.start) * span
     records: list[StepRecord] = []
     step = 0
     resumed = checkpoints.enter_path(label) if checkpoints is not None else None
@@ -415,6 +557,12 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         records = [StepRecord(**r) for r in resumed["records"]]
         apply(value, records[-1].increment if records else 0.0)
     bar = _progress(solver, label, quiet)
+    if stepping.predictor == "none":
+        predictor = None
+    elif predictor is None:
+        predictor = SecantPredictor(solver)
+    if predictor is not None and resumed is None:
+        predictor.restart(value)
     while value < stepping.end - 1e-12 * span:
         step += 1
         state = solver.save_state()
@@ -428,7 +576,13 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             if next_stop - target < 1e-3 * increment:  # avoid a sliver before a stop
                 target = next_stop
             apply(target, target - value)
-            converged, iterations = solver.solve()
+            reference = None
+            if predictor is not None and predictor.ready:
+                # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
+                reference = solver.residual_norm()
+                predictor.predict(target)
+            converged, iterations = solver.solve(reference) if reference is not None \
+                else solver.solve()
             if converged:
                 break
             history = list(solver.residual_history)
@@ -449,11 +603,17 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         if on_converged is not None:
             on_converged(record)
         bar.update((target - stepping.start) / span - bar.n)
-        if cuts == 0 and iterations <= stepping.easy_iterations:
-            increment = min(increment * stepping.grow, stepping.max_step * span)
+        increment = stepping.next_increment(increment, record, value)
+        if predictor is not None:
+            predictor.converged(value, state)
         if any(abs(target - s) <= 1e-12 * span for s in stops):
-            # a new stage (or output interval) starts: its difficulty is not the last one's
-            increment = max(increment, stepping.initial_step * span)
+            # a new stage (or output interval) starts: its difficulty is not the last one's,
+            # its path not the last one's continuation, its system perhaps not the last one's
+            # (on_converged may switch terms on): no secant across it, no kept Jacobian
+            increment = max(increment, stepping.first_step(value) * span)
+            solver.invalidate_jacobian()
+            if predictor is not None:
+                predictor.restart(value)
         if checkpoints is not None:
             try:
                 checkpoints.step_done({"label": label, "step": step, "value": value,
@@ -466,6 +626,46 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     if checkpoints is not None:
         checkpoints.leave_path([dataclasses.asdict(r) for r in records])
     return records
+
+
+class SecantPredictor:
+    """u(s) ≈ u_n + (s − s_n)/(s_n − s_n−1) · (u_n − u_n−1): the line through the last
+    two converged states of the current stage, evaluated at the target.
+
+    u_n is the solver's unknowns at the step's start; u_n−1 is kept in Functions of the
+    unknowns' spaces, so that :meth:`register` can put it in a checkpoint and a resumed
+    run predicts its first step as the uninterrupted run did."""
+
+    def __init__(self, solver: NonlinearSolver) -> None:
+        self.solver = solver
+        self.previous = [dolfinx.fem.Function(u.function_space) for u in solver.unknowns]
+        self.values = [float("nan"), float("nan")]  # s_n−1 (nan: none in this stage), s_n
+
+    def register(self, checkpoints: "Checkpoints", name: str = "predictor") -> None:
+        for i, f in enumerate(self.previous):
+            checkpoints.function(f"{name}_{i}", f)
+        checkpoints.value(f"{name}_values", lambda: list(self.values),
+                          lambda saved: setattr(self, "values", [float(v) for v in saved]))
+
+    @property
+    def ready(self) -> bool:
+        return bool(np.isfinite(self.values).all())
+
+    def converged(self, value: float, state: list[np.ndarray]) -> None:
+        """A step converged at ``value``; ``state``: the unknowns at its start (u_n−1)."""
+        for f, values in zip(self.previous, state):
+            f.x.array[:] = values
+        self.values = [self.values[1], value]
+
+    def restart(self, value: float) -> None:
+        """A new stage starts at ``value``: no secant across its start."""
+        self.values = [float("nan"), value]
+
+    def predict(self, target: float) -> None:
+        (s0, s1), x1 = self.values, self.solver.save_state()
+        factor = (target - s1) / (s1 - s0)
+        self.solver.restore_state([b + factor * (b - a.x.array)
+                                   for a, b in zip(self.previous, x1)])
 
 
 class _NoBar:
