@@ -580,7 +580,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             if predictor is not None and predictor.ready:
                 # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
                 reference = solver.residual_norm()
-                predictor.predict(target)
+                predictor.predict(target, state)
             converged, iterations = solver.solve(reference) if reference is not None \
                 else solver.solve()
             if converged:
@@ -661,8 +661,12 @@ class SecantPredictor:
         """A new stage starts at ``value``: no secant across its start."""
         self.values = [float("nan"), value]
 
-    def predict(self, target: float) -> None:
-        (s0, s1), x1 = self.values, self.solver.save_state()
+    def predict(self, target: float, start: list[np.ndarray]) -> None:
+        """Moves the unknowns to the secant's value at ``target``. ``start`` is u_n as the
+        step began, before ``apply`` set the load: an ``apply`` that also moves an unknown
+        to its prescribed value (the eye's pinned tire travel) would otherwise be
+        extrapolated once more from there (an overshoot of one step)."""
+        (s0, s1), x1 = self.values, start
         factor = (target - s1) / (s1 - s0)
         self.solver.restore_state([b + factor * (b - a.x.array)
                                    for a, b in zip(self.previous, x1)])
