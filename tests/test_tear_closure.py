@@ -76,9 +76,16 @@ def test_sutures_lift_the_tire_off_a_shallow_band():
     # the balance contact force = pull. Measured: held by the band while the pull (0.12,
     # 0.23 N) is below the contact force (0.14, 0.19 N); freed, 0.41, 0.44, 0.48 mm at
     # 0.17 ... 0.28 N and 0.464 mm at 0.3 N (0.456 N of contact and pull), band at 0.3 mm
+    # The release is checked after each converged step of step 3 and acts from the next
+    # one (lagged, as the suture directions): with the budget's stepping step 3 is two load
+    # steps and the tire is freed only at its end, too late to move (docs/scleral_buckling.md,
+    # "Not done"); the reference stepping takes six, which this test pins.
+    reference_stepping = dict(predictor="none", jacobian_reuse="0", buckle_step="0.25",
+                              step_effort="iterations", hard_step_effort="0")
     result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
                                               indentation="0.3", suture_force="0.3",
-                                              settle="false")), options=QUIET)
+                                              settle="false", **reference_stepping)),
+                    options=QUIET)
     after = result.quantities["after_suturing"]
     assert result.quantities["after_buckling"]["tire_free"] is False
     assert after["tire_free"] is True
