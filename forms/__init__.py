@@ -24,7 +24,11 @@ from eyemech.forms.hyperelastic import (
     volumetric_energy,
     von_mises,
 )
-from eyemech.forms.kinematics import deformation_gradient, isochoric_invariants
+from eyemech.forms.kinematics import (
+    deformation_gradient,
+    isochoric_invariants,
+    without_variables,
+)
 from eyemech.forms.viscoelastic import Viscoelastic
 
 __all__ = [
@@ -40,6 +44,7 @@ __all__ = [
     "Yeoh",
     "cauchy_stress",
     "deformation_gradient",
+    "without_variables",
     "enclosed_volume",
     "follower_pressure",
     "incompressible_energy_density",

@@ -11,6 +11,19 @@ def deformation_gradient(u: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
     return ufl.variable(ufl.Identity(dim) + ufl.grad(u))
 
 
+def without_variables(expression: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
+    """``expression`` with its derivatives evaluated and its ``ufl.variable`` wrappers
+    removed. A variable's label is numbered per process, and FFCx hashes an interpolated
+    expression's labels as they are (forms renumber theirs): an expression built on
+    :func:`deformation_gradient` would compile anew in every run and every sweep case.
+    Interpolated expressions pass through this first (tests/test_eye_calibration.py)."""
+    from ufl.algorithms import strip_variables
+    from ufl.algorithms.apply_algebra_lowering import apply_algebra_lowering
+    from ufl.algorithms.apply_derivatives import apply_derivatives
+
+    return strip_variables(apply_derivatives(apply_algebra_lowering(expression)))
+
+
 def isochoric_invariants(F: ufl.core.expr.Expr):
     """(Ī1, Ī2, J) of C = FᵀF with C̄ = J^(-2/3) C, the reduced invariants of the
     buckling paper's strain energy (seed 002, eq. 1)."""

@@ -73,3 +73,27 @@ def test_sweep_csv_records_each_cases_form_compilation_near_zero_after_the_first
     first, *later = (float(r["form_compilation_s"]) for r in rows)
     assert first > 1.0  # FFCx and the C compiler ran
     assert all(t < 0.1 * first for t in later), (first, later)
+
+
+def test_interpolated_stress_has_one_signature_in_every_run():
+    """An interpolated expression built on ``deformation_gradient`` (a ``ufl.variable``,
+    whose label is numbered per process) hashes the same for two meshes once passed
+    through ``without_variables``; without it FFCx would compile it again in each run and
+    each sweep case (its label is hashed as numbered)."""
+    import dolfinx
+    import ffcx.naming
+    from mpi4py import MPI
+
+    from eyemech.forms import Yeoh, cauchy_stress, deformation_gradient, von_mises, without_variables
+
+    def signature(strip: bool) -> str:
+        mesh = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1, dolfinx.mesh.CellType.hexahedron)
+        V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+        Q = dolfinx.fem.functionspace(mesh, ("DG", 0))
+        u, c10, c20 = dolfinx.fem.Function(V), dolfinx.fem.Function(Q), dolfinx.fem.Function(Q)
+        stress = von_mises(cauchy_stress(Yeoh(c10, c20), deformation_gradient(u)))
+        expression = without_variables(stress) if strip else stress
+        return ffcx.naming.compute_signature([(expression, Q.element.interpolation_points)], "")
+
+    assert signature(True) == signature(True)
+    assert signature(False) != signature(False)  # the labels are what differs

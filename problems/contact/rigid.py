@@ -10,6 +10,7 @@ import numpy as np
 from mpi4py import MPI
 
 from eyemech.forms import contact
+from eyemech.forms.kinematics import without_variables
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.parameters import ParameterError
 
@@ -32,7 +33,7 @@ class NodalPenetration:
         element = u.function_space.ufl_element()
         scalar = dolfinx.fem.functionspace(tagged.mesh, ("Lagrange", element.embedded_superdegree))
         self.values = dolfinx.fem.Function(scalar)
-        self.expression = dolfinx.fem.Expression(contact.penetration(obstacle, u),
+        self.expression = dolfinx.fem.Expression(without_variables(contact.penetration(obstacle, u)),
                                                  scalar.element.interpolation_points)
         self.comm = tagged.mesh.comm
 

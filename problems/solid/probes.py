@@ -9,6 +9,8 @@ import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
+from eyemech.forms.kinematics import without_variables
+
 
 class NodeProbe:
     """The displacement dofs of the mesh nodes nearest to given reference points.
@@ -106,7 +108,8 @@ class CellField:
     def __init__(self, expression, mesh: dolfinx.mesh.Mesh, name: str):
         space = dolfinx.fem.functionspace(mesh, ("DG", 0))
         self.field = dolfinx.fem.Function(space, name=name)
-        self._expression = dolfinx.fem.Expression(expression, space.element.interpolation_points)
+        self._expression = dolfinx.fem.Expression(without_variables(expression),
+                                                 space.element.interpolation_points)
         self._owned = space.dofmap.index_map.size_local
         self._comm = mesh.comm
 

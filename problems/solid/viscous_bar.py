@@ -48,7 +48,7 @@ import ufl
 from mpi4py import MPI
 
 from eyemech.forms import viscoelastic as ve
-from eyemech.forms.kinematics import deformation_gradient
+from eyemech.forms.kinematics import deformation_gradient, without_variables
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.solid.spaces import ELEMENTS, mixed_displacement_pressure
@@ -123,18 +123,18 @@ class ViscousHistory:
         self.Cbar_n = self._identity(Q, "Cbar_n")  # read by forward Euler only
         F = deformation_gradient(u)
         self.Cv = ve.current_internal_variable(scheme, material, F, self.Cv_n, self.Cbar_n, self.dt)
-        self._Cv_next = dolfinx.fem.Expression(self.Cv, points)
-        self._Cbar_next = dolfinx.fem.Expression(ve.isochoric_cauchy_green(F), points)
+        self._Cv_next = dolfinx.fem.Expression(without_variables(self.Cv), points)
+        self._Cbar_next = dolfinx.fem.Expression(without_variables(ve.isochoric_cauchy_green(F)), points)
         self._scratch = dolfinx.fem.Function(Q)
         # the embedded pair: ½ (Cv_BE − Cv_FE) from the same Cv_n, C̄_n and dt
         pair = 0.5 * (ve.current_internal_variable("backward-euler", material, F, self.Cv_n,
                                                    self.Cbar_n, self.dt)
                       - ve.current_internal_variable("forward-euler", material, F, self.Cv_n,
                                                      self.Cbar_n, self.dt))
-        self._difference = dolfinx.fem.Expression(pair, points)
+        self._difference = dolfinx.fem.Expression(without_variables(pair), points)
         Cbar = ve.isochoric_cauchy_green(F)
-        self._distance = dolfinx.fem.Expression(Cbar - self.Cv, points)
-        self._strain = dolfinx.fem.Expression(Cbar - ufl.Identity(3), points)
+        self._distance = dolfinx.fem.Expression(without_variables(Cbar - self.Cv), points)
+        self._strain = dolfinx.fem.Expression(without_variables(Cbar - ufl.Identity(3)), points)
         self.material = material
         # G per point, a Function on the same points (one value each, the dof layout of Q
         # without its block of 9) so that checkpoints carry it as they carry Cv_n
