@@ -31,10 +31,14 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(VENV)/bin/eyemech run $(MAIN) --out $(OUT)
 
-# The suite runs in two pytest processes (test files a–m, then n–z), both always, and fails
-# if either fails: one 40-minute process holding every PETSc, MPI and numba object of 400
-# tests ended once in a segmentation fault that no shorter run reproduced.
-TEST_GROUPS ?= "tests/test_[a-m]*.py" "tests/test_[n-z]*.py"
+# The suite runs in three pytest processes (test files a–m, n–s, t–z), all always, and fails
+# if any fails. A long-lived process holding the PETSc, MPI and numba objects of hundreds of
+# tests ended abruptly three times, never in a shorter run of the same tests: once with a
+# segmentation fault in libdolfinx (40-minute single process), twice with exit status 15
+# and no pytest summary in test_viscoelastic, about 13 minutes into the n–z process (CI
+# runs of 2026-11-25/26). Not diagnosed; test_viscoelastic passes alone and with its
+# neighbours.
+TEST_GROUPS ?= "tests/test_[a-m]*.py" "tests/test_[n-s]*.py" "tests/test_[t-z]*.py"
 
 test: $(STAMP)
 	@status=0; for group in $(TEST_GROUPS); do \
