@@ -50,3 +50,19 @@ def last_json(stdout: str) -> dict:
 @pytest.fixture
 def cli():
     return run_cli
+
+
+@pytest.fixture
+def compilations(monkeypatch):
+    """Calls of FFCx's C compilation (its disk cache is consulted first)."""
+    import ffcx.codegeneration.jit as jit
+
+    calls = []
+    compile_objects = jit._compile_objects
+
+    def counted(*args, **kwargs):
+        calls.extend(str(form)[:300] for form in args[1])
+        return compile_objects(*args, **kwargs)
+
+    monkeypatch.setattr(jit, "_compile_objects", counted)
+    return calls

@@ -20,22 +20,6 @@ from eyemech.problems.run.context import RunOptions
 QUIET = RunOptions(fields=False, pictures=False)
 
 
-@pytest.fixture
-def compilations(monkeypatch):
-    """Calls of FFCx's C compilation (its disk cache is consulted first)."""
-    import ffcx.codegeneration.jit as jit
-
-    calls = []
-    compile_objects = jit._compile_objects
-
-    def counted(*args, **kwargs):
-        calls.extend(str(form)[:300] for form in args[1])
-        return compile_objects(*args, **kwargs)
-
-    monkeypatch.setattr(jit, "_compile_objects", counted)
-    return calls
-
-
 # values never used before in this cache: a form with them baked in would have to compile
 MODULI = [0.05 * (1.0 + random.random()) for _ in range(3)]
 

@@ -102,22 +102,6 @@ def test_bad_stiffening_is_refused():
         scleral_buckling.Parameters(c20_cornea=5.0).validate()
 
 
-@pytest.fixture
-def compilations(monkeypatch):
-    """Calls of FFCx's C compilation (its disk cache is consulted first)."""
-    import ffcx.codegeneration.jit as jit
-
-    calls = []
-    compile_objects = jit._compile_objects
-
-    def counted(*args, **kwargs):
-        calls.extend(str(form)[:300] for form in args[1])
-        return compile_objects(*args, **kwargs)
-
-    monkeypatch.setattr(jit, "_compile_objects", counted)
-    return calls
-
-
 def test_new_stiffening_values_compile_nothing(compilations):
     """c20 is a cellwise field: a second value (never used before) reuses the kernels."""
     import random
