@@ -556,15 +556,23 @@ class BucklingModel:
         suture's bite (the share of its pull the half model carries: ½ on the
         symmetry plane), which makes the reaction on the tire the exact opposite of the
         bite loads."""
+        # Constants, not literals: the mesh and the penalty set them, and a literal would
+        # compile the eye's residual anew for every mesh size and penalty factor
         mesh = self.eye.mesh
         X = ufl.SpatialCoordinate(mesh)
         one = dolfinx.fem.Constant(mesh, 1.0)
-        self.sclera_area = _assemble(one * measure, self.ctx.comm)
+        self.sclera_area = dolfinx.fem.Constant(mesh, _assemble(one * measure, self.ctx.comm))
         footprint = _assemble(self.buckle.footprint_weight(X) * measure, self.ctx.comm)
-        self.tire_stiffness = self.penalty * max(footprint, 1.0)
-        self.bite_shares = np.array([
-            _assemble(bite_weight(X, ufl.as_vector(p.centre), self.params.suture_bite_radius)
-                      * measure, self.ctx.comm) for p in self.sutures.points])
+        self.tire_stiffness = dolfinx.fem.Constant(mesh, self.penalty * max(footprint, 1.0))
+        # one form for every bite: its centre and radius are Constants
+        centre = dolfinx.fem.Constant(mesh, np.zeros(3))
+        radius = dolfinx.fem.Constant(mesh, float(self.params.suture_bite_radius))
+        share = dolfinx.fem.form(bite_weight(X, centre, radius) * measure)
+        shares = []
+        for point in self.sutures.points:
+            centre.value[:] = point.centre
+            shares.append(_assemble(share, self.ctx.comm))
+        self.bite_shares = np.array(shares)
         shape = self.params.buckle_shape()
         self.on_tire = np.array([shape.on_tire(p.azimuth_deg) for p in self.sutures.points])
 
