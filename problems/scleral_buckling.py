@@ -452,6 +452,9 @@ class BucklingModel:
         self.drained = dolfinx.fem.Constant(mesh, 0.0)      # subretinal pressure removed
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
+        # a Constant, not a literal: the penalty follows the mesh size and the sclera's
+        # modulus, and a literal would compile the eye's residual anew for each of them
+        self.contact_penalty = dolfinx.fem.Constant(mesh, self.penalty)
         self.sclera_nodes = facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
         # the sutured buckle: the sclera's displacement when it is tied (end of step 1)
         self.u_tied = dolfinx.fem.Function(self.u.function_space, name="u_tied")
@@ -517,7 +520,7 @@ class BucklingModel:
                     + follower_pressure(self.P, self.u, v, self.wall)
                     + self.coupled * liquid + (1 - self.coupled) * pinned)
         contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
-        contact = smoothed_penalty_energy(self.buckle, self.u, self.penalty, params.contact_smoothing,
+        contact = smoothed_penalty_energy(self.buckle, self.u, self.contact_penalty, params.contact_smoothing,
                                           contact_ds(self.eye.tag("sclera_outer")))
         self.contact_energy = contact
         residual += ufl.derivative(contact, self.u, v)
@@ -527,7 +530,7 @@ class BucklingModel:
                                                                   "choroid_detached")))
             residual += follower_pressure(-self.drained * self.P, self.u, v, subretinal)
         if params.buckle_attachment == "sutured":
-            tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.penalty,
+            tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.contact_penalty,
                                         contact_ds(self.eye.tag("sclera_outer")))
             residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
