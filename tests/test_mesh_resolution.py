@@ -1,0 +1,127 @@
+"""Mesh sizes from the physics for the cornea scenes and the eye (issue 27, item 1): the
+resolution parameters keep their meaning when the geometry changes, the shipped defaults
+give the same meshes as the absolute sizes they replace, the cell count is known before
+meshing and a mesh past the limit is refused naming the parameter. Meshes only, no solves.
+
+References: the cornea's count is exact (structured planform × layers,
+:func:`eyemech.meshes.cornea.cell_count`) and is compared with the built mesh; the eye's
+estimate leaves out the optic-nerve stub and the tear (measured: 800 vs 803 cells at
+n = 8, 1,760 vs 1,762 at n = 12), hence 1 %.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from eyemech.meshes import MeshError  # noqa: F401  (imports dolfinx_solver before dolfinx)
+from eyemech.meshes.cornea import CorneaGeometry, _radius_levels, bending_length, cell_count, cornea
+from eyemech.meshes.eye import RESOLUTIONS, EyeGeometry, build_grid
+from eyemech.problems import keratotomy, scleral_buckling, tonometry
+from eyemech.problems.run.parameters import ParameterError, build
+
+
+def _cells(tagged) -> int:
+    return tagged.mesh.topology.index_map(3).size_global
+
+
+# -- the cornea ---------------------------------------------------------------------------
+@pytest.mark.parametrize("changes", [
+    dict(), dict(incisions=8), dict(incisions=6, mesh_size=1.5, layers=3),
+    dict(incisions=4, quarter=True, azimuthal_divisions=8, mesh_size=1.5),
+    dict(incisions=8, geometry_degree=2, mesh_size=2.0, incision_depth=0.6),
+])
+def test_cornea_cell_count_is_exact_before_meshing(changes):
+    geometry = CorneaGeometry(**changes)
+    assert cell_count(geometry) == _cells(cornea(geometry))
+
+
+def test_keratotomy_default_mesh_is_the_one_of_mesh_size_1mm():
+    """resolution = 2 cells per √(Ra t_c) = 2.014 mm gives 1.007 mm: the same radius levels
+    (hence the same mesh, 612 cells) as the absolute 1 mm it replaces."""
+    params = keratotomy.Parameters()
+    assert params.planform_size == pytest.approx(bending_length(7.8, 0.52) / 2.0)
+    derived = params.geometry(params.incisions)
+    absolute = dataclasses.replace(derived, mesh_size=1.0)
+    assert np.array_equal(_radius_levels(derived), _radius_levels(absolute))
+    assert params.estimated_cells == cell_count(absolute) == 612
+
+
+def test_keratotomy_resolution_scales_with_the_cornea():
+    """A cornea with every length doubled gets the planform size doubled and the same
+    number of cells; a thinner cornea (t_c 0.52 → 0.26 mm) a size √2 smaller."""
+    base = keratotomy.Parameters()
+    lengths = ("anterior_radius", "posterior_radius", "central_thickness", "limbal_thickness",
+               "diameter", "optical_zone", "incision_end", "fit_diameter")
+    doubled = dataclasses.replace(base, **{k: 2 * getattr(base, k) for k in lengths})
+    assert doubled.planform_size == pytest.approx(2 * base.planform_size, rel=1e-12)
+    assert doubled.estimated_cells == base.estimated_cells
+    thin = dataclasses.replace(base, central_thickness=0.26, limbal_thickness=0.4)
+    assert thin.planform_size == pytest.approx(base.planform_size / np.sqrt(2), rel=1e-12)
+    # an absolute size overrides the resolution
+    assert dataclasses.replace(base, mesh_size=0.7).planform_size == 0.7
+
+
+def test_tonometry_default_size_is_the_absolute_half_millimetre():
+    """3.06 cells per applanation radius 1.53 mm = 0.5 mm: the default mesh and penalty
+    (α = penalty E / h) are those of the absolute size it replaces."""
+    params = tonometry.Parameters()
+    assert params.planform_size == 0.5
+    assert params.penalty_stiffness == pytest.approx(30.0 * 0.13 / 0.5, rel=1e-14)
+    assert params.estimated_cells == cell_count(dataclasses.replace(params.geometry(), mesh_size=0.5))
+    wide = dataclasses.replace(params, applanation_diameter=6.0)  # twice Goldmann's disc
+    assert wide.planform_size == pytest.approx(1.0 / 1.02)  # 3 mm / 3.06
+
+
+@pytest.mark.parametrize("scene, overrides, key", [
+    (keratotomy, {"mesh_size": "0.01"}, "mesh_size"),
+    (keratotomy, {"resolution": "120", "azimuthal_divisions": "96"}, "resolution"),
+    (tonometry, {"resolution": "200"}, "resolution"),
+    (scleral_buckling, {"cells_per_bending_length": "12"}, "cells_per_bending_length"),
+    (scleral_buckling, {"mesh_size": "0.1"}, "mesh_size"),
+])
+def test_a_mesh_past_max_cells_is_refused_naming_the_parameter(scene, overrides, key):
+    with pytest.raises(ParameterError, match="max_cells") as info:
+        build(scene.Parameters, overrides)
+    assert info.value.key == key
+    assert "estimated before meshing" in str(info.value)
+    # the limit is a parameter: raising it lets the run through its checks
+    build(scene.Parameters, {**overrides, "max_cells": "1000000"})
+
+
+# -- the eye ------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", list(RESOLUTIONS))
+def test_named_eye_resolutions_give_the_same_meshes(name):
+    """coarse / default / paper: cube edges of 8, 12, 26 cells, as before the physical
+    resolution existed; the default's 1.59 cells per bending length gives the default."""
+    params = scleral_buckling.Parameters(resolution=name)
+    assert params.geometry() == EyeGeometry(cells_per_edge=RESOLUTIONS[name])
+    per_length = EyeGeometry().bending_length / params.geometry().element_size
+    same = scleral_buckling.Parameters(cells_per_bending_length=round(per_length, 2))
+    assert same.cells_per_edge == RESOLUTIONS[name]
+
+
+@pytest.mark.parametrize("n", [8, 12])
+def test_eye_cell_estimate_within_one_percent(n):
+    geometry = EyeGeometry(cells_per_edge=n)
+    built = len(build_grid(geometry).hexes)  # 803 / 1,762
+    assert geometry.estimated_cells == pytest.approx(built, rel=0.01)
+
+
+def test_eye_sizes_from_the_bending_length_and_absolute():
+    """√(11.5 · 0.5) = 2.398 mm; 2.5 cells per length: h ≤ 0.959 mm → 20 cells per cube
+    edge (0.903 mm); mesh_size 1.5 mm → 14 (1.29 mm). A thinner retina is refused at the
+    named coarse mesh but meshes at a resolution fine enough for it."""
+    geometry = EyeGeometry()
+    assert geometry.bending_length == pytest.approx(np.sqrt(5.75))
+    finer = scleral_buckling.Parameters(cells_per_bending_length=2.5)
+    assert finer.cells_per_edge == 20
+    assert finer.geometry().element_size <= geometry.bending_length / 2.5
+    assert scleral_buckling.Parameters(mesh_size=1.5).cells_per_edge == 14
+    with pytest.raises(ParameterError, match="retina") as info:
+        build(scleral_buckling.Parameters, {"cells_per_bending_length": "1.0",
+                                            "retina_thickness": "0.1"})
+    assert info.value.key == "cells_per_bending_length"
+    build(scleral_buckling.Parameters, {"cells_per_bending_length": "2.5", "retina_thickness": "0.1"})
