@@ -98,6 +98,15 @@ def oscillator_response(omega: float, damping: float, dt: float, steps: int, nam
     return np.asarray(history)
 
 
+def oscillator_exact(omega: float, damping: float, times, u0: float = 1.0) -> np.ndarray:
+    """u(t) of ü + c u̇ + ω² u = 0 released at rest from u0, exactly: A e^{r₁t} + B e^{r₂t}
+    with r = −c/2 ± √(c²/4 − ω²) (complex when underdamped), A + B = u0, r₁A + r₂B = 0."""
+    root = np.sqrt(complex(0.25 * damping * damping - omega * omega))
+    r1, r2 = -0.5 * damping + root, -0.5 * damping - root
+    t = np.asarray(times, dtype=float)
+    return u0 * ((r2 * np.exp(r1 * t) - r1 * np.exp(r2 * t)) / (r2 - r1)).real
+
+
 def oscillator_step(s: Scheme, omega: float, damping: float, dt: float, state: np.ndarray) -> np.ndarray:
     """(u, v, a)_{n+1} from (u, v, a)_n for one mode (linear in the state: its amplification
     matrix is this applied to the unit states)."""
