@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import ufl
@@ -68,6 +69,12 @@ class Parameters(SceneParameters, ShellDiscretisation):
     damping: float = field(0.0, "mass-proportional damping c as a fraction of ω₁", "")
     steps_per_period: int = field(40, "time steps per undamped period 2π/ω₁")
     periods: float = field(2.0, "simulated time in undamped periods")
+
+    RESOLUTION_KEY: ClassVar[str] = "divisions"
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.grid_triangles(self.divisions, 1)
 
     def validate(self) -> None:
         self.require_positive("length", "width", "divisions", "density", "steps_per_period",

@@ -13,14 +13,26 @@ from __future__ import annotations
 
 import dataclasses
 
+import dolfinx.mesh
 import numpy as np
 import pytest
+from mpi4py import MPI
 
-from eyemech.meshes import MeshError  # noqa: F401  (imports dolfinx_solver before dolfinx)
+from eyemech.meshes.cook import cook_membrane as cook_mesh
 from eyemech.meshes.cornea import CorneaGeometry, _radius_levels, bending_length, cell_count, cornea
 from eyemech.meshes.eye import RESOLUTIONS, EyeGeometry, build_grid
-from eyemech.problems import keratotomy, scleral_buckling, tonometry
+from eyemech.meshes.surface import mapped_surface
+from eyemech.problems import (
+    cook_membrane,
+    hemisphere,
+    keratotomy,
+    scleral_buckling,
+    scordelis_lo,
+    tonometry,
+    uniaxial_relaxation,
+)
 from eyemech.problems.run.parameters import ParameterError, build
+from eyemech.problems.solid.spaces import ELEMENTS
 
 
 def _cells(tagged) -> int:
@@ -125,3 +137,40 @@ def test_eye_sizes_from_the_bending_length_and_absolute():
                                             "retina_thickness": "0.1"})
     assert info.value.key == "cells_per_bending_length"
     build(scleral_buckling.Parameters, {"cells_per_bending_length": "2.5", "retina_thickness": "0.1"})
+
+
+# -- the structured benchmarks: exact counts before meshing, refused past the limit -------
+@pytest.mark.parametrize("diagonal", ["crossed", "right", "alternating"])
+def test_shell_grid_counts_are_exact(diagonal):
+    params = scordelis_lo.Parameters(divisions=3, diagonal=diagonal)
+    mesh = mapped_surface(lambda s, t: np.column_stack([s, t, 0 * s]), 3, 3, diagonal)
+    assert params.estimated_cells == mesh.topology.index_map(2).size_global
+    sphere = hemisphere.Parameters(divisions=3, diagonal=diagonal)
+    assert sphere.estimated_cells == params.grid_triangles(sphere.around, 3)
+
+
+@pytest.mark.parametrize("element", ["Q2P1", "P2P1"])
+def test_solid_benchmark_counts(element):
+    """Cook: the transfinite panel's n² hexahedra (exact) or at most 6 n² tetrahedra; the
+    viscous bar: n³ hexahedra or 6 n³ tetrahedra (exact)."""
+    cook = cook_membrane.Parameters(elements_per_side=3, element=element)
+    panel = cook_mesh(3, ELEMENTS[element].hexahedral)
+    built = _cells(panel)
+    assert built == cook.estimated_cells if element == "Q2P1" else built <= cook.estimated_cells
+    bar = uniaxial_relaxation.Parameters(mesh_divisions=2, element=element)
+    hexahedral = ELEMENTS[element].hexahedral
+    cell = dolfinx.mesh.CellType.hexahedron if hexahedral else dolfinx.mesh.CellType.tetrahedron
+    box = dolfinx.mesh.create_box(MPI.COMM_WORLD, [np.zeros(3), np.ones(3)], [2, 2, 2], cell)
+    assert bar.estimated_cells == box.topology.index_map(3).size_global
+
+
+@pytest.mark.parametrize("scene, overrides, key", [
+    (scordelis_lo, {"divisions": "1000"}, "divisions"),
+    (hemisphere, {"divisions": "1000"}, "divisions"),
+    (cook_membrane, {"elements_per_side": "2000"}, "elements_per_side"),
+    (uniaxial_relaxation, {"mesh_divisions": "200"}, "mesh_divisions"),
+])
+def test_structured_benchmarks_refuse_a_typo_before_meshing(scene, overrides, key):
+    with pytest.raises(ParameterError, match="EYEMECH_MAX_CELLS") as info:
+        build(scene.Parameters, overrides)
+    assert info.value.key == key
