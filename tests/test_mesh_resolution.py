@@ -1,4 +1,5 @@
-"""Mesh sizes from the physics for the cornea scenes and the eye (issue 27, item 1): the
+"""Mesh sizes from the physics for the cornea scenes and the eye, and the cell counts of the
+other scenes before meshing (issue 27, item 1): the
 resolution parameters keep their meaning when the geometry changes, the shipped defaults
 give the same meshes as the absolute sizes they replace, the cell count is known before
 meshing and a mesh past the limit is refused naming the parameter. Meshes only, no solves.
@@ -18,14 +19,17 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from eyemech.meshes.contact_bodies import layered_caps, stacked_blocks
 from eyemech.meshes.cook import cook_membrane as cook_mesh
 from eyemech.meshes.cornea import CorneaGeometry, _radius_levels, bending_length, cell_count, cornea
 from eyemech.meshes.eye import RESOLUTIONS, EyeGeometry, build_grid
 from eyemech.meshes.surface import mapped_surface
 from eyemech.problems import (
+    contact_patch,
     cook_membrane,
     hemisphere,
     keratotomy,
+    retina_reattachment,
     scleral_buckling,
     scordelis_lo,
     tonometry,
@@ -174,3 +178,24 @@ def test_structured_benchmarks_refuse_a_typo_before_meshing(scene, overrides, ke
     with pytest.raises(ParameterError, match="EYEMECH_MAX_CELLS") as info:
         build(scene.Parameters, overrides)
     assert info.value.key == key
+
+
+def test_unstructured_contact_meshes_are_estimated_before_meshing():
+    """Volume over a regular tetrahedron's h³/(6√2): gmsh's meshes have 0.76 (contact-patch
+    blocks) and 1.40 (the retina's thin quarter caps, one cell through 0.2 mm at h = 0.3 mm)
+    of it at the defaults; the test allows a factor 2 either way, which keeps a typo's
+    orders of magnitude visible."""
+    patch = contact_patch.Parameters()
+    blocks = stacked_blocks(patch.width, 0.5 * patch.width, 0.5 * patch.width, patch.master_size,
+                            patch.slave_size)
+    assert 0.5 < _cells(blocks) / patch.estimated_cells < 2.0  # 867 / 1,135
+    retina = retina_reattachment.Parameters()
+    caps = layered_caps(retina.inner_radius, retina.soft_thickness, retina.gap,
+                        retina.stiff_thickness, retina.half_angle, retina.mesh_size)
+    assert 0.5 < _cells(caps) / retina.estimated_cells < 2.0  # 803 / 573
+    with pytest.raises(ParameterError) as info:
+        build(contact_patch.Parameters, {"slave_size": "0.005"})
+    assert info.value.key == "slave_size"
+    with pytest.raises(ParameterError) as info:
+        build(retina_reattachment.Parameters, {"mesh_size": "0.005"})
+    assert info.value.key == "mesh_size"
