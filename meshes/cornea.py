@@ -167,6 +167,37 @@ def _levels(start: float, end: float, size: float) -> np.ndarray:
     return np.linspace(start, end, count + 1)
 
 
+def _radius_levels(g: CorneaGeometry) -> np.ndarray:
+    """Planform radii of the polar rings: from the O-grid core's circle 0.6 × optical_zone/2
+    through the optical-zone edge and the incision end to the limbus, ``mesh_size`` apart."""
+    r_polar = 0.6 * g.optical_zone / 2
+    return np.unique(np.concatenate([
+        _levels(r_polar, g.optical_zone / 2, g.mesh_size),
+        _levels(g.optical_zone / 2, g.incision_end, g.mesh_size),
+        _levels(g.incision_end, g.diameter / 2, g.mesh_size) if g.incision_end < g.diameter / 2
+        else [g.incision_end]]))
+
+
+def cell_count(g: CorneaGeometry) -> int:
+    """The number of hexahedra :func:`cornea` builds for ``g``, from the level counts alone
+    (nothing is meshed): the O-grid core's (azimuths/4)² quads, one ring of quads per radius
+    level, times the layers through the thickness; a quarter cornea holds a quarter of them
+    (its azimuths are a multiple of 8, so no cell straddles a symmetry plane)."""
+    n_theta = g.azimuths
+    quads = (n_theta // 4) ** 2 + n_theta * len(_radius_levels(g))
+    cells = quads * (len(_depth_levels(g)) - 1)
+    return cells // 4 if g.quarter else cells
+
+
+def bending_length(anterior_radius: float, central_thickness: float) -> float:
+    """√(R t): the length over which a thin spherical shell's bending disturbances (the
+    clamped or sprung limbus, the free edges of a cut) decay into its membrane state
+    (Timoshenko & Woinowsky-Krieger, *Theory of Plates and Shells*, 1959, §§ 130–131:
+    the decay length is √(R t)/[3(1 − ν²)]^¼). The planform element size of the cornea
+    scenes is this length over their ``resolution``."""
+    return math.sqrt(anterior_radius * central_thickness)
+
+
 def _planform(g: CorneaGeometry):
     """2D nodes, quads (CCW), the polar grid index of each polar node, radius levels."""
     n_theta = g.azimuths
@@ -187,11 +218,7 @@ def _planform(g: CorneaGeometry):
                  + [core_id(i, 0) for i in range(0, n_core)]
                  + [core_id(n_core, m) for m in range(0, h)])
     assert len(perimeter) == n_theta
-    radii = np.unique(np.concatenate([
-        _levels(r_polar, g.optical_zone / 2, g.mesh_size),
-        _levels(g.optical_zone / 2, g.incision_end, g.mesh_size),
-        _levels(g.incision_end, g.diameter / 2, g.mesh_size) if g.incision_end < g.diameter / 2
-        else [g.incision_end]]))
+    radii = _radius_levels(g)
     phi = 2 * math.pi * np.arange(n_theta) / n_theta
     polar = np.array([[r * math.cos(p), r * math.sin(p)] for r in radii for p in phi])
     nodes = np.vstack([core, polar])

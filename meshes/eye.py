@@ -116,7 +116,7 @@ class EyeGeometry:
             raise MeshError("need ora serrata < detachment start < tear angle < detachment end")
         if self.cornea_diameter / 2 >= self.sclera_radius or self.cornea_radius <= self.cornea_diameter / 2:
             raise MeshError("the cornea must be a cap smaller than the scleral sphere")
-        element = 0.5 * math.pi * self.sclera_radius / self.cells_per_edge
+        element = self.element_size
         if element / self.retina_thickness > 12.0:
             raise MeshError(
                 f"resolution too coarse to resolve the retina: elements of {element:.2f} mm on a "
@@ -149,6 +149,33 @@ class EyeGeometry:
         if rim.max() >= inner or centre + b >= inner_apex:
             raise MeshError("the lens does not fit inside the eye (lens_diameter, lens_thickness "
                             "or lens_depth too large)")
+
+    @property
+    def bending_length(self) -> float:
+        """√(R t) of the scleral shell at its thinnest (the equator): the length over which
+        a spherical shell's bending disturbances (the buckle's indentation, the limbus, the
+        optic nerve) decay into its membrane state (Timoshenko & Woinowsky-Krieger, *Theory
+        of Plates and Shells*, 1959, §§ 130–131: √(R t)/[3(1 − ν²)]^¼)."""
+        return math.sqrt(self.sclera_radius * self.sclera_thickness_equator)
+
+    @property
+    def element_size(self) -> float:
+        """In-plane size of the wall's cells: a quarter great circle over ``cells_per_edge``."""
+        return 0.5 * math.pi * self.sclera_radius / self.cells_per_edge
+
+    def cells_per_edge_for(self, size: float) -> int:
+        """The even cube-edge count (≥ 4) whose cells are at most ``size`` wide in-plane."""
+        return max(4, 2 * math.ceil(0.25 * math.pi * self.sclera_radius / size - 1e-9))
+
+    @property
+    def estimated_cells(self) -> int:
+        """Hexahedra before meshing: the half cubed sphere's 3 n² quads times the wall's
+        layers (coat, choroid, retina), plus the lens's half cube; the optic-nerve stub
+        adds and the tear removes a few cells (within 1 % at n = 8 and 12:
+        tests/test_eye_mesh.py)."""
+        n = self.cells_per_edge
+        lens = self.lens_cells ** 3 // 2 if self.lens else 0
+        return (self.coat_layers + 2) * 3 * n * n + lens
 
     @property
     def lens_centre(self) -> float:

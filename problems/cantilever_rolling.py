@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import dolfinx.fem
 import numpy as np
@@ -56,6 +57,12 @@ class Parameters(SceneParameters, ShellDiscretisation):
     width_divisions: int = field(1, "squares across the width")
     kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
     load_steps: int = field(8, "initial number of load steps (cut and grown as needed)")
+
+    RESOLUTION_KEY: ClassVar[str] = "divisions"
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.grid_triangles(self.divisions, self.width_divisions)
 
     def validate(self) -> None:
         self.require_positive("length", "width", "divisions", "width_divisions", "load_steps")

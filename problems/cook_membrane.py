@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import dolfinx
 import dolfinx.fem
@@ -49,6 +50,15 @@ class Parameters(SceneParameters):
     element: ElementName = field("Q2P1", "element family: " + ", ".join(ELEMENTS))
     bulk_modulus: float = field(400942.0, "bulk modulus of the displacement-only P1 family", "MPa")
     load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+
+    RESOLUTION_KEY: ClassVar[str] = "elements_per_side"
+
+    @property
+    def estimated_cells(self) -> int:
+        """n² hexahedra, or the tetrahedra of n² × 2 extruded triangles (3 each): an
+        upper bound, the transfinite grid's (meshes/cook.py)."""
+        hexahedral = ELEMENTS[self.element].hexahedral if self.element in ELEMENTS else True
+        return self.elements_per_side ** 2 * (1 if hexahedral else 6)
 
     def validate(self) -> None:
         self.require_positive("shear_modulus", "elements_per_side", "load_steps", "bulk_modulus")

@@ -18,6 +18,16 @@ relative stress error of the time steps (in both modes), with ``time_steps`` and
 per-point estimate G is checkpointed with Cv_n). Measured against fixed steps:
 docs/viscoelastic.md.
 
+Mesh sizes follow the physics: the planform's radial size is the cornea's bending length
+√(Ra t_c) (the decay length of the limbus's and the cuts' bending disturbances,
+:func:`~eyemech.meshes.cornea.bending_length`) over ``resolution``, so a thinner or flatter
+cornea gets the same mesh relative to its shell behaviour; ``mesh_size`` sets an absolute
+size instead. Through the thickness ``layers`` cells per local thickness, with a level at
+the incision bottom and at least one layer in the uncut ligament, whatever
+``incision_depth`` is. The hexahedra are counted before meshing
+(:func:`~eyemech.meshes.cornea.cell_count`, exact) and a run above ``max_cells`` is refused,
+naming ``resolution``.
+
 Simplification: the incisions exist from the start of loading; cutting a cornea that is
 already pressurised (the surgical sequence) would need the pre-stressed state carried over
 to the cut mesh, which is not done.
@@ -27,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 import dolfinx
 import numpy as np
@@ -37,7 +47,7 @@ from mpi4py import MPI
 from eyemech.forms import follower_pressure
 from eyemech.forms import viscoelastic as ve
 from eyemech.meshes import MeshError
-from eyemech.meshes.cornea import CorneaGeometry, cornea
+from eyemech.meshes.cornea import CorneaGeometry, bending_length, cell_count, cornea
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import displacement_grid, render_png
 from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
@@ -84,7 +94,13 @@ class Parameters(SceneParameters, SolverChoice):
                                                    "elastic (distributed springs standing in for the sclera)")
     limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
                                     "(≈ E_sclera / 5 mm)", "MPa/mm")
-    mesh_size: float = field(1.0, "radial element size in the planform", "mm")
+    resolution: float = field(2.0, "planform cells per bending length √(anterior_radius · "
+                              "central_thickness) (2.0: 1.007 mm on the default cornea); sets the "
+                              "radial element size unless mesh_size is given")
+    mesh_size: float = field(0.0, "radial element size in the planform; 0 = √(anterior_radius · "
+                             "central_thickness) / resolution", "mm")
+    max_cells: int = field(20_000, "refuse a mesh of more hexahedra than this (counted before "
+                           "meshing; 20,000 Q2P1 cells ≈ 0.6 M unknowns)")
     azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))")
     layers: int = field(2, "element layers through the thickness (at least)")
     geometry_degree: int = field(1, "cell geometry: 1 = trilinear (faceted) cells, 2 = 27-node "
@@ -94,9 +110,13 @@ class Parameters(SceneParameters, SolverChoice):
     symmetry: Literal["full", "quarter"] = field("full", "mesh the whole cornea, or the quadrant "
                                                  "x, y > 0 with symmetry planes (even incisions)")
 
+    RESOLUTION_KEY: ClassVar[str] = "resolution"
+
     def validate(self) -> None:
         self.require_positive("mu_inf", "mu_v", "tau", "t_end", "first_dt", "iop_mmHg",
-                              "fit_diameter", "time_tolerance", "max_steps")
+                              "fit_diameter", "time_tolerance", "max_steps", "resolution",
+                              "max_cells")
+        self.require_nonnegative("mesh_size")
         try:
             self.geometry(self.incisions).validate()
         except MeshError as err:
@@ -112,9 +132,25 @@ class Parameters(SceneParameters, SolverChoice):
     def geometry(self, incisions: int) -> CorneaGeometry:
         return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,
                               self.limbal_thickness, self.diameter, incisions, self.incision_depth,
-                              self.optical_zone, self.incision_end, self.mesh_size,
+                              self.optical_zone, self.incision_end, self.planform_size,
                               self.azimuthal_divisions, self.layers, self.geometry_degree,
                               quarter=self.symmetry == "quarter")
+
+    @property
+    def planform_size(self) -> float:
+        """``mesh_size``, or the bending length √(Ra t_c) over ``resolution``."""
+        if self.mesh_size > 0:
+            return self.mesh_size
+        return bending_length(self.anterior_radius, self.central_thickness) / self.resolution
+
+    @property
+    def estimated_cells(self) -> int | None:
+        """The exact hexahedron count of the incised cornea (the intact one has the same
+        cells), from the level counts; None while the geometry is invalid (validate names it)."""
+        try:
+            return cell_count(self.geometry(self.incisions))
+        except (MeshError, ValueError, ZeroDivisionError):
+            return None
 
     def time_grid(self) -> tuple[float, ...]:
         times, dt, t = [], self.first_dt, 0.0

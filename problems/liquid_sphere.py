@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 import dolfinx
 import dolfinx.fem
@@ -56,6 +56,7 @@ SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
+    RESOLUTION_KEY: ClassVar[str] = "cells_across_wall"
     inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm")
     outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
     c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa")

@@ -127,7 +127,17 @@ BENCHMARK = {"resolution": "paper"}
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
     resolution: Literal["coarse", "default", "paper"] = field(
-        "default", "mesh: coarse (tests), default, paper (>= the paper's 7,421 hexahedra)")
+        "default", "mesh: coarse (tests), default, paper (>= the paper's 7,421 hexahedra); "
+                   "1.06, 1.59 and 3.45 cells per scleral bending length")
+    cells_per_bending_length: float = field(
+        0.0, "in-plane cells of the eye wall per scleral bending length √(R t) (R = 11.5 mm, "
+             "t = 0.5 mm at the equator: 2.40 mm), rounded up to an even cube-edge count; "
+             "0 = the named resolution")
+    mesh_size: float = field(0.0, "in-plane element size of the eye wall, rounded down to an even "
+                                  "cube-edge count; 0 = from cells_per_bending_length or resolution",
+                             "mm")
+    max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
+                                   "meshing; the paper resolution has 8,152)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
@@ -233,7 +243,8 @@ class Parameters(SceneParameters, SolverChoice):
                               "retina_penalty_factor", "c_lens", "lens_diameter",
                               "lens_thickness", "zonule_modulus", "zonule_area",
                               "suture_bite_radius",
-                              "tear_closure_tolerance", "retina_thickness")
+                              "tear_closure_tolerance", "retina_thickness", "max_cells")
+        self.require_nonnegative("cells_per_bending_length", "mesh_size")
         if not 0 <= self.jacobian_reuse < 1:
             raise ParameterError("jacobian_reuse", f"{self.jacobian_reuse}: a contraction factor "
                                  "in [0, 1) (0: full Newton)")
@@ -290,11 +301,33 @@ class Parameters(SceneParameters, SolverChoice):
         try:
             geometry.validate()
         except Exception as err:
-            key = "lens_diameter" if "lens" in str(err) else "resolution"
+            key = "lens_diameter" if "lens" in str(err) else self.resolution_key()
             raise ParameterError(key, str(err)) from None
 
+    def resolution_key(self) -> str:
+        if self.mesh_size > 0:
+            return "mesh_size"
+        return "cells_per_bending_length" if self.cells_per_bending_length > 0 else "resolution"
+
+    @property
+    def cells_per_edge(self) -> int:
+        """The cube-edge count of the wall's mesh: from ``mesh_size``, else from
+        ``cells_per_bending_length`` (the bending length of the default geometry), else
+        the named ``resolution`` (8, 12, 26)."""
+        reference = EyeGeometry()
+        if self.mesh_size > 0:
+            return reference.cells_per_edge_for(self.mesh_size)
+        if self.cells_per_bending_length > 0:
+            return reference.cells_per_edge_for(reference.bending_length
+                                                / self.cells_per_bending_length)
+        return RESOLUTIONS[self.resolution]
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.geometry().estimated_cells
+
     def geometry(self) -> EyeGeometry:
-        return EyeGeometry(cells_per_edge=RESOLUTIONS[self.resolution],
+        return EyeGeometry(cells_per_edge=self.cells_per_edge,
                            detachment_height=self.detachment_height,
                            retina_thickness=self.retina_thickness, lens=self.lens,
                            tear_radius=self.tear_radius,

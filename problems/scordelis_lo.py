@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import ufl
@@ -47,6 +48,12 @@ class Parameters(SceneParameters, ShellDiscretisation):
     gravity_load: float = field(90.0, "self weight per unit (reference) area, acting along -z", "MPa")
     divisions: int = field(16, "squares along the length and around the arc")
     kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear")
+
+    RESOLUTION_KEY: ClassVar[str] = "divisions"
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.grid_triangles(self.divisions, self.divisions)
 
     def validate(self) -> None:
         self.require_positive("radius", "length", "half_angle", "divisions")

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import dolfinx.fem
 import dolfinx.la
@@ -70,6 +71,12 @@ class Parameters(SceneParameters, ShellDiscretisation):
     radial_divisions: int = field(6, "squares across the ring")
     kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
     load_steps: int = field(20, "initial number of load steps (cut and grown as needed)")
+
+    RESOLUTION_KEY: ClassVar[str] = "divisions"
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.grid_triangles(self.divisions, self.radial_divisions)
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "divisions", "radial_divisions", "load_steps")

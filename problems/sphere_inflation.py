@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import ClassVar
 
 import dolfinx
 import dolfinx.fem
@@ -49,6 +50,7 @@ from eyemech.problems.solve.linear_solvers import SolverChoice
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
+    RESOLUTION_KEY: ClassVar[str] = "cells_across_wall"
     inner_radius: float = field(10.0, "inner radius of the unloaded sphere", "mm")
     outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
     c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa")

@@ -29,6 +29,12 @@ at 520 µm (docs/studies/tonometry_sweep.csv); keratotomy's glassy material (E =
 reads ≈ 4.5 mmHg high. The IOP is held constant during applanation (the ≈ 0.5 µl displaced by a
 Goldmann tonometer raises it by ≈ 3 %, neglected as in Goldmann's calibration).
 
+Mesh sizes follow the physics: the planform's radial size is the applanation radius (the
+contact disc the reading depends on) over ``resolution``, so another prism diameter gets
+the same number of rings across its disc; ``mesh_size`` sets an absolute size instead.
+Through the thickness ``layers`` cells per local thickness. The hexahedra are counted
+before meshing (exact) and a run above ``max_cells`` is refused, naming ``resolution``.
+
 The contact radius is where the gap to the applanator changes sign along the radial grid
 lines of the anterior surface, found on the quadratic (Q2) interpolant of the gap along
 each line, so that it varies continuously with the applanator's position; the position is
@@ -40,6 +46,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import ClassVar
 
 import dolfinx
 import dolfinx.fem
@@ -50,7 +57,7 @@ from mpi4py import MPI
 from eyemech.forms import contact, follower_pressure
 from eyemech.forms import viscoelastic as ve
 from eyemech.meshes import MeshError
-from eyemech.meshes.cornea import CorneaGeometry, cornea
+from eyemech.meshes.cornea import CorneaGeometry, cell_count, cornea
 from eyemech.problems.contact.rigid import resultant_force
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries, displacement_grid, render_png
@@ -75,6 +82,8 @@ CONTACT_QUADRATURE = 6    # the penalty integrand has a kink at the contact edge
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
+    RESOLUTION_KEY: ClassVar[str] = "resolution"
+
     iop_mmHg: float = field(15.0, "true intra-ocular pressure on the posterior surface", "mmHg")
     youngs_modulus: float = field(0.13, "instantaneous Young's modulus of the cornea, E = 3(μ∞ + μv); "
                                   "0.13 makes the model read the true IOP at 520 µm (Goldmann's "
@@ -87,11 +96,18 @@ class Parameters(SceneParameters):
     applanation_diameter: float = field(GOLDMANN_DIAMETER, "contact disc diameter at the reading", "mm")
     tear_film_mmHg: float = field(4.57, "capillary attraction of the tear meniscus on the prism, as a "
                                   "pressure over the disc (McCafferty et al. 2018: 4.57 ± 0.18 mmHg)", "mmHg")
-    penalty: float = field(30.0, "applanator penalty factor: α = penalty · E / mesh_size", "")
+    penalty: float = field(30.0, "applanator penalty factor: α = penalty · E / h, h the planform "
+                           "element size", "")
     support: Support = field("clamped", "limbus support: " + ", ".join(SUPPORTS))
     limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
                                     "(≈ E_sclera / 5 mm)", "MPa/mm")
-    mesh_size: float = field(0.5, "radial element size in the planform", "mm")
+    resolution: float = field(3.06, "planform cells per applanation radius "
+                              "(applanation_diameter / 2; 3.06: 0.5 mm at Goldmann's 3.06 mm); sets "
+                              "the radial element size unless mesh_size is given")
+    mesh_size: float = field(0.0, "radial element size in the planform; 0 = applanation_diameter "
+                             "/ 2 / resolution", "mm")
+    max_cells: int = field(20_000, "refuse a mesh of more hexahedra than this (counted before "
+                           "meshing; 20,000 Q2P1 cells ≈ 0.6 M unknowns)")
     azimuthal_divisions: int = field(16, "elements around (rounded up to a multiple of 8)")
     layers: int = field(2, "element layers through the thickness")
     geometry_degree: int = field(2, "cell geometry: 2 = 27-node cells on the curved surfaces, "
@@ -101,7 +117,8 @@ class Parameters(SceneParameters):
 
     def validate(self) -> None:
         self.require_positive("iop_mmHg", "youngs_modulus", "applanation_diameter", "penalty",
-                              "max_depth")
+                              "max_depth", "resolution", "max_cells")
+        self.require_nonnegative("mesh_size")
         self.require_nonnegative("tear_film_mmHg")
         validate_support(self)
         for key in ("iop_mmHg", "youngs_modulus", "central_thickness", "penalty"):
@@ -114,20 +131,39 @@ class Parameters(SceneParameters):
         if not self.applanation_diameter <= 0.6 * self.diameter:
             raise ParameterError("applanation_diameter", f"{self.applanation_diameter} mm: at most "
                                  f"0.6 × the corneal diameter ({0.6 * self.diameter:.3g} mm)")
-        if not self.mesh_size <= self.applanation_diameter / 2:
-            raise ParameterError("mesh_size", f"must not exceed the contact radius "
+        if not self.planform_size <= self.applanation_diameter / 2:
+            key = "mesh_size" if self.mesh_size > 0 else "resolution"
+            raise ParameterError(key, f"the planform size {self.planform_size:.3g} mm must not "
+                                 f"exceed the contact radius "
                                  f"({self.applanation_diameter / 2} mm) to resolve the disc")
 
     def geometry(self) -> CorneaGeometry:
         # the clear zone (no incisions) puts a ring of nodes at the contact edge
         return CorneaGeometry(self.anterior_radius, self.posterior_radius, self.central_thickness,
                               self.limbal_thickness, self.diameter, 0, 0.5, self.applanation_diameter,
-                              self.diameter / 2, self.mesh_size, self.azimuthal_divisions, self.layers,
+                              self.diameter / 2, self.planform_size, self.azimuthal_divisions,
+                              self.layers,
                               self.geometry_degree)
 
     @property
+    def planform_size(self) -> float:
+        """``mesh_size``, or the applanation radius over ``resolution``."""
+        if self.mesh_size > 0:
+            return self.mesh_size
+        return self.applanation_diameter / 2 / self.resolution
+
+    @property
+    def estimated_cells(self) -> int | None:
+        """The exact hexahedron count, from the level counts; None while the geometry is
+        invalid (validate names the key)."""
+        try:
+            return cell_count(self.geometry())
+        except (MeshError, ValueError, ZeroDivisionError):
+            return None
+
+    @property
     def penalty_stiffness(self) -> float:
-        return contact.default_penalty(self.youngs_modulus, self.mesh_size, self.penalty)
+        return contact.default_penalty(self.youngs_modulus, self.planform_size, self.penalty)
 
 
 class ContactEdge:

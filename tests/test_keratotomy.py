@@ -8,6 +8,8 @@ depend on the moduli and the mesh and are reported in docs/viscoelastic.md.
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from eyemech.problems import keratotomy
@@ -189,3 +191,30 @@ def test_adaptive_steps_stop_at_the_step_cap():
     with pytest.raises(TooManySteps) as info:
         solve(incisions=0, symmetry="quarter", time_stepping="adaptive", max_steps=3)
     assert "max_steps = 3" in str(info.value) and "time_tolerance" in str(info.value)
+
+
+# lengths ×2: the resolution (cells per bending length √(Ra t_c)) gives the same cells
+DOUBLED = dict(anterior_radius=15.6, posterior_radius=13.0, central_thickness=1.04,
+               limbal_thickness=1.34, diameter=23.4, optical_zone=6.0, incision_end=10.7,
+               fit_diameter=6.0)
+
+
+@pytest.mark.parametrize("label, case", [
+    ("relaxation time x0.1", dict(tau=360.0)),
+    ("moduli and IOP x10", dict(mu_inf=0.4, mu_v=0.3, iop_mmHg=150.0)),
+    ("lengths x2", DOUBLED),
+])
+def test_adaptive_steps_hold_their_tolerance_when_scaled(label, case):
+    """The reported time-error estimates stay within ``time_tolerance`` away from the
+    defaults (coarse quarter cornea, 1 h, 8 incisions; the planform from ``resolution``
+    so that it scales with the cornea). Measured (incised / intact, steps): τ ×0.1 0.65 % /
+    0.65 %, 56 steps; moduli and IOP ×10 and lengths ×2 0.33 % / 0.33 %, 23 steps (the same
+    strains, so the same relative stress error); the doubled cornea has the same 39 cells."""
+    base = keratotomy.Parameters(**{**COARSE, "mesh_size": 0.0, "resolution": 1.34,  # 1.5 mm
+                                    "incisions": 8, "symmetry": "quarter",
+                                    "time_stepping": "adaptive"})
+    params = dataclasses.replace(base, **case)
+    q = keratotomy.run(params, options=QUIET).quantities
+    assert 0 < q["time_error_estimate"] <= params.time_tolerance
+    assert 0 < q["intact_time_error_estimate"] <= params.time_tolerance
+    assert q["cells"] == params.estimated_cells == base.estimated_cells  # 39

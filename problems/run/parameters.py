@@ -15,7 +15,7 @@ import os
 import tomllib
 import typing
 from pathlib import Path
-from typing import Any, Literal, get_args, get_origin
+from typing import Any, ClassVar, Literal, get_args, get_origin
 
 MMHG = 1.33322e-4  # MPa per mmHg
 
@@ -45,6 +45,9 @@ class SceneParameters:
     command line, a TOML file or Python alike; so is a float that is not finite (unless
     its field says ``finite=False``)."""
 
+    # the parameter that sets the mesh's fineness, named by a refused cell count
+    RESOLUTION_KEY: ClassVar[str] = "mesh_size"
+
     def __post_init__(self) -> None:
         for key, kind in _field_types(type(self)).items():
             if get_origin(kind) is Literal and getattr(self, key) not in get_args(kind):
@@ -54,6 +57,11 @@ class SceneParameters:
 
     def validate(self) -> None:
         """Check physical sense; subclasses extend and raise ParameterError."""
+
+    def resolution_key(self) -> str:
+        """The parameter that sets this mesh's fineness: ``mesh_size`` when that absolute
+        override is set, else ``RESOLUTION_KEY``."""
+        return "mesh_size" if getattr(self, "mesh_size", 0) > 0 else type(self).RESOLUTION_KEY
 
     # -- helpers for subclasses -------------------------------------------------
     def require_positive(self, *keys: str) -> None:
@@ -151,14 +159,29 @@ def check_step_count(params: SceneParameters) -> None:
                              f"{'max_steps' if hasattr(params, 'max_steps') else MAX_STEPS_ENV})")
 
 
-def check_cell_count(params: SceneParameters) -> None:
-    cells = params.estimated_cells
+def max_cells(params: SceneParameters) -> tuple[int, str]:
+    """The cell limit of ``params`` and how to raise it: the scene's own ``max_cells``
+    field, else EYEMECH_MAX_CELLS, else DEFAULT_MAX_CELLS."""
+    own = getattr(params, "max_cells", None)
+    if isinstance(own, int) and own > 0:
+        return own, "max_cells"
     env = os.environ.get(MAX_CELLS_ENV, "").strip()
-    limit = int(env) if env.isdigit() and int(env) > 0 else DEFAULT_MAX_CELLS
+    return (int(env) if env.isdigit() and int(env) > 0 else DEFAULT_MAX_CELLS), MAX_CELLS_ENV
+
+
+def check_cell_count(params: SceneParameters) -> None:
+    """Refuse, before meshing, a mesh whose estimated cell count exceeds the limit,
+    naming the scene's resolution parameter (``RESOLUTION_KEY``) and the override."""
+    cells = params.estimated_cells
+    limit, override = max_cells(params)
     if cells is not None and cells > limit:
-        size = getattr(params, "element_size", getattr(params, "mesh_size", float("nan")))
-        raise ParameterError("mesh_size", f"an element size of {size:g} mm gives about {int(cells):,} cells, "
-                             f"more than the limit of {limit:,} (raise it with {MAX_CELLS_ENV})")
+        key = params.resolution_key()
+        size = getattr(params, "element_size", getattr(params, "mesh_size", None))
+        sized = f"an element size of {size:.3g} mm" if isinstance(size, (int, float)) and size > 0 \
+            else f"{key}={getattr(params, key)!r}"
+        raise ParameterError(key, f"{sized} gives about {int(cells):,} cells (estimated before "
+                             f"meshing), more than the limit of {limit:,}: coarsen the mesh with {key}, or raise "
+                             f"the limit with {override}")
 
 
 def check(params: SceneParameters) -> None:

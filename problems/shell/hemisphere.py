@@ -10,7 +10,7 @@ u_z = 0 at one node of the equator.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 import ufl
@@ -45,6 +45,17 @@ class HemisphereParameters(SceneParameters, ShellDiscretisation):
     kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear")
     load_steps: int = field(10, "initial number of load steps (nonlinear; cut and grown as needed)")
 
+    RESOLUTION_KEY: ClassVar[str] = "divisions"
+
+    @property
+    def around(self) -> int:
+        """Divisions around: about 5 × ``divisions``, a multiple of 4."""
+        return 4 * max(1, round(5 * self.divisions / 4))
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.grid_triangles(self.around, self.divisions)
+
     def validate(self) -> None:
         self.require_positive("radius", "hole_angle", "divisions", "load_steps")
         check_shell_parameters(self, self.radius)
@@ -58,7 +69,7 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
     recorded step (e.g. a reference curve). Returns the Result."""
     with RunContext(scene_name, params, comm, out, options) as ctx:
         R, top = params.radius, np.radians(90.0 - params.hole_angle)
-        around = 4 * max(1, round(5 * params.divisions / 4))
+        around = params.around
 
         def sphere(s, t):
             azimuth, elevation = 2 * np.pi * s, top * t

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Callable, Literal
+from typing import Callable, ClassVar, Literal
 
 import basix.ufl
 import dolfinx
@@ -150,6 +150,11 @@ class ShellDiscretisation:
     degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
 
+    def grid_triangles(self, nx: int, ny: int) -> int:
+        """Triangles of the structured nx × ny grid (meshes/surface.py: 4 per square when
+        crossed, else 2), the exact cell count before meshing."""
+        return (4 if self.diagonal == "crossed" else 2) * nx * ny
+
 
 @dataclasses.dataclass(frozen=True)
 class PlateParameters(SceneParameters, ShellDiscretisation):
@@ -164,6 +169,12 @@ class PlateParameters(SceneParameters, ShellDiscretisation):
     load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)")
     in_plane: InPlane = field("immovable", "in-plane edge condition: immovable (u = 0) or sliding "
                                            "(normal in-plane displacement 0, tangential free: Levy 1942)")
+
+    RESOLUTION_KEY: ClassVar[str] = "divisions"
+
+    @property
+    def estimated_cells(self) -> int:
+        return self.grid_triangles(self.divisions, self.divisions)
 
     def validate(self) -> None:
         self.require_positive("length", "divisions", "load_steps")

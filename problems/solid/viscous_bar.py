@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Callable, Literal
+from typing import Callable, ClassVar, Literal
 
 import basix.ufl
 import dolfinx
@@ -80,6 +80,14 @@ class BarParameters(SceneParameters):
     element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)")
     mesh_divisions: int = field(1, "elements (hexahedra; ×6 tetrahedra) along each edge of the cube")
     length: float = field(1.0, "edge of the cube", "mm")
+
+    RESOLUTION_KEY: ClassVar[str] = "mesh_divisions"
+
+    @property
+    def estimated_cells(self) -> int:
+        """n³ hexahedra, or 6 n³ tetrahedra (dolfinx.mesh.create_box)."""
+        hexahedral = ELEMENTS[self.element].hexahedral if self.element in ELEMENTS else True
+        return self.mesh_divisions ** 3 * (1 if hexahedral else 6)
 
     def validate(self) -> None:
         self.require_positive("mu_inf", "mu_v", "tau", "t_end", "dt", "mesh_divisions", "length",

@@ -1,0 +1,128 @@
+r"""Time steps of :class:`~eyemech.problems.solve.time_integration.ImplicitDynamics` chosen
+from the local error estimate against a stated tolerance.
+
+Each step is solved with the step Δt proposed, then judged by
+:meth:`ImplicitDynamics.local_error` (the embedded backward-Euler/trapezoidal difference, or
+Zienkiewicz–Xie for Newmark): a step whose estimate e exceeds the allowed
+
+    e_allowed = tolerance · Δt / time_scale
+
+is repeated shorter, an accepted one sets the next Δt = Δt · clip(safety · (e_allowed/e)^{1/p},
+shrink_limit, grow_limit) (p the scheme's order: e ∝ Δt^{p+1}, e_allowed ∝ Δt). Error per
+unit step keeps the sum of the local errors, reported as ``time_error_estimate``, below
+``tolerance`` over ``time_scale`` (the run's length). A Newton failure halves the step (at
+most 6 times in a row). Verified on the damped oscillator, whose exact solution is known:
+tests/test_adaptive_dynamics.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import numpy as np
+
+from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure
+from eyemech.problems.solve.time_integration import ImplicitDynamics
+
+MAX_CUTS = 6  # Newton failures in a row before the march gives up
+
+
+@dataclasses.dataclass(frozen=True)
+class TimeErrorControl:
+    """The tolerance of an adaptive march and how fast its steps may change."""
+
+    tolerance: float        # allowed displacement error (the model's length unit) over time_scale
+    time_scale: float       # the interval the tolerance is spread over (usually t_end)
+    first_dt: float
+    max_dt: float = np.inf
+    max_steps: int = 20_000
+    safety: float = 0.9
+    shrink_limit: float = 0.2
+    grow_limit: float = 2.0
+
+    def __post_init__(self) -> None:
+        for key in ("tolerance", "time_scale", "first_dt", "max_dt", "max_steps"):
+            if not getattr(self, key) > 0:
+                raise ValueError(f"{key} must be > 0, got {getattr(self, key)!r}")
+
+    def allowed(self, dt: float) -> float:
+        return self.tolerance * dt / self.time_scale
+
+    def judge(self, dt: float, error: float, order: int) -> tuple[bool, float]:
+        """(accepted, next Δt) for a step of length ``dt`` with estimate ``error``."""
+        allowed = self.allowed(dt)
+        if error <= 0.0:
+            return True, min(dt * self.grow_limit, self.max_dt)
+        factor = self.safety * (allowed / error) ** (1.0 / order)
+        next_dt = dt * float(np.clip(factor, self.shrink_limit, self.grow_limit))
+        return error <= allowed, min(next_dt, self.max_dt)
+
+
+@dataclasses.dataclass
+class MarchSummary:
+    """What the march did: the estimated time error and the steps it took."""
+
+    time_error_estimate: float = 0.0  # sum of the accepted steps' local estimates
+    time_steps: int = 0
+    rejected_steps: int = 0
+    cuts: int = 0  # Newton failures (each halved the step)
+    min_dt: float = np.inf
+    max_dt: float = 0.0
+
+
+def march_dynamics(solver: NonlinearSolver, dynamics: ImplicitDynamics,
+                   apply: Callable[[float, float], None], t_end: float, control: TimeErrorControl,
+                   accept: Callable[[int, float, float, int, float], None] | None = None, *,
+                   stops: tuple[float, ...] = (), t_start: float = 0.0) -> MarchSummary:
+    """From ``t_start`` to ``t_end`` with error-controlled steps, landing on ``stops``.
+
+    ``apply(t, dt)`` sets the step ending at t (loads, lagged contact state);
+    ``accept(step, t, dt, iterations, error)`` sees each accepted step before
+    ``dynamics.advance()`` is called. Raises :class:`SolveFailure` when Newton fails
+    ``MAX_CUTS`` times in a row or ``control.max_steps`` would be exceeded (the last
+    accepted state is kept)."""
+    summary = MarchSummary()
+    order = dynamics.order
+    ends = sorted({t for t in stops if t_start < t < t_end} | {t_end})
+    t, dt, cuts_in_row = t_start, min(control.first_dt, control.max_dt), 0
+    state = solver.save_state()
+    while t < t_end * (1 - 1e-12):
+        if summary.time_steps >= control.max_steps:
+            raise SolveFailure(summary.time_steps + 1, t + dt, t, [],
+                               f"more than max_steps = {control.max_steps} time steps at the "
+                               f"tolerance {control.tolerance:g}", quantity="time", unit="s")
+        next_stop = next(s for s in ends if s > t * (1 + 1e-12))
+        target = min(t + dt, next_stop)
+        if next_stop - target < 1e-3 * dt:  # no sliver before a stop
+            target = next_stop
+        h = target - t
+        dynamics.set_step(h)
+        apply(target, h)
+        converged, iterations = solver.solve()
+        if not converged:
+            residuals, reason = list(solver.residual_history), solver.reason()
+            solver.restore_state(state)
+            summary.cuts += 1
+            cuts_in_row += 1
+            if cuts_in_row > MAX_CUTS:
+                raise SolveFailure(summary.time_steps + 1, target, t, residuals, reason,
+                                   quantity="time", unit="s")
+            dt = 0.5 * h
+            continue
+        cuts_in_row = 0
+        error = dynamics.local_error()
+        accepted, dt = control.judge(h, error, order)
+        if not accepted:
+            solver.restore_state(state)
+            summary.rejected_steps += 1
+            continue
+        summary.time_steps += 1
+        summary.time_error_estimate += error
+        summary.min_dt, summary.max_dt = min(summary.min_dt, h), max(summary.max_dt, h)
+        if accept is not None:
+            accept(summary.time_steps, target, h, iterations, error)
+        dynamics.advance()
+        t = target
+        state = solver.save_state()
+    return summary
