@@ -788,6 +788,9 @@ class Dynamics:
         self.stall: float | None = None
         # energy backtracking (off: it did not lower the iterations of the release)
         self.line_search = False
+        # values of the `fixed` dofs at the end of the next step (None: held where they are):
+        # a prescribed motion (the fold's rolled optic), set before `step`
+        self.prescribed: np.ndarray | None = None
         self.contact = None
         self.obstacles = None
         self._keys = None  # the upper pattern as sorted row · n + col (with contact or obstacles)
@@ -997,6 +1000,16 @@ class Dynamics:
                 best, best_r, best_norm = u, r, np.linalg.norm(r)
         return best, best_r
 
+    def _prescribe(self, u_n: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The start iterate u with the fixed dofs at ``prescribed``. With self-contact the
+        move u_n → u must not cross the surface (the barrier is undefined past a crossing):
+        where the CCD shortens it, the step is refused (RuntimeError: the caller cuts Δt)."""
+        u = u.copy()
+        u[self.solver.fixed] = self.prescribed
+        if self.contact is not None and self._collision_free_fraction(u_n, u - u_n) < 1.0:
+            raise RuntimeError(f"the prescribed motion over Δt = {self.dt:g} s crosses the surface")
+        return u
+
     def step(self) -> int:
         """One step from (u, v); returns the Newton iterations (each one linear solve, rejected
         ones included; ``max_iterations`` caps those on fresh factors and those on reused
@@ -1007,12 +1020,18 @@ class Dynamics:
         u_n, v_n = self.u.copy(), self.v.copy()
         r_n = self._system(u_n, u_n, v_n, False)
         norm0 = np.linalg.norm(r_n)
-        tolerance = max(self.rtol * norm0, self.atol)
         u, r = self._predict(u_n, v_n, r_n)
+        if self.prescribed is not None:
+            u = self._prescribe(u_n, u)
+            r = self._system(u, u_n, v_n, False)
+            # the free dofs' reaction to the prescribed move is what Newton reduces
+            norm0 = np.linalg.norm(r)
+        tolerance = max(self.rtol * norm0, self.atol)
         norm, iterations, factorised, fresh = np.linalg.norm(r), 0, 0, True
         while norm > tolerance:
             # the cap bounds the iterations on fresh factors and, separately, those on reused ones
             if max(factorised, iterations - factorised) >= self.max_iterations or not np.isfinite(norm):
+                self.counts["iterations"] += iterations  # a failed step's iterations count too
                 raise RuntimeError(f"rotation-free Newton: no convergence in {iterations} iterations "
                                    f"(residual {norm:.3e} of {norm0:.3e}) at Δt = {self.dt:g} s")
             if fresh:
@@ -1149,6 +1168,8 @@ class FastLens:
     shell: RotationFreeShell
     optic_nodes: np.ndarray
     tip_nodes: np.ndarray  # the vertices of the first haptic's tip edge
+    optic_triangles: np.ndarray
+    haptic_triangles: np.ndarray
 
     @classmethod
     def build(cls, params, bending: str = "edge") -> "FastLens":
@@ -1169,7 +1190,8 @@ class FastLens:
                                   up=lambda c: np.tile([0.0, 0.0, 1.0], (len(c), 1)), bending=bending)
         mesh.topology.create_connectivity(1, 0)
         tip = dolfinx.mesh.entities_to_geometry(mesh, 1, tagged.facets("tip_1"))
-        return cls(shell, np.unique(triangles[optic]), np.unique(np.asarray(tip)))
+        haptic = np.setdiff1d(np.arange(len(triangles)), optic)
+        return cls(shell, np.unique(triangles[optic]), np.unique(np.asarray(tip)), np.asarray(optic), haptic)
 
     def rolled_displacement(self, radius: float) -> np.ndarray:
         from eyemech.problems.lens.model import rolled
