@@ -35,8 +35,9 @@ class SurfaceSelfContact:
                  exclusion: float | None = None, margin: float | None = None):
         """``margin`` δ (default 4 d̂): the candidate pairs are those within d̂ + δ of each
         other at the positions x_b of their build (ipctk BVH, boxes inflated by d̂ + δ), reused
-        for every x with max_v |x_v − x_b,v| ≤ δ/2 — no pair outside them can then come within
-        d̂ — and rebuilt otherwise (``rebuilds`` counts them)."""
+        for every x with max_v |x_v − x_b,v − t| ≤ δ/2 for the mean move t (``_covers``) — no
+        pair outside them can then come within d̂ — and rebuilt otherwise (``rebuilds`` counts
+        them)."""
         import ipctk
         import scipy.sparse
         from scipy.sparse.csgraph import dijkstra
@@ -69,8 +70,15 @@ class SurfaceSelfContact:
                                    f"closer than d̂ = {self.dhat} mm")
 
     def _covers(self, x: np.ndarray) -> bool:
-        return self._x_build is not None and \
-            float(np.max(np.sum((x - self._x_build) ** 2, axis=1))) <= (0.5 * self.margin) ** 2
+        """Whether x is within δ/2 of the build positions up to a common translation t (the mean
+        move): a pair's distance is translation invariant, so it changes by at most
+        2 max_v |x_v − x_b,v − t| — the lens pushed through the injector moves ≈ 0.4 mm per step
+        as a whole, which without t would rebuild the candidates at every iterate."""
+        if self._x_build is None:
+            return False
+        move = x - self._x_build
+        move -= move.mean(axis=0)
+        return float(np.max(np.sum(move ** 2, axis=1))) <= (0.5 * self.margin) ** 2
 
     def _candidates_for(self, x: np.ndarray):
         """Candidates valid at x: the kept ones, or new ones built at x."""
@@ -126,9 +134,9 @@ class SurfaceSelfContact:
 
     def step_fraction(self, x0: np.ndarray, x1: np.ndarray) -> float:
         """The largest fraction of the straight path x0 → x1 that is collision-free (CCD). With
-        both ends within δ/2 of the candidates' build positions, every point of the path is too
-        (a ball is convex), so the kept candidates hold every pair that can meet on it; else a
-        full BVH sweep."""
+        both ends within δ/2 of the candidates' build positions (up to translations t0, t1),
+        every point of the path is too (up to the interpolated translation: a ball is convex), so
+        the kept candidates hold every pair that can meet on it; else a full BVH sweep."""
         candidates = self._candidates_for(x0)
         if self._covers(x1):
             fraction = float(candidates.compute_collision_free_stepsize(
@@ -168,15 +176,24 @@ class NodalObstacles:
         self.obstacles, self.stiffness, self.smoothing = obstacles, float(stiffness), float(smoothing)
         self.excluded = {name: np.asarray(nodes, dtype=np.int64) for name, nodes in (excluded or {}).items()}
 
-    def _pressed(self, x: np.ndarray):
+        self._last: tuple[np.ndarray, list] | None = None
+
+    def _pressed(self, x: np.ndarray) -> list:
+        """(vertices, gaps, ∇g) per obstacle where g < ε; the last x's are kept (Newton asks
+        energy, gradient and Hessian at the same iterate)."""
+        if self._last is not None and np.array_equal(self._last[0], x):
+            return self._last[1]
+        pressed = []
         for name, obstacle in self.obstacles.items():
-            gap, normal, acts = obstacle.gap_normal(x)
+            gap, _, acts = obstacle.gap_normal(x)
             if name in self.excluded:
                 acts = acts.copy()
                 acts[self.excluded[name]] = False
             hit = np.flatnonzero(acts & (gap < self.smoothing))
             if len(hit):
-                yield hit, gap[hit], self._gap_gradient(obstacle, x[hit])
+                pressed.append((hit, gap[hit], self._gap_gradient(obstacle, x[hit])))
+        self._last = (np.array(x), pressed)
+        return pressed
 
     @staticmethod
     def _gap_gradient(obstacle, x: np.ndarray, step: float = 1e-7) -> np.ndarray:
@@ -186,13 +203,9 @@ class NodalObstacles:
         exact on its surface only), and a force that is not the energy's gradient defeats the
         energy line search that self-contact turns on (the coarse P1 injection stalled in the
         taper at 0.1 % residual reduction per iteration)."""
-        gradient = np.empty_like(x)
-        for c in range(3):
-            up, down = x.copy(), x.copy()
-            up[:, c] += step
-            down[:, c] -= step
-            gradient[:, c] = (obstacle.gap_normal(up)[0] - obstacle.gap_normal(down)[0]) / (2.0 * step)
-        return gradient
+        shifts = step * np.vstack([np.eye(3), -np.eye(3)])  # the 6 points of every vertex, one call
+        gap = obstacle.gap_normal((x[None, :, :] + shifts[:, None, :]).reshape(-1, 3))[0].reshape(6, -1)
+        return ((gap[:3] - gap[3:]) / (2.0 * step)).T
 
     def energy(self, x: np.ndarray) -> float:
         """Σ φ(g): k (ε − g)³/(12ε) for |g| < ε, ½ k g² + k ε²/6 below (C², φ′ = −p)."""
