@@ -25,7 +25,7 @@ class Parameters(FoldParameters):
 
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle of iol-speed: the same roll, chamber and ipctk self-contact on "
-                                    "its vertices and triangles; no friction, no pictures)")
+                                    "its vertices and triangles; no pictures)")
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,

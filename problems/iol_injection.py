@@ -60,8 +60,8 @@ from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, S
 @dataclasses.dataclass(frozen=True)
 class Parameters(FoldParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
-                                    "triangle of iol-speed: the same walls, plunger, fluid and ipctk "
-                                    "self-contact on its vertices and triangles; no friction, no pictures)")
+                                    "triangle of iol-speed: the same walls, plunger, fluid, friction and "
+                                    "ipctk self-contact on its vertices and triangles; no pictures)")
     folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)")
     plunger_speed: float = field(40.0, "plunger speed", "mm/s")
     plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
@@ -110,8 +110,7 @@ class Parameters(FoldParameters):
         if self.folded_state and not Path(self.folded_state).is_file():
             raise ParameterError("folded_state", f"no such file: {self.folded_state}")
         if self.model == "p1-rotation-free":
-            refuse_on_p1(self, {"linearised": False, "jacobian_lag": 1, "scheme": "backward-euler",
-                                "capsule_friction": 0.0, "cartridge_friction": 0.0, "injector_twist": 0.0})
+            refuse_on_p1(self, {"linearised": False, "jacobian_lag": 1, "scheme": "backward-euler"})
         if self.plunger_speed * self.time_step > 0.5 * self.nozzle_radius:
             raise ParameterError("plunger_speed", f"{self.plunger_speed} mm/s moves the plunger "
                                  f"{self.plunger_speed * self.time_step:.3g} mm per step, more than half "

@@ -15,8 +15,11 @@ The same scene as the P2 one (:mod:`eyemech.problems.lens.fold`,
   jet, lagged per step) as the external force c M v_f of the backward-Euler residual
   R = ∇Π − c M v_f + M[(1/Δt² + c/Δt)(u − u_n) − v_n/Δt].
 - **self-contact** (both): ipctk's barrier on the P1 triangles with CCD-limited Newton
-  updates (``surface_contact.SurfaceSelfContact``), and ipctk's exact intersection test after
-  every converged step.
+  updates and lagged smoothed Coulomb friction μ = ``friction`` (``surface_contact.SurfaceSelfContact``),
+  and ipctk's exact intersection test after every converged step.
+- **wall friction**: ``capsule_friction`` and ``cartridge_friction``, lagged smoothed Coulomb
+  on the nodal walls (``NodalObstacles.begin_step``); with ``injector_twist`` the cartridge's
+  anchors turn with it, as in the P2 scene.
 
 Steps that Newton does not converge (or whose prescribed motion would cross the surface) are
 halved and retried; Δt grows back ×2 after steps of ≤ ``EASY_ITERATIONS`` iterations, as in
@@ -34,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from eyemech.problems.lens.fold import EASY_ITERATIONS, blocked_dofs
-from eyemech.problems.lens.injector import Plunger
+from eyemech.problems.lens.injector import Plunger, turn_about_x
 from eyemech.problems.lens.model import InjectorLayout, rolled
 from eyemech.problems.lens.rotation_free import Dynamics, FastLens
 from eyemech.problems.lens.surface_contact import NodalObstacles, SurfaceSelfContact
@@ -129,7 +132,7 @@ def self_contact(lens: FastLens, params) -> SurfaceSelfContact | None:
         raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
                              "or set self_contact=false") from err
     return SurfaceSelfContact(lens.shell.X, lens.shell.tri, params.self_contact_distance,
-                              params.self_contact_stiffness)
+                              params.self_contact_stiffness, friction=params.friction, slip=params.friction_slip)
 
 
 def save_state(path: Path, lens: FastLens, u: np.ndarray) -> None:
@@ -195,7 +198,8 @@ class History:
             min_self_distance_mm=float(min(distances)) if distances else None,
             self_intersecting=bool(any(self.intersecting)),
             self_contact_forces=(f"ipctk barrier on the P1 triangles (d̂ = {params.self_contact_distance} mm), "
-                                 "CCD-limited updates, frictionless" if params.self_contact else "not applied"),
+                                 f"CCD-limited updates, friction μ = {params.friction}" if params.self_contact
+                                 else "not applied"),
             factorisations=self.counts.get("factorisations", 0),
             pattern_growths=self.counts.get("pattern_growths", 0),
             ccd_limited_updates=self.counts.get("step_limits", 0),
@@ -237,6 +241,8 @@ def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None)
         fraction = t / params.fold_time
         dyn.prescribed = (rolled(X_optic, fraction / params.fold_radius) - X_optic).ravel()
         chamber.opening = (1.0 - fraction) * opening
+        if contact is not None:
+            contact.begin_step(shell.X + dyn.u.reshape(-1, 3))
 
     def converged(record: StepRecord) -> None:
         history.record(record, lens, dyn.u, walls, contact)
@@ -278,7 +284,10 @@ class Injection:
                 excluded["plunger"] = np.setdiff1d(haptic_nodes, lens.optic_nodes)
             self.walls = NodalObstacles({"cartridge": layout.cartridge(params, lip=layout.nozzle_lip),
                                          "plunger": self.plunger, "capsule": self.capsule},
-                                        params.contact_stiffness, excluded=excluded)
+                                        params.contact_stiffness, excluded=excluded,
+                                        friction={"capsule": params.capsule_friction,
+                                                  "cartridge": params.cartridge_friction},
+                                        slip=params.friction_slip)
             self.dyn.set_obstacles(self.walls)
         self.contact = self_contact(lens, params) if params.contact else None
         if self.contact is not None:
@@ -290,15 +299,27 @@ class Injection:
         self.bore = layout.cartridge(params)
         stop = layout.tip + params.plunger_overshoot
         self.motion = PlungerMotion(params.plunger_speed, params.start_ramp, stop - self.start)
+        self.twist = np.radians(params.injector_twist) / self.motion.travel(self.motion.push_time)  # rad/mm
         self.push_time = self.motion.push_time
         self.end = self.push_time + params.settle_time
         self.history = History()
 
-    def apply(self, t: float, _dt: float) -> None:
-        """The plunger's position at t and the fluid's drag force c M v_f at u_n."""
+    def apply(self, t: float, dt: float) -> None:
+        """The step ending at t: the plunger's position, the fluid's drag force c M v_f at u_n,
+        the lagged friction of the walls (the cartridge turned over the step with a twisted
+        injector) and of the lens on itself."""
         from eyemech.problems.iol_injection import axial_fluid_speed
 
         self.plunger.position = self.start + self.motion.travel(t)
+        x = self.lens.shell.X + self.dyn.u.reshape(-1, 3)
+        if self.walls is not None:
+            motion = {}
+            if self.twist != 0.0:
+                angle = self.twist * (self.motion.travel(t) - self.motion.travel(t - dt))
+                motion["cartridge"] = turn_about_x(self.params.axis_point(), angle)
+            self.walls.begin_step(x, motion)
+        if self.contact is not None:
+            self.contact.begin_step(x)
         if self.params.fluid_carried:
             x = self.lens.shell.X[:, 0] + self.dyn.u[0::3]
             v_fluid = np.zeros((len(x), 3))
