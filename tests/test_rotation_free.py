@@ -207,8 +207,10 @@ def test_iol_speed_refuses_what_the_fast_model_cannot_do():
 
     from eyemech.problems.run.context import RunOptions
 
-    with pytest.raises(ParameterError, match="time_step"):  # Newton cannot take it: 25 iterations
-        iol_speed.run(iol_speed.Parameters(model="p1-rotation-free", steps=2, time_step=0.2),
+    # Newton cannot take it in 25 iterations (it stalls at 1e-4 of the start residual); with the
+    # inertia correction Δt = 0.2 s converges in 18 (docs/iol.md §4b)
+    with pytest.raises(ParameterError, match="time_step"):
+        iol_speed.run(iol_speed.Parameters(model="p1-rotation-free", steps=2, time_step=5.0),
                       comm=MPI.COMM_SELF, options=RunOptions(fields=False, pictures=False))
 
 
@@ -232,17 +234,22 @@ def test_one_symbolic_factorisation_per_run():
         assert count("MatCholFctrSym") - symbolic == 1
         assert count("MatCholFctrNum") - numeric == run["counts"]["factorisations"]
         assert run["counts"]["iterations"] == sum(run["history"]["iterations"])
-        # fresh: one factorisation per iteration (measured 52); lagged: fewer (39 for 74 iterations)
-        assert (run["counts"]["factorisations"] == run["counts"]["iterations"]) == (stall is None)
+        # fresh: one factorisation per iteration and one more per shift of an indefinite Hessian
+        # (measured 44 + 3, the first Hessian shifted once: 3 tries); lagged: fewer than iterations
+        made = run["counts"]["factorisations"] - run["counts"]["iterations"]
+        assert run["counts"]["shifted"] >= 1
+        assert (made >= run["counts"]["shifted"]) if stall is None else made < 0
 
 
 def test_newton_tolerance_and_lagged_factors_give_the_converged_answer():
     # the release's tip over 10 steps (it moves 0.09 mm) at rtol 1e-6 (fresh and lagged factors)
-    # against rtol 1e-10: measured 2.5e-10 mm (fresh) and 1.5e-8 mm (lagged, linear convergence)
+    # against rtol 1e-10: measured 3.9e-7 mm (fresh: the first step stops just under the
+    # tolerance after the shifted iterations; 2.5e-10 without the inertia correction) and
+    # 1.5e-8 mm (lagged)
     params, lens = _coarse_lens_release()
     tight, _ = _coarse_lens_release(rtol=1e-10)
     reference = np.asarray(rf.release(tight, 10, lens)["history"]["tip"])
-    for stall, bound in ((None, 1e-8), (0.2, 1e-6)):
+    for stall, bound in ((None, 1e-6), (0.2, 1e-6)):
         tip = np.asarray(rf.release(params, 10, lens, stall)["history"]["tip"])
         assert np.abs(tip - reference).max() < bound
     assert np.linalg.norm(reference[-1] - reference[0]) > 0.05  # the lens has moved (measured 0.09 mm)
