@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from eyemech.problems.iol_speed import MODELS, Model
 from eyemech.problems.lens.fold import FoldParameters, fold, self_contact_kind
 from eyemech.problems.lens.model import LensShell, save_state, write_animation
+from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import field
 from eyemech.problems.run.scene import Scene
@@ -65,10 +65,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     """The fold on the P1 lens; its folded_state.npz (the vertices') starts
     ``iol-injection --set model=p1-rotation-free``."""
-    from eyemech.problems.iol_injection import fast_lens
     from eyemech.problems.lens import fast_injection
 
-    lens = fast_lens(ctx, params)
+    lens = fast_injection.fast_lens(ctx, params)
     with ctx.timings("time_stepping"):
         folded, history = fast_injection.fold(params, lens, ctx.record_step)
     ctx.result.quantities.update(model=params.model, **history.quantities(params),

@@ -26,7 +26,6 @@ from mpi4py import MPI
 
 from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.contact.self_distance import self_distance_probe
-from eyemech.problems.iol_speed import MODELS, Model
 from eyemech.problems.lens.fold import (
     EASY_ITERATIONS,
     FoldParameters,
@@ -49,6 +48,8 @@ from eyemech.problems.lens.model import (
     write_animation,
     write_frame_grid,
 )
+from eyemech.problems.lens.models import MODELS, Model
+from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, field
@@ -167,26 +168,13 @@ def refuse_on_p1(params, defaults: dict) -> None:
                                  "(this option is the p2-c0ip model's)")
 
 
-def fast_lens(ctx: RunContext, params):
-    """The rotation-free P1 lens of these parameters (one ParameterError for a mesh it cannot use)."""
-    from eyemech.problems.lens.rotation_free import FastLens, MeshInputError
-
-    if ctx.comm.size != 1:
-        raise ParameterError("model", "model=p1-rotation-free runs on one rank")
-    with ctx.timings("mesh"):
-        try:
-            return FastLens.build(params)
-        except (MeshInputError, ValueError) as err:
-            raise ParameterError("mesh_size", f"the rotation-free lens cannot use this mesh: {err}") from err
-
-
 def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     """The fold (or ``folded_state``) and the injection on the P1 lens; the wall time from the
     start of the fold to the end of the injection is ``operation_wall_seconds``."""
     from eyemech.problems.lens import fast_injection
 
     begin = time.perf_counter()
-    lens = fast_lens(ctx, params)
+    lens = fast_injection.fast_lens(ctx, params)
     q = ctx.result.quantities
     if params.folded_state:
         folded = fast_injection.load_state(Path(params.folded_state), lens)
@@ -293,48 +281,6 @@ class FluidDrag:
 
     def residual_hook(self, _x, F) -> None:
         F.axpy(1.0, self.drag)
-
-
-def axial_fluid_speed(x: np.ndarray, speed: float, bore, jet_length: float) -> np.ndarray:
-    """``FluidDrag``'s fluid speed (mm/s) at axial positions x: plug flow
-    speed (R_bore/R(x))² inside the injector, its jet decaying as exp(−(x − tip)/jet_length)
-    beyond the nozzle tip."""
-    inside = speed * (bore.radius / bore.wall_radius(np.minimum(x, bore.tip))) ** 2
-    return np.where(x < bore.tip, inside, inside * np.exp(-np.maximum(x - bore.tip, 0.0) / jet_length))
-
-
-@dataclasses.dataclass(frozen=True)
-class PlungerMotion:
-    """The plunger's travel: from rest, the speed grows linearly to ``speed`` over ``ramp``
-    seconds, stays there, and stops once the plunger has travelled ``distance``.
-
-    Why a ramp: a jump from rest to 40 mm/s puts the whole fluid drag c M v_f on the resting lens
-    in the first step (and the plunger 0.4 mm into it): the first step was cut 3× (coarse) and 6×
-    (paper resolution). A real push also starts from rest."""
-
-    speed: float
-    ramp: float
-    distance: float
-
-    @property
-    def push_time(self) -> float:
-        ramp_distance = 0.5 * self.speed * self.ramp
-        if ramp_distance >= self.distance:  # still accelerating when it arrives
-            return float(np.sqrt(2.0 * self.distance * self.ramp / self.speed))
-        return self.ramp + (self.distance - ramp_distance) / self.speed
-
-    def speed_at(self, t: float) -> float:
-        if t > self.push_time + 1e-12:
-            return 0.0
-        return self.speed * min(t / self.ramp, 1.0) if self.ramp > 0.0 else self.speed
-
-    def travel(self, t: float) -> float:
-        t = min(max(t, 0.0), self.push_time)
-        if self.ramp <= 0.0:
-            return self.speed * t
-        if t <= self.ramp:
-            return 0.5 * self.speed * t * t / self.ramp
-        return self.speed * (t - 0.5 * self.ramp)
 
 
 @dataclasses.dataclass

@@ -39,7 +39,8 @@ import numpy as np
 from eyemech.problems.lens.fold import EASY_ITERATIONS, blocked_dofs
 from eyemech.problems.lens.injector import Plunger, turn_about_x
 from eyemech.problems.lens.model import InjectorLayout, rolled
-from eyemech.problems.lens.rotation_free import Dynamics, FastLens
+from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
+from eyemech.problems.lens.rotation_free import Dynamics, FastLens, MeshInputError
 from eyemech.problems.lens.surface_contact import NodalObstacles, SurfaceSelfContact
 from eyemech.problems.run.parameters import ParameterError
 
@@ -88,6 +89,17 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
         cuts = 0
         if iterations <= EASY_ITERATIONS:
             dt = min(2.0 * dt, time_step)
+
+
+def fast_lens(ctx, params) -> FastLens:
+    """The rotation-free P1 lens of these parameters (one ParameterError for a mesh it cannot use)."""
+    if ctx.comm.size != 1:
+        raise ParameterError("model", "model=p1-rotation-free runs on one rank")
+    with ctx.timings("mesh"):
+        try:
+            return FastLens.build(params)
+        except (MeshInputError, ValueError) as err:
+            raise ParameterError("mesh_size", f"the rotation-free lens cannot use this mesh: {err}") from err
 
 
 # -- measurements on the P1 lens -----------------------------------------------------------------
@@ -264,8 +276,6 @@ class Injection:
 
     def __init__(self, params, lens: FastLens, folded: np.ndarray,
                  record_step: Callable[..., None] | None = None):
-        from eyemech.problems.iol_injection import PlungerMotion
-
         self.params, self.lens, self.record_step = params, lens, record_step
         shell = lens.shell
         layout = InjectorLayout()
@@ -308,8 +318,6 @@ class Injection:
         """The step ending at t: the plunger's position, the fluid's drag force c M v_f at u_n,
         the lagged friction of the walls (the cartridge turned over the step with a twisted
         injector) and of the lens on itself."""
-        from eyemech.problems.iol_injection import axial_fluid_speed
-
         self.plunger.position = self.start + self.motion.travel(t)
         x = self.lens.shell.X + self.dyn.u.reshape(-1, 3)
         if self.walls is not None:
