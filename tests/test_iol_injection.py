@@ -261,3 +261,44 @@ def test_p1_injection_lands_right_side_up_without_crossing_itself_or_the_walls(p
     assert max(q["penetration_mm"]) < PENETRATION_TOLERANCE_MM
     # every Newton iteration counted: at least one per step, factorisations at least as many
     assert q["newton_iterations_total"] >= q["steps"]
+
+
+def test_p1_step_that_cannot_converge_is_cut_then_refused(monkeypatch):
+    """A step Newton never converges is halved down to 1e-3 of the time step (10 cuts), every
+    attempt undone, then one ParameterError naming time_step."""
+    from eyemech.problems.lens import fast_injection
+    from eyemech.problems.lens.rotation_free import Dynamics, FastLens
+    from eyemech.problems.run.parameters import ParameterError
+
+    params = iol_injection.Parameters(model="p1-rotation-free", resolution="coarse", self_contact=False)
+    lens = FastLens.build(params)
+    attempts = []
+
+    def never(self):
+        attempts.append((self.dt, float(np.abs(self.u).max())))
+        self.u = self.u + 1.0  # what a failed attempt leaves behind
+        raise RuntimeError("no convergence")
+
+    monkeypatch.setattr(Dynamics, "step", never)
+    with pytest.raises(ParameterError, match="time_step"):
+        fast_injection.fold(params, lens)
+    assert len(attempts) == 10  # 0.01 s halved until below 1e-5 s
+    assert attempts[-1][0] == pytest.approx(params.time_step / 2 ** 9)
+    assert all(start == 0.0 for _, start in attempts)  # each attempt from the restored flat lens
+
+
+def test_p1_injection_starts_from_a_p2_fold():
+    """A P2 fold (tests/data/iol_folded_coarse.npz: its nodes include the P1 vertices) seeds the
+    P1 injection, matched by coordinates; it does not intersect itself on the P1 triangles."""
+    pytest.importorskip("ipctk")
+    from eyemech.problems.lens import fast_injection
+    from eyemech.problems.lens.rotation_free import FastLens
+
+    params = iol_injection.Parameters(model="p1-rotation-free", resolution="coarse")
+    lens = FastLens.build(params)
+    u = fast_injection.load_state(FOLDED, lens)
+    data = np.load(FOLDED)
+    assert len(data["coordinates"]) > len(lens.shell.X)  # the P2 state has the mid-edge nodes too
+    assert np.abs(u).max() > 0.5  # folded (mm)
+    contact = fast_injection.self_contact(lens, params)
+    assert not contact.intersecting(lens.shell.X + u.reshape(-1, 3))
