@@ -173,7 +173,13 @@ class Parameters(SceneParameters, SolverChoice):
         "from step 2 on; frictionless: it may slide along the buckle")
     tire_arc_deg: float = field(90.0, "arc of the silicone tire about the optic axis, centred "
                                 "on the tear's meridian (360: a full ring)", "deg")
-    buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
+    buckle_position: float = field(
+        12.5, "buckle centre behind the limbus, along the sclera. 12.5: the tear (centre 11.5 mm "
+        "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
+        "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
+        "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
+        "detached flap, not at its root, and the sutures keep the tear closed (docs/scleral_buckling.md, "
+        "\"The tear at the defaults\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial)", "mm")
