@@ -25,7 +25,10 @@ Design notes
   (:class:`SecantPredictor`) whose solve keeps the unpredicted start's tolerance; modified
   Newton (``NewtonOptions.reuse_contraction``: the Jacobian callback leaves the matrix as it
   is, so PCSetUp keeps the factorisation); load steps sized by the step's factorisations
-  (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``).
+  (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``); a
+  failed solve repeated with another line search (``NewtonOptions.fallback_line_search``:
+  full steps settle a contact's kink where backtracking on ‖F‖ creeps, docs/scleral_buckling.md,
+  "Which contact chatters").
 """
 
 from __future__ import annotations
@@ -97,7 +100,7 @@ class NewtonOptions:
     # a solve that fails is repeated once from the same start with this line search (e.g.
     # "bt" behind "basic": full Newton steps cross a contact's kink where backtracking on
     # ‖F‖ creeps at its 0.1 floor, and the retry keeps a cycling active set from cutting
-    # the step; "": no retry; docs/bench/scleral-buckling.md)
+    # the step; "": no retry; docs/scleral_buckling.md, "Which contact chatters")
     fallback_line_search: str = ""
 
     def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
