@@ -178,7 +178,8 @@ def run_adaptive_release(ctx: "RunContext", params: Any) -> None:
     ``time_step``, at most 10 × it); reports the accepted steps' histories and the
     estimate against ``time_tolerance``."""
     control = TimeErrorControl(tolerance=params.time_tolerance, time_scale=params.steps * params.time_step,
-                               first_dt=params.time_step, max_dt=10.0 * params.time_step)
+                               first_dt=params.time_step, max_dt=10.0 * params.time_step,
+                               min_dt=1e-3 * params.time_step)
     with ctx.timings("mesh"):
         stepper, tips, optic, size = _release_stepper(params)
     history: dict[str, list] = {"time": [], "dt": [], "tip": [], "optic": [], "iterations": [], "error": []}
