@@ -74,6 +74,7 @@ from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.lens.injector import Capsule
 from eyemech.problems.lens.model import LensParameters, LensShell, rolled
 from eyemech.problems.lens.time_error import (
+    P2Release,
     TimeErrorTally,
     run_adaptive_release,
     step_error,
@@ -407,7 +408,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         if ctx.comm.size != 1:
             raise ParameterError("ranks", "iol-speed measures one core: run it on one rank")
         if params.time_stepping == "adaptive":
-            run_adaptive_release(ctx, params)
+            run_adaptive_release(ctx, params, P2Release(_lens, initial_roll, StepSolver, tip_nodes))
             return ctx.result
         if params.model == "p1-rotation-free":
             _run_rotation_free(ctx, params)

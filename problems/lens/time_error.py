@@ -29,7 +29,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 from petsc4py import PETSc
@@ -176,7 +176,18 @@ def validate_adaptive(params: Any) -> None:
                              f"{' | '.join(ESTIMATED_SCHEMES)}")
 
 
-def run_adaptive_release(ctx: "RunContext", params: Any) -> None:
+@dataclasses.dataclass(frozen=True)
+class P2Release:
+    """What the scene builds the P2 release from (``iol-speed``'s own functions, passed in:
+    a room does not import a scene)."""
+
+    lens: Callable[[Any], Any]                 # params → LensShell
+    initial_roll: Callable[[Any, float], np.ndarray]  # (shell, radius) → u0
+    step_solver: Callable[..., Any]            # (shell, dynamics, contact, params) → StepSolver
+    tip_nodes: Callable[[Any], np.ndarray]     # shell → the tip's nodes
+
+
+def run_adaptive_release(ctx: "RunContext", params: Any, p2: P2Release) -> None:
     """The release over ``steps × time_step`` with error-controlled steps (first Δt
     ``time_step``, at most 10 × it); reports the accepted steps' histories and the
     estimate against ``time_tolerance``."""
@@ -184,7 +195,7 @@ def run_adaptive_release(ctx: "RunContext", params: Any) -> None:
                                first_dt=params.time_step, max_dt=10.0 * params.time_step,
                                min_dt=1e-3 * params.time_step)
     with ctx.timings("mesh"):
-        stepper, tips, optic, size = _release_stepper(params)
+        stepper, tips, optic, size = _release_stepper(params, p2)
     history: dict[str, list] = {"time": [], "dt": [], "tip": [], "optic": [], "iterations": [], "error": []}
 
     def accept(step: int, t: float, dt: float, iterations: int, error: float) -> None:
@@ -219,10 +230,8 @@ def stepper_displacement(stepper: P1Stepper | P2Stepper) -> np.ndarray:
     return stepper.u.x.array.reshape(-1, 3)
 
 
-def _release_stepper(params: Any):
+def _release_stepper(params: Any, p2: P2Release):
     """(stepper at the rolled state, tip nodes, optic nodes, size quantities) of the model."""
-    from eyemech.problems import iol_speed
-
     if params.model == "p1-rotation-free":
         from eyemech.problems.lens.rotation_free import Dynamics, FastLens
 
@@ -233,15 +242,15 @@ def _release_stepper(params: Any):
         dyn.reset(lens.rolled_displacement(params.roll_radius))
         size = {"dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri), "nodes": len(lens.shell.X)}
         return P1Stepper(dyn), lens.tip_nodes, lens.optic_nodes, size
-    shell = iol_speed._lens(params)
-    u0 = iol_speed.initial_roll(shell, params.roll_radius)
+    shell = p2.lens(params)
+    u0 = p2.initial_roll(shell, params.roll_radius)
     shell.u.x.array[:] = u0
     shell.u.x.scatter_forward()
     dynamics = ImplicitDynamics(shell.u, shell.mass(), [], scheme_name=params.scheme, damping=params.damping)
-    solver = iol_speed.StepSolver(shell, dynamics, None, params)
+    solver = p2.step_solver(shell, dynamics, None, params)
     dynamics.set_step(params.time_step)
     if params.scheme != "backward-euler":
         dynamics.initial_acceleration(shell.residual())
     size = {"dofs": shell.dofs(), "cells": shell.mesh.topology.index_map(2).size_global,
             "nodes": shell.mesh.geometry.index_map().size_global}
-    return P2Stepper(solver, dynamics), iol_speed.tip_nodes(shell), shell.nodes_of("optic"), size
+    return P2Stepper(solver, dynamics), p2.tip_nodes(shell), shell.nodes_of("optic"), size
