@@ -13,18 +13,27 @@ from mpi4py import MPI
 
 from eyemech.problems.lens.fold import FoldParameters, fold, self_contact_kind
 from eyemech.problems.lens.model import LensShell, save_state, write_animation
+from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.parameters import field
 from eyemech.problems.run.scene import Scene
 
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(FoldParameters):
-    """The fold's parameters (:class:`eyemech.problems.lens.fold.FoldParameters`)."""
+    """The fold's parameters (:class:`eyemech.problems.lens.fold.FoldParameters`) and the model."""
+
+    model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
+                                    "triangle of iol-speed: the same roll, chamber and ipctk self-contact on "
+                                    "its vertices and triangles; no pictures)")
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
         options: RunOptions | None = None):
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        if params.model == "p1-rotation-free":
+            _run_rotation_free(ctx, params)
+            return ctx.result
         with ctx.timings("mesh"):
             shell = LensShell(params, ctx.comm)
         pictures = ctx.out if ctx.pictures else None
@@ -52,6 +61,21 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                 if gif:
                     ctx.result.pictures.append(gif)
     return ctx.result
+
+
+def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
+    """The fold on the P1 lens; its folded_state.npz (the vertices') starts
+    ``iol-injection --set model=p1-rotation-free``."""
+    from eyemech.problems.lens import fast_injection
+
+    lens = fast_injection.fast_lens(ctx, params)
+    with ctx.timings("time_stepping"):
+        folded, history = fast_injection.fold(params, lens, ctx.record_step)
+    ctx.result.quantities.update(model=params.model, **history.quantities(params),
+                                 triangles=len(lens.shell.tri), nodes=len(lens.shell.X), dofs=lens.shell.n_dofs)
+    if ctx.out is not None and ctx.rank0:
+        fast_injection.save_state(ctx.out / "folded_state.npz", lens, folded)
+        ctx.result.fields.append("folded_state.npz")
 
 
 SCENE = Scene(name="iol-fold", kind="scene", parameters=Parameters, run=run,

@@ -48,6 +48,8 @@ from eyemech.problems.lens.model import (
     write_animation,
     write_frame_grid,
 )
+from eyemech.problems.lens.models import MODELS, Model
+from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
 from eyemech.problems.lens.time_error import TimeErrorTally, step_error
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries
@@ -59,6 +61,9 @@ from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, S
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(FoldParameters):
+    model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
+                                    "triangle of iol-speed: the same walls, plunger, fluid, friction and "
+                                    "ipctk self-contact on its vertices and triangles; no pictures)")
     folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)")
     plunger_speed: float = field(40.0, "plunger speed", "mm/s")
     plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
@@ -106,6 +111,8 @@ class Parameters(FoldParameters):
         self.require_positive("jet_length")
         if self.folded_state and not Path(self.folded_state).is_file():
             raise ParameterError("folded_state", f"no such file: {self.folded_state}")
+        if self.model == "p1-rotation-free":
+            refuse_on_p1(self, {"linearised": False, "jacobian_lag": 1, "scheme": "backward-euler"})
         if self.plunger_speed * self.time_step > 0.5 * self.nozzle_radius:
             raise ParameterError("plunger_speed", f"{self.plunger_speed} mm/s moves the plunger "
                                  f"{self.plunger_speed * self.time_step:.3g} mm per step, more than half "
@@ -127,6 +134,9 @@ def _newton(ctx: RunContext, params: Parameters):
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
         options: RunOptions | None = None):
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
+        if params.model == "p1-rotation-free":
+            _run_rotation_free(ctx, params)
+            return ctx.result
         with ctx.timings("mesh"):
             shell = LensShell(params, ctx.comm)
         if params.folded_state:
@@ -149,6 +159,39 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         injection.run()
         report(params, ctx, injection)
     return ctx.result
+
+
+def refuse_on_p1(params, defaults: dict) -> None:
+    """One ParameterError for the first option the P1 scenes do not model, set off its default."""
+    for name, default in defaults.items():
+        if getattr(params, name) != default:
+            raise ParameterError(name, f"model=p1-rotation-free runs with {name}={default} "
+                                 "(this option is the p2-c0ip model's)")
+
+
+def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
+    """The fold (or ``folded_state``) and the injection on the P1 lens; the wall time from the
+    start of the fold to the end of the injection is ``operation_wall_seconds``."""
+    from eyemech.problems.lens import fast_injection
+
+    begin = time.perf_counter()
+    lens = fast_injection.fast_lens(ctx, params)
+    q = ctx.result.quantities
+    if params.folded_state:
+        folded = fast_injection.load_state(Path(params.folded_state), lens)
+    else:
+        with ctx.timings("folding"):
+            folded, fold_history = fast_injection.fold(params, lens)
+        q.update(fold_steps=len(fold_history.time), fold_wall_seconds=fold_history.wall,
+                 fold_newton_iterations=int(sum(fold_history.newton)), fold_step_cuts=int(sum(fold_history.cuts)),
+                 fold_self_intersecting=bool(any(fold_history.intersecting)))
+        if ctx.out is not None and ctx.rank0:
+            fast_injection.save_state(ctx.out / "folded_state.npz", lens, folded)
+            ctx.result.fields.append("folded_state.npz")
+    injection = fast_injection.Injection(params, lens, folded, ctx.record_step)
+    with ctx.timings("time_stepping"):
+        injection.run()
+    q.update(model=params.model, **injection.quantities(), operation_wall_seconds=time.perf_counter() - begin)
 
 
 FOLD_CODE = ("problems/lens/fold.py", "problems/lens/model.py", "problems/lens/injector.py",
@@ -226,9 +269,7 @@ class FluidDrag:
     def fluid_velocity(self, speed: float) -> np.ndarray:
         """Axial fluid speed (mm/s) at the current node positions."""
         x = (self.X + self.shell.u.x.array.reshape(-1, 3))[:, 0]
-        inside = speed * (self.bore.radius / self.bore.wall_radius(np.minimum(x, self.bore.tip))) ** 2
-        return np.where(x < self.bore.tip, inside,
-                        inside * np.exp(-np.maximum(x - self.bore.tip, 0.0) / self.jet_length))
+        return axial_fluid_speed(x, speed, self.bore, self.jet_length)
 
     def begin_step(self, speed: float) -> None:
         axial = self.fluid_velocity(speed)
@@ -241,40 +282,6 @@ class FluidDrag:
 
     def residual_hook(self, _x, F) -> None:
         F.axpy(1.0, self.drag)
-
-
-@dataclasses.dataclass(frozen=True)
-class PlungerMotion:
-    """The plunger's travel: from rest, the speed grows linearly to ``speed`` over ``ramp``
-    seconds, stays there, and stops once the plunger has travelled ``distance``.
-
-    Why a ramp: a jump from rest to 40 mm/s puts the whole fluid drag c M v_f on the resting lens
-    in the first step (and the plunger 0.4 mm into it): the first step was cut 3× (coarse) and 6×
-    (paper resolution). A real push also starts from rest."""
-
-    speed: float
-    ramp: float
-    distance: float
-
-    @property
-    def push_time(self) -> float:
-        ramp_distance = 0.5 * self.speed * self.ramp
-        if ramp_distance >= self.distance:  # still accelerating when it arrives
-            return float(np.sqrt(2.0 * self.distance * self.ramp / self.speed))
-        return self.ramp + (self.distance - ramp_distance) / self.speed
-
-    def speed_at(self, t: float) -> float:
-        if t > self.push_time + 1e-12:
-            return 0.0
-        return self.speed * min(t / self.ramp, 1.0) if self.ramp > 0.0 else self.speed
-
-    def travel(self, t: float) -> float:
-        t = min(max(t, 0.0), self.push_time)
-        if self.ramp <= 0.0:
-            return self.speed * t
-        if t <= self.ramp:
-            return 0.5 * self.speed * t * t / self.ramp
-        return self.speed * (t - 0.5 * self.ramp)
 
 
 @dataclasses.dataclass

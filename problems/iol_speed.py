@@ -73,6 +73,7 @@ from eyemech.meshes.iol import LensGeometry
 from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.lens.injector import Capsule
 from eyemech.problems.lens.model import LensParameters, LensShell, rolled
+from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.lens.time_error import (
     P2Release,
     TimeErrorTally,
@@ -88,10 +89,8 @@ from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, S
 Method = Literal["newton", "linearised"]
 JacobianKind = Literal["fresh", "lagged", "matrix-free"]
 Tangent = Literal["explicit", "ufl"]
-Model = Literal["p2-c0ip", "p1-rotation-free"]
 Bending = Literal["edge", "patch"]
 METHODS, JACOBIANS, TANGENTS = get_args(Method), get_args(JacobianKind), get_args(Tangent)
-MODELS = get_args(Model)
 PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 
 

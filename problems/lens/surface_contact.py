@@ -32,11 +32,13 @@ class SurfaceSelfContact:
     """ipctk self-contact of the P1 triangle surface (points X (n, 3), triangles (m, 3))."""
 
     def __init__(self, X: np.ndarray, triangles: np.ndarray, dhat: float, stiffness: float,
-                 exclusion: float | None = None, margin: float | None = None):
+                 exclusion: float | None = None, margin: float | None = None,
+                 friction: float = 0.0, slip: float = 1e-3):
         """``margin`` δ (default 4 d̂): the candidate pairs are those within d̂ + δ of each
         other at the positions x_b of their build (ipctk BVH, boxes inflated by d̂ + δ), reused
-        for every x with max_v |x_v − x_b,v| ≤ δ/2 — no pair outside them can then come within
-        d̂ — and rebuilt otherwise (``rebuilds`` counts them)."""
+        for every x with max_v |x_v − x_b,v − t| ≤ δ/2 for the mean move t (``_covers``) — no
+        pair outside them can then come within d̂ — and rebuilt otherwise (``rebuilds`` counts
+        them)."""
         import ipctk
         import scipy.sparse
         from scipy.sparse.csgraph import dijkstra
@@ -58,6 +60,10 @@ class SurfaceSelfContact:
         near = near[near[:, 0] < near[:, 1]]
         self.mesh.can_collide = ipctk.SparseCanCollide({(int(a), int(b)): False for a, b in near}, True)
         self.barrier = ipctk.BarrierPotential(self.dhat)
+        # lagged smoothed Coulomb between the lens' own surfaces (ipctk, as problems/contact/ipc.py)
+        self.friction = float(friction)
+        self.friction_potential = ipctk.FrictionPotential(float(slip)) if self.friction > 0 else None
+        self._tangential, self._x_start = None, None
         self._ccd = ipctk.AdditiveCCD(conservative_rescaling=0.9)
         self._cache: tuple[np.ndarray, object] | None = None
         self.margin = 4.0 * self.dhat if margin is None else float(margin)
@@ -69,8 +75,15 @@ class SurfaceSelfContact:
                                    f"closer than d̂ = {self.dhat} mm")
 
     def _covers(self, x: np.ndarray) -> bool:
-        return self._x_build is not None and \
-            float(np.max(np.sum((x - self._x_build) ** 2, axis=1))) <= (0.5 * self.margin) ** 2
+        """Whether x is within δ/2 of the build positions up to a common translation t (the mean
+        move): a pair's distance is translation invariant, so it changes by at most
+        2 max_v |x_v − x_b,v − t| — the lens pushed through the injector moves ≈ 0.4 mm per step
+        as a whole, which without t would rebuild the candidates at every iterate."""
+        if self._x_build is None:
+            return False
+        move = x - self._x_build
+        move -= move.mean(axis=0)
+        return float(np.max(np.sum(move ** 2, axis=1))) <= (0.5 * self.margin) ** 2
 
     def _candidates_for(self, x: np.ndarray):
         """Candidates valid at x: the kept ones, or new ones built at x."""
@@ -93,23 +106,45 @@ class SurfaceSelfContact:
         self._cache = (np.array(x), collisions)
         return collisions
 
+    def begin_step(self, x: np.ndarray) -> None:
+        """Lag the friction's normal forces and tangent bases at the step's start x (every
+        attempt of a step); a no-op without friction."""
+        self._tangential = None
+        if self.friction_potential is None:
+            return
+        self._x_start = np.asfortranarray(x)
+        tangential = self._ipctk.TangentialCollisions()
+        tangential.build(self.mesh, self._x_start, self.collisions(x), self.barrier, self.stiffness,
+                         self.friction)
+        self._tangential = tangential if len(tangential) else None
+
     def energy(self, x: np.ndarray) -> float:
-        return self.stiffness * float(self.barrier(self.collisions(x), self.mesh, np.asfortranarray(x)))
+        value = self.stiffness * float(self.barrier(self.collisions(x), self.mesh, np.asfortranarray(x)))
+        if self._tangential is not None:
+            value += float(self.friction_potential(self._tangential, self.mesh, np.asfortranarray(x) - self._x_start))
+        return value
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
         """∇Π_s, dofs 3 v + c."""
         collisions = self.collisions(x)
-        if not len(collisions):
-            return np.zeros(x.size)
-        return self.stiffness * self.barrier.gradient(collisions, self.mesh, np.asfortranarray(x))
+        grad = self.stiffness * self.barrier.gradient(collisions, self.mesh, np.asfortranarray(x)) \
+            if len(collisions) else np.zeros(x.size)
+        if self._tangential is not None:
+            grad = grad + self.friction_potential.gradient(self._tangential, self.mesh,
+                                                           np.asfortranarray(x) - self._x_start)
+        return grad
 
     def hessian(self, x: np.ndarray):
         """∇²Π_s (scipy sparse, exact), or None without active pairs."""
         collisions = self.collisions(x)
-        if not len(collisions):
-            return None
         none = self._ipctk.PSDProjectionMethod.NONE
-        return self.stiffness * self.barrier.hessian(collisions, self.mesh, np.asfortranarray(x), none)
+        hessian = self.stiffness * self.barrier.hessian(collisions, self.mesh, np.asfortranarray(x), none) \
+            if len(collisions) else None
+        if self._tangential is not None:
+            friction = self.friction_potential.hessian(self._tangential, self.mesh,
+                                                       np.asfortranarray(x) - self._x_start, none)
+            hessian = friction if hessian is None else hessian + friction
+        return hessian
 
     def pairs_within(self, x: np.ndarray, reach: float) -> np.ndarray:
         """The (row · 3n + col) keys of the Hessian entries of every pair closer than ``reach``
@@ -126,9 +161,9 @@ class SurfaceSelfContact:
 
     def step_fraction(self, x0: np.ndarray, x1: np.ndarray) -> float:
         """The largest fraction of the straight path x0 → x1 that is collision-free (CCD). With
-        both ends within δ/2 of the candidates' build positions, every point of the path is too
-        (a ball is convex), so the kept candidates hold every pair that can meet on it; else a
-        full BVH sweep."""
+        both ends within δ/2 of the candidates' build positions (up to translations t0, t1),
+        every point of the path is too (up to the interpolated translation: a ball is convex), so
+        the kept candidates hold every pair that can meet on it; else a full BVH sweep."""
         candidates = self._candidates_for(x0)
         if self._covers(x1):
             fraction = float(candidates.compute_collision_free_stepsize(
@@ -155,20 +190,104 @@ class NodalObstacles:
     """Rigid obstacles (``problems/lens/injector.py``: a signed gap g, its normal n and where
     it acts, per vertex) met by the P1 vertices through the smoothed nodal penalty of
     ``problems/contact/rigid_wall.NodalContact``: Π_c = Σ_v φ(g_v), p = −φ′ = k⟨−g⟩ smoothed
-    over ±ε (``forms.contact.smoothed_penalty_pressure``), force −p n, Hessian −p′ n⊗n (the
-    curvature term k g ∂n/∂x left out, as there: a quasi-Newton tangent)."""
+    over ±ε (``forms.contact.smoothed_penalty_pressure``), force −p ∇g (the energy's gradient:
+    ``_gap_gradient``), Hessian −p′ ∇g⊗∇g (the curvature term p ∇²g left out, as there: a
+    quasi-Newton tangent)."""
 
-    def __init__(self, obstacles: dict, stiffness: float, smoothing: float = 2e-3):
+    def __init__(self, obstacles: dict, stiffness: float, smoothing: float = 2e-3,
+                 excluded: dict | None = None, friction: dict | None = None, slip: float = 1e-3):
+        """``excluded``: obstacle name → vertices it does not act on (the plunger head on the
+        haptics, the closing chamber on the prescribed optic). ``friction``: obstacle name →
+        Coulomb μ (``begin_step`` lags it), ``slip`` ε its regularisation (mm per step)."""
         if not stiffness > 0:
             raise ValueError(f"the obstacles' stiffness must be > 0, got {stiffness!r}")
+        if not slip > 0:
+            raise ValueError(f"the friction's slip must be > 0, got {slip!r}")
         self.obstacles, self.stiffness, self.smoothing = obstacles, float(stiffness), float(smoothing)
+        self.excluded = {name: np.asarray(nodes, dtype=np.int64) for name, nodes in (excluded or {}).items()}
+        self.friction = {name: float(mu) for name, mu in (friction or {}).items() if mu > 0.0}
+        self.slip = float(slip)
+        self._lagged = None  # (vertices, μλ, normals, anchors) of the step's sliders
+        self._last: tuple[np.ndarray, list] | None = None
 
-    def _pressed(self, x: np.ndarray):
-        for obstacle in self.obstacles.values():
-            gap, normal, acts = obstacle.gap_normal(x)
+    def begin_step(self, x: np.ndarray, wall_motion: dict | None = None) -> None:
+        """Lag the wall friction at the step's start x (``rigid_wall.NodalContact.begin_step``):
+        each pressed vertex keeps μλ (λ = the penalty pressure k⟨−g⟩), the unit normal and its
+        anchor — x, or x moved as the wall moves over the step (``wall_motion``: name → map of
+        points, the twisted injector's turn)."""
+        from eyemech.forms.contact import smoothed_penalty_pressure
+
+        self._lagged = None
+        if not self.friction:
+            return
+        wall_motion = wall_motion or {}
+        found = []
+        for name, (nodes, g, grad) in zip(self.obstacles, self._pressed_by_name(x)):
+            if nodes is None or name not in self.friction:
+                continue
+            pressure, _ = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
+            normal = grad / np.linalg.norm(grad, axis=1)[:, None]
+            anchor = wall_motion[name](x[nodes]) if name in wall_motion else x[nodes].copy()
+            found.append((nodes, self.friction[name] * pressure, normal, anchor))
+        if found:
+            self._lagged = tuple(np.concatenate(parts) for parts in zip(*found))
+
+    def _slip(self, x: np.ndarray):
+        """(vertices, μλ, projectors P = I − n⊗n, slips s = P(x − a), |s|) of the sliders."""
+        nodes, weight, normal, anchor = self._lagged
+        projector = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
+        slip = np.einsum("nij,nj->ni", projector, x[nodes] - anchor)
+        return nodes, weight, projector, slip, np.linalg.norm(slip, axis=1)
+
+    def _f0_f1(self, r: np.ndarray):
+        """IPC's smoothed Coulomb: f₀(r), f₁(r)/r and f₁′(r) (finite at r = 0), ε = ``slip``."""
+        eps = self.slip
+        inside = r < eps
+        f0 = np.where(inside, -r ** 3 / (3 * eps ** 2) + r ** 2 / eps + eps / 3, r)
+        over_r = np.where(inside, 2.0 / eps - r / eps ** 2, 1.0 / np.maximum(r, eps))
+        slope = np.where(inside, 2.0 / eps - 2.0 * r / eps ** 2, 0.0)
+        return f0, over_r, slope
+
+    def friction_energy(self, x: np.ndarray) -> float:
+        """D = Σ μλ f₀(|s|): a potential within the step (λ, n, a lagged)."""
+        if self._lagged is None:
+            return 0.0
+        _, weight, _, _, r = self._slip(x)
+        return float(np.sum(weight * self._f0_f1(r)[0]))
+
+    def _pressed(self, x: np.ndarray) -> list:
+        """(vertices, gaps, ∇g) per obstacle where g < ε; the last x's are kept (Newton asks
+        energy, gradient and Hessian at the same iterate)."""
+        return [entry for entry in self._pressed_by_name(x) if entry[0] is not None]
+
+    def _pressed_by_name(self, x: np.ndarray) -> list:
+        """``_pressed``'s entries in the order of ``obstacles``, (None, None, None) where
+        nothing is pressed."""
+        if self._last is not None and np.array_equal(self._last[0], x):
+            return self._last[1]
+        pressed = []
+        for name, obstacle in self.obstacles.items():
+            gap, _, acts = obstacle.gap_normal(x)
+            if name in self.excluded:
+                acts = acts.copy()
+                acts[self.excluded[name]] = False
             hit = np.flatnonzero(acts & (gap < self.smoothing))
-            if len(hit):
-                yield hit, gap[hit], normal[hit]
+            pressed.append((hit, gap[hit], self._gap_gradient(obstacle, x[hit])) if len(hit)
+                           else (None, None, None))
+        self._last = (np.array(x), pressed)
+        return pressed
+
+    @staticmethod
+    def _gap_gradient(obstacle, x: np.ndarray, step: float = 1e-7) -> np.ndarray:
+        """∇g at x by central differences of the obstacle's gap (step 1e-7 mm on gaps of
+        O(1) mm: error ~1e-9). Why not the obstacle's normal: it is ∇g only to first order
+        (the tapered bore's −e_ρ leaves out the taper's slope dR/dx = −0.067; the capsule's is
+        exact on its surface only), and a force that is not the energy's gradient defeats the
+        energy line search that self-contact turns on (the coarse P1 injection stalled in the
+        taper at 0.1 % residual reduction per iteration)."""
+        shifts = step * np.vstack([np.eye(3), -np.eye(3)])  # the 6 points of every vertex, one call
+        gap = obstacle.gap_normal((x[None, :, :] + shifts[:, None, :]).reshape(-1, 3))[0].reshape(6, -1)
+        return ((gap[:3] - gap[3:]) / (2.0 * step)).T
 
     def energy(self, x: np.ndarray) -> float:
         """Σ φ(g): k (ε − g)³/(12ε) for |g| < ε, ½ k g² + k ε²/6 below (C², φ′ = −p)."""
@@ -176,7 +295,7 @@ class NodalObstacles:
         for _, g, _ in self._pressed(x):
             total += float(np.sum(np.where(g <= -eps, 0.5 * k * g ** 2 + k * eps ** 2 / 6,
                                            k * (eps - g) ** 3 / (12 * eps))))
-        return total
+        return total + self.friction_energy(x)
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
         from eyemech.forms.contact import smoothed_penalty_pressure
@@ -185,6 +304,9 @@ class NodalObstacles:
         for nodes, g, n in self._pressed(x):
             pressure, _ = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
             np.add.at(grad, nodes, -pressure[:, None] * n)
+        if self._lagged is not None:  # ∂D/∂x = μλ f₁(r)/r s
+            nodes, weight, _, slip, r = self._slip(x)
+            np.add.at(grad, nodes, (weight * self._f0_f1(r)[1])[:, None] * slip)
         return grad.ravel()
 
     def blocks(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -196,6 +318,14 @@ class NodalObstacles:
             _, slope = smoothed_penalty_pressure(g, self.stiffness, self.smoothing)
             nodes.append(hit)
             blocks.append(-slope[:, None, None] * np.einsum("ni,nj->nij", n, n))
+        if self._lagged is not None:  # μλ P[(f₁/r) I + (f₁′ − f₁/r) ŝ⊗ŝ]P, positive semidefinite
+            hit, weight, projector, slip, r = self._slip(x)
+            _, over_r, slope = self._f0_f1(r)
+            direction = slip / np.maximum(r, 1e-300)[:, None]
+            inner = (over_r[:, None, None] * np.eye(3)[None]
+                     + (slope - over_r)[:, None, None] * np.einsum("ni,nj->nij", direction, direction))
+            nodes.append(hit)
+            blocks.append(weight[:, None, None] * projector @ inner @ projector)
         return np.concatenate(nodes), np.concatenate(blocks)
 
     def max_penetration(self, x: np.ndarray) -> float:
