@@ -13,7 +13,7 @@ the end) and keeps the largest (``max_local_time_error_mm``) and the raw sum.
 
 The sum bounds the error at the end when errors made early do not grow later: the lens in
 its fluid (c = 2e4 /s, ζ ≫ 1) is a damped gradient flow, which contracts them (measured
-17–48× above the true error: tests/test_lens_time_error.py). It is not a strict bound for a
+17–300× above the true error: tests/test_lens_time_error.py, docs/iol.md §1). It is not a strict bound for a
 lightly damped oscillation, whose numerical damping accumulates into an amplitude error the
 local estimates do not sum to (the oscillator at ζ = 0.08: 1.5 × the tolerance,
 tests/test_adaptive_dynamics.py). docs/iol.md §1.
