@@ -50,7 +50,9 @@ step costs when the shared machine is busy with other jobs. Methods:
 
 Quantities: steps per second (wall, min over ``repeats``; and CPU), the per-phase split, the
 history of the tip and optic-centre displacement (``tip_history``, ``optic_history`` at
-every step), Newton iterations, Jacobians and factorisations, residual of the last step.
+every step), Newton iterations, Jacobians and factorisations, residual of the last step, the
+estimated time error (``time_error_estimate_mm``; ``time_stepping=adaptive``: Δt chosen by it,
+problems/lens/time_error.py, docs/iol.md §1).
 """
 
 from __future__ import annotations
