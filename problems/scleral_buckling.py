@@ -173,7 +173,13 @@ class Parameters(SceneParameters, SolverChoice):
         "from step 2 on; frictionless: it may slide along the buckle")
     tire_arc_deg: float = field(90.0, "arc of the silicone tire about the optic axis, centred "
                                 "on the tear's meridian (360: a full ring)", "deg")
-    buckle_position: float = field(11.5, "buckle centre behind the limbus, along the sclera", "mm")
+    buckle_position: float = field(
+        12.5, "buckle centre behind the limbus, along the sclera. 12.5: the tear (centre 11.5 mm "
+        "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
+        "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
+        "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
+        "detached flap, not at its root, and the sutures keep the tear closed (docs/scleral_buckling.md, "
+        "\"The tear at the defaults\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial)", "mm")
@@ -219,7 +225,8 @@ class Parameters(SceneParameters, SolverChoice):
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
                                           "mm")
     # Newton's budget (docs/bench/scleral-buckling.md); the reference method: predictor=none,
-    # jacobian_reuse=0, buckle_step=0.25, step_effort=iterations, hard_step_effort=0
+    # jacobian_reuse=0, buckle_step=0.25, step_effort=iterations, hard_step_effort=0,
+    # line_search=bt
     predictor: Literal["secant", "none"] = field(
         "secant", "start each load step from the secant through the stage's last two converged "
         "states (none: from the last converged state)")
@@ -233,6 +240,12 @@ class Parameters(SceneParameters, SolverChoice):
     step_effort: Literal["iterations", "factorisations"] = field(
         "factorisations", "what sizes the next load step: grown after <= 6, halved after > "
         "hard_step_effort of the step's Newton iterations or its factorisations")
+    line_search: Literal["basic", "bt"] = field(
+        "basic", "Newton's line search while the buckle moves in (step 2): basic = the full step "
+        "(a failed solve repeated once with bt before the load step is cut); bt = backtracking "
+        "on the residual's norm, which creeps at its 0.1 floor where a step crosses the "
+        "contact's kink. Steps 3-4, where retina pairs change triangles, backtrack (bt) "
+        "(docs/scleral_buckling.md, Which contact chatters)")
     hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
 
@@ -417,6 +430,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
     stage = model.stage_of(record.load)
     if abs(record.load - 1.0) < 1e-12:
         model.couple_liquid()
+    if abs(record.load - 2.0) < 1e-12:
+        model.backtrack()
     if abs(record.load - 2.0) < 1e-12 and model.tire_loop:
         model.free_tire()
     if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
@@ -499,7 +514,9 @@ class BucklingModel:
 
         self.bcs = self._boundary_conditions()
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
-        newton = dataclasses.replace(ctx.options.newton, reuse_contraction=params.jacobian_reuse)
+        newton = dataclasses.replace(ctx.options.newton, reuse_contraction=params.jacobian_reuse,
+                                     fallback_line_search="bt" if params.line_search == "basic"
+                                     else ctx.options.newton.fallback_line_search)
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings,
                                       iterative=params.linear_solver(2 * self.stiffness, dx))
@@ -807,10 +824,11 @@ class BucklingModel:
         self.initial_volume.value = self.volume()
         self.initial_pressure.value = self.cavity_pressure()
         if "snes_linesearch_type" not in self.ctx.options.newton.petsc:
-            # backtracking from step 2 on: with the buckle's contact and the sutures plain
-            # Newton can cycle between two active sets (seen at 85 % of a 0.1 N pull); in
-            # step 1 it would only cost iterations (12-14 per step instead of 3-4)
-            self.solver.snes.getLineSearch().setType("bt")
+            # step 2 (the buckle's travel) ``line_search``: full steps (a failed solve repeated
+            # with bt: plain Newton can cycle between two active sets, seen at 85 % of a 0.1 N
+            # pull) or bt, which in step 1 would only cost iterations (12-14 per step
+            # instead of 3-4)
+            self.solver.snes.getLineSearch().setType(self.params.line_search)
         self.coupled.value = 1.0
         self.u_tied.x.array[:] = self.u.x.array
         self.tied.value = 1.0
@@ -820,6 +838,13 @@ class BucklingModel:
                                     "under_buckle": self.under_buckle.positions(self.u)}
         self.preoperative = self._optics() | {"volume_mm3": 2.0 * self.volume(),
                                               "iop_mmHg": self.cavity_pressure() / MMHG}
+
+    def backtrack(self) -> None:
+        """End of step 2: backtracking (bt) from here. The retina's node-to-surface pairs
+        change triangles in steps 3-4 (a jump in their gap, not a kink): full steps cycled
+        there at the paper's resolution (docs/scleral_buckling.md, Which contact chatters)."""
+        if "snes_linesearch_type" not in self.ctx.options.newton.petsc:
+            self.solver.snes.getLineSearch().setType("bt")
 
     def release_liquid(self) -> None:
         """End of step 3 (the acute state): from here the liquid's volume is free and its

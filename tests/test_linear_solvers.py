@@ -85,9 +85,11 @@ def test_bad_solver_choice_is_refused(overrides, key):
 # solver converges a step of the buckling stage in 10 Newton iterations where the
 # iterative one needs 11 and cuts the step, and the two load paths then end 1.7 % apart in
 # axial length (the sutured eye's result depends on its load path: open, see
-# docs/scleral_buckling.md). This test is about the linear solvers.
+# docs/scleral_buckling.md). This test is about the linear solvers. The buckle centred on
+# the tear (11.5 mm): 12.5 mm behind the limbus (the default) the frictionless buckle stalls
+# at 97 % of the buckling stage (residual flat at 4.8e-5)
 BUCKLING = ["--set", "resolution=coarse", "--set", "buckle_attachment=frictionless",
-            "--set", "indentation=1.0", "--set", "settle=false"]
+            "--set", "indentation=1.0", "--set", "settle=false", "--set", "buckle_position=11.5"]
 QUANTITIES = ("axial_length_change_mm", "buckle_indentation_mm", "iop_mmHg", "cavity_volume_mm3",
               "retina_choroid_gap_min_mm", "retina_choroid_gap_mean_mm", "von_mises_max_MPa",
               "zonule_force_total_N")

@@ -17,9 +17,13 @@ from eyemech.problems.run.parameters import ParameterError, build
 QUIET = RunOptions(fields=False, pictures=False)
 
 # a tire alone with one suture over it, pressed 0.2 mm in step 2 (0.15 mm past the
-# clearance): the sutures' 0.3 N then carry it deeper, with no band to lean on
+# clearance): the sutures' 0.3 N then carry it deeper, with no band to lean on. The
+# reference stepping (no predictor, full Newton, load steps sized by iterations) gives
+# step 3 ten load steps to follow the travel by; the budget's stepping takes two there
+REFERENCE_STEPPING = dict(predictor="none", jacobian_reuse="0", buckle_step="0.25",
+                          step_effort="iterations", hard_step_effort="0")
 SEWN = dict(resolution="coarse", buckle="segmental", suture_azimuths="0", indentation="0.2",
-            suture_force="0.3", settle="false")
+            suture_force="0.3", settle="false", **REFERENCE_STEPPING)
 
 
 @pytest.fixture(scope="module")
@@ -32,11 +36,13 @@ def test_sutures_drive_the_tire_until_the_sclera_balances_them(sewn):
     force = [s["suture_force_N"] for s in steps]
     travel = [s["tire_travel_mm"] for s in steps]
     assert len(steps) >= 2
-    # the tire goes deeper with the pull: measured 0.327, 0.404, 0.443, 0.467, 0.483 mm at
-    # 0.056 ... 0.28 N, then 0.474 mm at 0.3 N. That last dip is the lagged suture
-    # directions (seed 002 §2.2: from the last converged state): as the tire sinks, the
-    # loop's legs turn tangential and the radial pull per newton drops (1.65 -> 1.54 per
-    # N over that step). So the check is across forces at least twice apart
+    # the tire goes deeper with the pull: measured 0.319, 0.370, 0.413, 0.425, 0.434, 0.437,
+    # 0.443, 0.450, 0.461, 0.468 mm at 0.056 ... 0.3 N (the buckle 12.5 mm behind the
+    # limbus). With the lagged suture directions (seed 002 §2.2: from the last converged
+    # state) the loop's legs turn tangential as the tire sinks and the radial pull per
+    # newton drops, which has made the travel dip between neighbouring steps (0.483 ->
+    # 0.474 mm at 0.28 -> 0.3 N, the buckle at 11.5 mm). So the check is across forces at
+    # least twice apart
     pairs = [(i, j) for i in range(len(steps)) for j in range(len(steps))
              if force[j] >= 2 * force[i] > 0]
     assert len(pairs) >= 2
@@ -70,7 +76,8 @@ def test_drainage_without_a_detachment_exits_2(tmp_path):
 
 
 def test_sutures_lift_the_tire_off_a_shallow_band():
-    # band and tire pressed only 0.3 mm (0.25 mm past the clearance): the sclera's push on
+    # band and tire pressed only 0.3 mm (0.25 mm past the clearance; numbers measured with the
+    # buckle at 11.5 mm, the test passes at 12.5): the sclera's push on
     # the tire is weaker than the 0.3 N suture's loop, so the band lets the tire go
     # deeper than itself in step 3, and with the band's stop inactive the tire's row is
     # the balance contact force = pull. Measured: held by the band while the pull (0.12,
@@ -80,11 +87,9 @@ def test_sutures_lift_the_tire_off_a_shallow_band():
     # one (lagged, as the suture directions): with the budget's stepping step 3 is two load
     # steps and the tire is freed only at its end, too late to move (docs/scleral_buckling.md,
     # "Not done"); the reference stepping takes six, which this test pins.
-    reference_stepping = dict(predictor="none", jacobian_reuse="0", buckle_step="0.25",
-                              step_effort="iterations", hard_step_effort="0")
     result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
                                               indentation="0.3", suture_force="0.3",
-                                              settle="false", **reference_stepping)),
+                                              settle="false", **REFERENCE_STEPPING)),
                     options=QUIET)
     after = result.quantities["after_suturing"]
     assert result.quantities["after_buckling"]["tire_free"] is False

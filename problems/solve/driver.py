@@ -25,7 +25,10 @@ Design notes
   (:class:`SecantPredictor`) whose solve keeps the unpredicted start's tolerance; modified
   Newton (``NewtonOptions.reuse_contraction``: the Jacobian callback leaves the matrix as it
   is, so PCSetUp keeps the factorisation); load steps sized by the step's factorisations
-  (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``).
+  (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``); a
+  failed solve repeated with another line search (``NewtonOptions.fallback_line_search``:
+  full steps settle a contact's kink where backtracking on ‖F‖ creeps, docs/scleral_buckling.md,
+  "Which contact chatters").
 """
 
 from __future__ import annotations
@@ -94,6 +97,11 @@ class NewtonOptions:
     # on the eye a load step started on it failed more often than it saved, see
     # docs/bench/scleral-buckling.md)
     reuse_across_solves: bool = False
+    # a solve that fails is repeated once from the same start with this line search (e.g.
+    # "bt" behind "basic": full Newton steps cross a contact's kink where backtracking on
+    # ‖F‖ creeps at its 0.1 floor, and the retry keeps a cycling active set from cutting
+    # the step; "": no retry; docs/scleral_buckling.md, "Which contact chatters")
+    fallback_line_search: str = ""
 
     def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
         """SNES options, then the KSP/PC options: MUMPS LU, or ``linear`` (an iterative
@@ -338,8 +346,10 @@ class NonlinearSolver:
         rather than rtol · ‖F_0‖; a predicted start is not held to a tighter tolerance.
         With modified Newton (``options.reuse_contraction``), a solve that fails after
         keeping a Jacobian is repeated once from the same start with fresh Jacobians
-        (both attempts counted)."""
-        start_state = self.save_state() if self.options.reuse_contraction > 0 else None
+        (both attempts counted); one that still fails, once more with
+        ``options.fallback_line_search`` if given (counted too)."""
+        retries = self.options.reuse_contraction > 0 or self.options.fallback_line_search
+        start_state = self.save_state() if retries else None
         converged, iterations = self._solve_once(reference_norm)
         if not converged and self._kept_iterations and start_state is not None:
             log.info("modified Newton failed (%s) after %d kept Jacobians, residuals %s: "
@@ -352,9 +362,29 @@ class NonlinearSolver:
                 converged, iterations = self._solve_once(reference_norm)
             finally:
                 self._reuse_enabled = True
+        if not converged and start_state is not None:
+            converged, iterations = self._retry_with_fallback(start_state, reference_norm)
         if not converged:
             self._jacobian_valid = False
         return converged, iterations
+
+    def _retry_with_fallback(self, start_state: list[np.ndarray],
+                             reference_norm: float | None) -> tuple[bool, int]:
+        """The failed solve once more from ``start_state`` with
+        ``options.fallback_line_search`` and fresh Jacobians (counted as its own solve)."""
+        line_search = self.snes.getLineSearch()
+        fallback, current = self.options.fallback_line_search, line_search.getType()
+        if not fallback or fallback == current:
+            return False, self.snes.getIterationNumber()
+        log.info("Newton with line search %s failed (%s), residuals %s: again with %s", current,
+                 self.reason(), " ".join(f"{r:.2e}" for r in self.residual_history), fallback)
+        self.restore_state(start_state)
+        self._jacobian_valid = False
+        line_search.setType(fallback)
+        try:
+            return self._solve_once(reference_norm)
+        finally:
+            line_search.setType(current)
 
     def _solve_once(self, reference_norm: float | None) -> tuple[bool, int]:
         """One SNES solve; its work, converged or not, is added to ``counts`` and to the
