@@ -49,7 +49,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                  self_contact_seconds=getattr(history["self_contact"], "seconds", 0.0),
                  ccd_limited_updates=len(getattr(history["self_contact"], "step_limits", [])),
                  triangles=shell.mesh.topology.index_map(2).size_global,
-                 nodes=shell.mesh.geometry.index_map().size_global, dofs=shell.dofs())
+                 nodes=shell.mesh.geometry.index_map().size_global, dofs=shell.dofs(),
+                 **history["time_error"])
         if ctx.out is not None:
             save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
             ctx.result.fields.append("folded_state.npz")

@@ -50,6 +50,7 @@ from eyemech.problems.lens.model import (
 )
 from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
+from eyemech.problems.lens.time_error import TimeErrorTally, step_error
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, field
@@ -335,6 +336,7 @@ class Injection:
         self.fluid = FluidDrag(self.dynamics, shell, layout.cartridge(params), params.jet_length) \
             if params.fluid_carried else None
         self.solver = self._solver()
+        self.time_error = TimeErrorTally()  # the steps' estimated time error (problems/lens/time_error.py)
         # contact=false is the deformation-only benchmark: no self-contact either
         self.self_contact = lens_self_contact(shell, params) if params.contact else None
         if self.self_contact is not None:
@@ -398,6 +400,7 @@ class Injection:
     def converged(self, record) -> None:
         """Advance the dynamics and record, measure and draw the converged step."""
         ctx, h = self.ctx, self.history
+        self.time_error.add(step_error(self.dynamics, self.solver.snes.getKSP()))
         self.dynamics.advance()
         h.time.append(record.load)
         h.newton.append(record.iterations)
@@ -464,6 +467,7 @@ def report(params: Parameters, ctx: RunContext, injection: Injection) -> None:
     deformation = h.solver_seconds - h.contact_seconds
     distances = [d for d in h.self_distance if np.isfinite(d)]
     q = ctx.result.quantities
+    q.update(injection.time_error.quantities())
     q.update(
         steps=steps, newton_iterations_total=int(sum(h.newton)),
         steps_per_second=steps / h.wall,

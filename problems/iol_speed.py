@@ -50,7 +50,9 @@ step costs when the shared machine is busy with other jobs. Methods:
 
 Quantities: steps per second (wall, min over ``repeats``; and CPU), the per-phase split, the
 history of the tip and optic-centre displacement (``tip_history``, ``optic_history`` at
-every step), Newton iterations, Jacobians and factorisations, residual of the last step.
+every step), Newton iterations, Jacobians and factorisations, residual of the last step, the
+estimated time error (``time_error_estimate_mm``; ``time_stepping=adaptive``: Δt chosen by it,
+problems/lens/time_error.py, docs/iol.md §1).
 """
 
 from __future__ import annotations
@@ -74,6 +76,13 @@ from eyemech.problems.contact.rigid_wall import NodalContact
 from eyemech.problems.lens.injector import Capsule
 from eyemech.problems.lens.model import LensParameters, LensShell, rolled
 from eyemech.problems.lens.models import MODELS, Model
+from eyemech.problems.lens.time_error import (
+    P2Release,
+    TimeErrorTally,
+    run_adaptive_release,
+    step_error,
+    validate_adaptive,
+)
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, field
 from eyemech.problems.run.scene import Scene
@@ -123,6 +132,11 @@ class Parameters(LensParameters):
     native_kernels: bool = field(False, "compile the shell kernels with -O3 -march=native (≈ 20 % faster "
                                         "Jacobian here; the JIT cache must then not be shared between CPU types)")
     repeats: int = field(1, "runs of the same steps (the state is reset); steps/s is the best of them")
+    time_stepping: Literal["fixed", "adaptive"] = field("fixed", "fixed (Δt = time_step: the paper's step, at which the speed is measured) | "
+                                        "adaptive (the deformation-only release over steps × time_step with Δt "
+                                        "chosen by the time-error estimate: docs/iol.md §1)")
+    time_tolerance: float = field(0.01, "time_stepping=adaptive: allowed estimated displacement error at the "
+                                        "end of the release", "mm")
 
     def validate(self) -> None:
         super().validate()
@@ -130,6 +144,7 @@ class Parameters(LensParameters):
                               "roll_radius", "repeats")
         self.require_nonnegative("quadrature_degree")
         self.require_positive("stall", "krylov_rtol", "krylov_max_it")
+        validate_adaptive(self)
         if self.method == "linearised" and SCHEMES[self.scheme].alpha_f:
             raise ParameterError("scheme", "generalized-alpha needs the residual at the accepted state "
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
@@ -393,6 +408,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     with RunContext(SCENE.name, params, comm, out, options) as ctx:
         if ctx.comm.size != 1:
             raise ParameterError("ranks", "iol-speed measures one core: run it on one rank")
+        if params.time_stepping == "adaptive":
+            run_adaptive_release(ctx, params, P2Release(_lens, initial_roll, StepSolver, tip_nodes))
+            return ctx.result
         if params.model == "p1-rotation-free":
             _run_rotation_free(ctx, params)
             return ctx.result
@@ -454,7 +472,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         **best["counts"], newton_iterations=history["iterations"],
         tip_history=history["tip"], optic_history=history["optic"],
         time=[params.time_step * (i + 1) for i in range(steps)], load_average=os.getloadavg()[0],
-        dofs=best["dofs"], cells=best["cells"], nodes=best["nodes"])
+        dofs=best["dofs"], cells=best["cells"], nodes=best["nodes"], time_stepping=params.time_stepping,
+        **best["time_error"])
     if obstacles:
         ctx.result.quantities.update(max_penetration_mm=max(history["penetration"], default=0.0),
                                      capsule_semi_axes_mm=obstacles["capsule"].semi_axes.tolist())
@@ -488,9 +507,11 @@ def _timed_run(params, shell, dynamics, solver: StepSolver, contact, u0, ctx) ->
     solver.factor_age = None
     tips, optic = tip_nodes(shell), shell.nodes_of("optic")
     history = {"tip": [], "optic": [], "iterations": [], "penetration": []}
+    time_error = TimeErrorTally()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for _ in range(params.steps):
         history["iterations"].append(solver.step())
+        time_error.add(step_error(dynamics, solver.ksp))
         dynamics.advance()
         u = shell.u.x.array.reshape(-1, 3)
         history["tip"].append(u[tips].mean(axis=0).tolist())
@@ -508,7 +529,8 @@ def _timed_run(params, shell, dynamics, solver: StepSolver, contact, u0, ctx) ->
     ctx.timings.add("solve", clock.wall["factorisation"] + clock.wall["solve"])
     ctx.timings.add("contact_search", clock.wall["contact"])
     return {"wall": wall, "cpu": cpu, "phases_wall": dict(clock.wall), "phases_cpu": dict(clock.cpu),
-            "counts": dict(solver.counts), "history": history, "last_residual": solver.last_residual}
+            "counts": dict(solver.counts), "history": history, "last_residual": solver.last_residual,
+            "time_error": time_error.quantities()}
 
 
 def _report(ctx: RunContext, params: Parameters, shell: LensShell, runs: list[dict]) -> None:
@@ -529,7 +551,8 @@ def _report(ctx: RunContext, params: Parameters, shell: LensShell, runs: list[di
              load_average=os.getloadavg()[0],
              dofs=shell.dofs(), cells=shell.mesh.topology.index_map(2).size_global,
              nodes=shell.mesh.geometry.index_map().size_global,
-             quadrature_degree=params.quadrature_degree or 2 * params.degree)
+             quadrature_degree=params.quadrature_degree or 2 * params.degree,
+             time_stepping=params.time_stepping, **best["time_error"])
 
 
 SCENE = Scene(name="iol-speed", kind="benchmark", parameters=Parameters, run=run,

@@ -23,7 +23,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from eyemech.problems.solve.adaptive_dynamics import TimeErrorControl, march_dynamics
+from eyemech.problems.solve.adaptive_dynamics import TimeErrorControl, march_dynamics, march_steps
 from eyemech.problems.solve.driver import NewtonOptions, NonlinearSolver
 from eyemech.problems.solve.time_integration import (
     ImplicitDynamics,
@@ -111,3 +111,50 @@ def test_march_meets_its_tolerance(name, damping, tolerance):
     assert true <= tolerance
     assert times[-1] == pytest.approx(2.0, abs=1e-12) and 0.5 in times
     assert summary.time_steps == len(times) and summary.cuts == 0
+
+
+class _OscillatorStepper:
+    """The exact-solution oscillator as a ``march_steps`` Stepper (its own step loop)."""
+
+    def __init__(self, name: str, damping: float):
+        self.scheme, self.damping = scheme(name), damping
+        self.order = 1 if self.scheme.beta is None else 2
+        self.state = exact(0.0, c=damping)
+        self.trial = self.state
+
+    def save(self):
+        return self.state.copy()
+
+    def restore(self, state):
+        self.state = state.copy()
+
+    def solve_step(self, dt: float) -> int:
+        self.dt = dt
+        self.trial = oscillator_step(self.scheme, OMEGA, self.damping, dt, self.state)
+        return 1
+
+    def local_error(self) -> float:
+        return local_error_estimate(self.scheme, self.dt, self.state[2], self.trial[2])
+
+    def advance(self) -> None:
+        self.state = self.trial
+
+
+@pytest.mark.parametrize("name, damping, tolerance", CASES)
+def test_march_steps_meets_its_tolerance(name, damping, tolerance):
+    """``march_steps`` (the controller on a model's own step loop, as the lens release uses
+    it) on the exact oscillator: the estimate and the true error at the end stay below the
+    tolerance, as ``march_dynamics``' do."""
+    stepper = _OscillatorStepper(name, damping)
+    control = TimeErrorControl(tolerance=tolerance, time_scale=2.0, first_dt=0.01)
+    summary = march_steps(stepper, 2.0, control)
+    assert summary.time_error_estimate <= tolerance
+    assert abs(stepper.state[0] - exact(2.0, c=damping)[0]) <= tolerance
+
+
+def test_steps_at_the_floor_are_accepted_and_the_step_never_goes_below_it():
+    control = TimeErrorControl(tolerance=1e-3, time_scale=1.0, first_dt=1e-2, min_dt=1e-4)
+    accepted, next_dt = control.judge(1e-4, 1.0, 1)  # far over the allowed 1e-7
+    assert accepted and next_dt == pytest.approx(1e-4)
+    accepted, next_dt = control.judge(1e-2, 1.0, 1)
+    assert not accepted and next_dt == pytest.approx(2e-3)  # shrink limit 0.2

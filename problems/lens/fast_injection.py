@@ -42,6 +42,7 @@ from eyemech.problems.lens.model import InjectorLayout, rolled
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
 from eyemech.problems.lens.rotation_free import Dynamics, FastLens, MeshInputError
 from eyemech.problems.lens.surface_contact import NodalObstacles, SurfaceSelfContact
+from eyemech.problems.lens.time_error import TimeErrorTally, rotation_free_step_error
 from eyemech.problems.run.parameters import ParameterError
 
 RTOL, ATOL = 1e-6, 1e-9  # lens_newton's: relative, and N (shell forces ~1e-4 N)
@@ -62,7 +63,7 @@ class StepRecord:
 
 def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time_step: float,
           on_converged: Callable[[StepRecord], None], stops: tuple[float, ...] = (),
-          min_fraction: float = 1e-3) -> None:
+          min_fraction: float = 1e-3, time_error: TimeErrorTally | None = None) -> None:
     """Backward-Euler steps from t = 0 to ``end`` (landing on each of ``stops``): ``apply(t, Δt)``
     sets the step ending at t, then ``dyn.step()``; a step that fails is undone and halved."""
     t, dt, cuts = 0.0, time_step, 0
@@ -85,6 +86,8 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
                 raise StepFailure(f"Δt cut to {dt:.3g} s at t = {t:.4g} s ({err})") from err
             continue
         t = target
+        if time_error is not None:
+            time_error.add(rotation_free_step_error(dyn))
         on_converged(StepRecord(t, h, iterations, cuts))
         cuts = 0
         if iterations <= EASY_ITERATIONS:
@@ -182,6 +185,7 @@ class History:
     wall: float = 0.0
     cpu: float = 0.0
     counts: dict = dataclasses.field(default_factory=dict)
+    time_error: TimeErrorTally = dataclasses.field(default_factory=TimeErrorTally)
 
     def record(self, record: StepRecord, lens: FastLens, u: np.ndarray, walls: NodalObstacles | None,
                contact: SurfaceSelfContact | None) -> None:
@@ -215,12 +219,13 @@ class History:
             factorisations=self.counts.get("factorisations", 0),
             pattern_growths=self.counts.get("pattern_growths", 0),
             ccd_limited_updates=self.counts.get("step_limits", 0),
-            time=self.time, penetration_mm=self.penetration, self_distance_mm=self.self_distance)
+            time=self.time, penetration_mm=self.penetration, self_distance_mm=self.self_distance,
+            **self.time_error.quantities())
 
 
 def _run(dyn: Dynamics, history: History, *args, **kwargs) -> None:
     wall, cpu = time.perf_counter(), time.process_time()
-    march(dyn, *args, **kwargs)
+    march(dyn, *args, **kwargs, time_error=history.time_error)
     history.wall, history.cpu = time.perf_counter() - wall, time.process_time() - cpu
     history.counts = dict(dyn.counts)
 

@@ -37,6 +37,7 @@ from eyemech.problems.lens.model import (
     rolled,
     write_frame_grid,
 )
+from eyemech.problems.lens.time_error import TimeErrorTally, step_error
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.output import PyvistaSeries
 from eyemech.problems.run.parameters import field
@@ -118,7 +119,10 @@ def fold(params: FoldParameters, ctx: RunContext, shell: LensShell, frames_dir: 
         if self_contact is not None:
             self_contact.begin_step()
 
+    time_error = TimeErrorTally()
+
     def converged(record) -> None:
+        time_error.add(step_error(dynamics, solver.snes.getKSP()))
         dynamics.advance()
         history["time"].append(record.load)
         history["penetration"].append(max(contact.max_penetration().values(), default=0.0))
@@ -155,6 +159,7 @@ def fold(params: FoldParameters, ctx: RunContext, shell: LensShell, frames_dir: 
     history["contact_seconds"] = contact.seconds
     history["self_contact"] = self_contact
     history["frames"] = frames
+    history["time_error"] = time_error.quantities()
     return history
 
 

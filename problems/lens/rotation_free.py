@@ -1266,9 +1266,13 @@ def release(params, steps: int | None = None, lens: FastLens | None = None, stal
     dyn.reset(lens.rolled_displacement(params.roll_radius))
     history = {"tip": [], "optic": [], "iterations": [], "intersecting": 0, "min_distance": np.inf,
                "penetration": []}
+    from eyemech.problems.lens.time_error import TimeErrorTally, rotation_free_step_error
+
+    time_error = TimeErrorTally()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
         history["iterations"].append(dyn.step())
+        time_error.add(rotation_free_step_error(dyn))
         u = dyn.u.reshape(-1, 3)
         history["tip"].append(u[lens.tip_nodes].mean(axis=0).tolist())
         history["optic"].append(u[lens.optic_nodes].mean(axis=0).tolist())
@@ -1284,7 +1288,7 @@ def release(params, steps: int | None = None, lens: FastLens | None = None, stal
     clock = dict(dyn.clock)
     clock["other"] = cpu - sum(v for k, v in clock.items() if k != "other")
     return {"wall": wall, "cpu": cpu, "phases_cpu": clock, "counts": dict(dyn.counts), "history": history,
-            "dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri), "nodes": len(lens.shell.X)}
+            "time_error": time_error.quantities(), "dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri), "nodes": len(lens.shell.X)}
 
 
 # MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20: midpoint of the free edge, linear

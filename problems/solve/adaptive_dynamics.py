@@ -18,7 +18,7 @@ tests/test_adaptive_dynamics.py.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
@@ -36,6 +36,10 @@ class TimeErrorControl:
     time_scale: float       # the interval the tolerance is spread over (usually t_end)
     first_dt: float
     max_dt: float = np.inf
+    # steps this short are accepted whatever their estimate (which still joins the sum): a
+    # start from rest against a large force (the released lens: a₀ ~ 1e8 mm/s²) would
+    # otherwise demand Δt ≲ 2 tolerance/(time_scale a₀) ~ 1e-9 s in its inertial layer
+    min_dt: float = 0.0
     max_steps: int = 20_000
     safety: float = 0.9
     shrink_limit: float = 0.2
@@ -56,7 +60,8 @@ class TimeErrorControl:
             return True, min(dt * self.grow_limit, self.max_dt)
         factor = self.safety * (allowed / error) ** (1.0 / order)
         next_dt = dt * float(np.clip(factor, self.shrink_limit, self.grow_limit))
-        return error <= allowed, min(next_dt, self.max_dt)
+        at_floor = dt <= self.min_dt * (1.0 + 1e-9)
+        return error <= allowed or at_floor, min(max(next_dt, self.min_dt), self.max_dt)
 
 
 @dataclasses.dataclass
@@ -125,4 +130,73 @@ def march_dynamics(solver: NonlinearSolver, dynamics: ImplicitDynamics,
         dynamics.advance()
         t = target
         state = solver.save_state()
+    return summary
+
+
+class Stepper(Protocol):
+    """One implicit time step that can be tried, judged and undone (for :func:`march_steps`):
+    a model with its own step loop (the lens' ``StepSolver``, the rotation-free P1
+    ``Dynamics``)."""
+
+    order: int  # of the scheme: local error ∝ Δt^{order+1}
+
+    def save(self) -> Any: ...
+
+    def restore(self, state: Any) -> None: ...
+
+    def solve_step(self, dt: float) -> int:
+        """Solve the step of length dt from the saved state; the Newton iterations. Raises
+        RuntimeError when Newton does not converge."""
+
+    def local_error(self) -> float: ...
+
+    def advance(self) -> None: ...
+
+
+def march_steps(stepper: Stepper, t_end: float, control: TimeErrorControl,
+                accept: Callable[[int, float, float, int, float], None] | None = None, *,
+                t_start: float = 0.0) -> MarchSummary:
+    """:func:`march_dynamics`' controller on a :class:`Stepper`: a step whose
+    ``local_error()`` exceeds ``control.allowed(Δt)`` is undone and repeated at the Δt
+    ``control.judge`` proposes; a Newton failure halves it (at most ``MAX_CUTS`` in a row,
+    then :class:`SolveFailure`). ``accept(step, t, dt, iterations, error)`` sees each
+    accepted step after ``advance()``."""
+    summary = MarchSummary()
+    t, dt, cuts_in_row = t_start, min(control.first_dt, control.max_dt), 0
+    state = stepper.save()
+    while t < t_end * (1 - 1e-12):
+        if summary.time_steps >= control.max_steps:
+            raise SolveFailure(summary.time_steps + 1, t + dt, t, [],
+                               f"more than max_steps = {control.max_steps} time steps at the "
+                               f"tolerance {control.tolerance:g}", quantity="time", unit="s")
+        target = min(t + dt, t_end)
+        if t_end - target < 1e-3 * dt:  # no sliver before the end
+            target = t_end
+        h = target - t
+        try:
+            iterations = stepper.solve_step(h)
+        except RuntimeError as err:
+            stepper.restore(state)
+            summary.cuts += 1
+            cuts_in_row += 1
+            if cuts_in_row > MAX_CUTS:
+                raise SolveFailure(summary.time_steps + 1, target, t, [], str(err),
+                                   quantity="time", unit="s") from err
+            dt = 0.5 * h
+            continue
+        cuts_in_row = 0
+        error = stepper.local_error()
+        accepted, dt = control.judge(h, error, stepper.order)
+        if not accepted:
+            stepper.restore(state)
+            summary.rejected_steps += 1
+            continue
+        stepper.advance()
+        summary.time_steps += 1
+        summary.time_error_estimate += error
+        summary.min_dt, summary.max_dt = min(summary.min_dt, h), max(summary.max_dt, h)
+        t = target
+        state = stepper.save()
+        if accept is not None:
+            accept(summary.time_steps, t, h, iterations, error)
     return summary

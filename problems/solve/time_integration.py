@@ -254,6 +254,21 @@ class ImplicitDynamics:
         a_new.destroy()
         return float(error)
 
+    def local_error_vector(self, out: PETSc.Vec) -> None:
+        """The vector whose max norm is :meth:`local_error` (the same call order), into ``out``."""
+        _require_estimate(self.scheme)
+        self._read(self._work)
+        self._acceleration(self._work, out)
+        if self.scheme.beta is None:
+            out.scale(0.5 * self.dt * self.dt)
+        else:
+            out.axpy(-1.0, self.a_n)
+            out.scale((self.scheme.beta - 1.0 / 6.0) * self.dt * self.dt)
+
+    def mass_factor(self) -> float:
+        """m of the Jacobian's inertia term m M (:meth:`jacobian_hook`, not generalised-α)."""
+        return (1.0 + self.damping * self.scheme.gamma * self.dt) * self.coefficients[0]
+
     @property
     def order(self) -> int:
         """Order of accuracy of an estimated scheme: 1 for backward Euler, 2 for Newmark."""
