@@ -11,6 +11,7 @@ from typing import Any
 
 from mpi4py import MPI
 
+from eyemech.forms import ordering  # noqa: F401  (UFL's operand order: forms/ordering.py)
 from eyemech.meshes import MeshError
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
