@@ -198,7 +198,9 @@ class Cornea:
             N = ufl.FacetNormal(mesh)
             cut = ds(self.tagged.tag("incision"))
             area = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(1.0 * cut)))
-            self._gape = dolfinx.fem.form(-2.0 / area * ufl.dot(self.u, N) * cut)
+            # a Constant: the cut's area follows the mesh (a literal compiles anew per mesh)
+            scale = dolfinx.fem.Constant(mesh, -2.0 / area)
+            self._gape = dolfinx.fem.form(scale * ufl.dot(self.u, N) * cut)
         self.comm = comm
 
     def _central_anterior(self, V, fdim: int, radius: float) -> None:
