@@ -14,7 +14,7 @@ import subprocess
 import pytest
 from mpi4py import MPI
 
-from eyemech.problems import liquid_sphere, sphere_inflation
+from eyemech.problems import keratotomy, liquid_sphere, scleral_buckling, sphere_inflation
 from eyemech.problems.run.context import RunOptions
 
 QUIET = RunOptions(fields=False, pictures=False)
@@ -34,6 +34,73 @@ def test_a_sweep_over_modulus_and_mesh_size_compiles_nothing_after_its_first_cas
     for c10, size in zip(MODULI[1:], sizes[1:]):
         scene.run(scene.Parameters(c10=c10, mesh_size=size), comm=MPI.COMM_SELF, options=QUIET)
     assert compilations[first:] == []
+
+
+def test_keratotomy_with_new_moduli_and_mesh_size_compiles_nothing_after_its_first_case(compilations):
+    """Both corneas (intact and 8 incisions, a quarter) in two short creep runs (2 fixed
+    steps): the second case's moduli, relaxation time, IOP and mesh size are new to this
+    process and the cache. ≈ 5 s a case."""
+    short = dict(symmetry="quarter", azimuthal_divisions=8, t_end=600.0, first_dt=300.0,
+                 time_stepping="fixed")
+
+    def case(mesh_size: float) -> keratotomy.Parameters:
+        return keratotomy.Parameters(mu_inf=0.03 + 0.02 * random.random(),
+                                     mu_v=0.02 + 0.02 * random.random(),
+                                     tau=3000.0 + 1000.0 * random.random(),
+                                     iop_mmHg=14.0 + 2.0 * random.random(),
+                                     mesh_size=mesh_size, **short)
+
+    keratotomy.run(case(2.0), comm=MPI.COMM_SELF, options=QUIET)
+    first = len(compilations)
+    keratotomy.run(case(1.7), comm=MPI.COMM_SELF, options=QUIET)
+    assert compilations[first:] == []
+
+
+def test_eye_with_new_moduli_penalty_and_geometry_compiles_nothing_after_its_first_case(compilations):
+    """The coarse eye without the settling step (three stages, ≈ 11 s a case). The eye's
+    mesh has named resolutions only (coarse, default, paper; default is ≈ 3× the cells):
+    the second case changes the mesh through the detachment's height instead, which
+    changes the cavity wall's area and volume (Constants in the liquid's row), with new
+    c_sclera, penalty factor (the buckle's penalty follows both), bulk modulus and IOP.
+    The lead's finding, 5 Jacobian blocks compiled again in a process's second run, came
+    from UFL's operand order (forms/ordering.py, tested below on its own)."""
+
+    def case(**geometry) -> scleral_buckling.Parameters:
+        return scleral_buckling.Parameters(resolution="coarse", settle=False,
+                                           c_sclera=0.08 + 0.01 * random.random(),
+                                           penalty_factor=20.0 + 10.0 * random.random(),
+                                           **geometry)
+
+    scleral_buckling.run(case(), comm=MPI.COMM_SELF, options=QUIET)
+    first = len(compilations)
+    scleral_buckling.run(case(detachment_height=0.4 + 0.2 * random.random(),
+                              bulk_modulus=2000.0 + 100.0 * random.random(),
+                              iop_mmHg=14.0 + 2.0 * random.random()),
+                         comm=MPI.COMM_SELF, options=QUIET)
+    assert compilations[first:] == []
+
+
+@pytest.mark.parametrize("later", [(109, 117), (209, 217), (1009, 1017)])
+def test_a_forms_signature_does_not_depend_on_its_constants_creation_counts(later):
+    """The same form over two Constants created 9th and 17th in a process, or later
+    (a later run of a scene): UFL orders a product's operands by ``repr``, whose
+    count '17' sorts before '9' but '117' after '109', so without forms/ordering.py the
+    form is ``b·a`` in the first run and ``a·b`` in the second: a new signature and a
+    new compilation (measured on the coarse eye: 10 of 66 forms)."""
+    import basix.ufl
+    import ufl
+    from ufl.constant import Constant
+
+    import eyemech.forms  # noqa: F401  (installs the order)
+
+    def signature(first: int, second: int) -> str:
+        cell = "tetrahedron"
+        domain = ufl.Mesh(basix.ufl.element("Lagrange", cell, 1, shape=(3,)))
+        u = ufl.Coefficient(ufl.FunctionSpace(domain, basix.ufl.element("Lagrange", cell, 1)))
+        a, b = Constant(domain, count=first), Constant(domain, count=second)
+        return ((a * b + a / b) * u * ufl.dx).signature()
+
+    assert signature(9, 17) == signature(*later)
 
 
 def test_sweep_csv_records_each_cases_form_compilation_near_zero_after_the_first(tmp_path):
