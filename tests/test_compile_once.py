@@ -148,3 +148,36 @@ def test_interpolated_stress_has_one_signature_in_every_run():
 
     assert signature(True) == signature(True)
     assert signature(False) != signature(False)  # the labels are what differs
+
+
+def test_a_cached_form_is_found_without_listing_the_cache_folder(tmp_path, compilations, monkeypatch):
+    """problems/run/jit_cache.py: the second build of a form finds the compiled module by
+    its file name (FFCx 0.11 lists the whole cache folder for every form, 35 ms with
+    13,000 files), compiles nothing and assembles the same number; a folder listing
+    raises here, so FFCx's own lookup would fail the test."""
+    import importlib.machinery
+
+    import dolfinx
+    import ufl
+
+    from eyemech.problems.run import jit_cache
+
+    jit_cache.install()
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    c = dolfinx.fem.Constant(mesh, 3.0)
+    options = {"cache_dir": str(tmp_path / "jit")}
+
+    def area_times_c() -> float:
+        form = dolfinx.fem.form(c * ufl.dx(domain=mesh), jit_options=options)
+        return dolfinx.fem.assemble_scalar(form)
+
+    assert area_times_c() == pytest.approx(3.0)
+    assert len(compilations) == 1
+
+    def listing(*_args, **_kwargs):
+        raise AssertionError("the JIT cache folder was listed")
+
+    monkeypatch.setattr(importlib.machinery.FileFinder, "_fill_cache", listing)
+    c.value = 5.0
+    assert area_times_c() == pytest.approx(5.0)
+    assert len(compilations) == 1
