@@ -8,12 +8,17 @@ Wall time is that of the whole process, as a user meets it: ``eyemech run ... --
 --no-pictures`` against ``python -m ...plain_dolfinx_sphere``, start-up and imports
 included. Every case runs once untimed first (compiled forms in the cache, files in the
 page cache), then ``repeats`` times alternating the two, one process at a time; the
-median is reported.
+median is reported. Each row records the 1-minute load average before and after its
+runs (the machine is shared) and the number of files in FFCx's JIT cache folder: FFCx 0.11
+lists that folder for every form it looks up (35 ms at 13,000 files), which eyemech's run
+contract avoids (problems/run/jit_cache.py) and the plain script, as the DOLFINx demos
+write it, pays once per form.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -53,7 +58,13 @@ def _plain(element: str, mesh_size: float) -> tuple[float, dict]:
                   "unknowns": result["unknowns"]}
 
 
+def _jit_cache_files() -> int:
+    folder = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "fenics"
+    return sum(1 for _ in folder.iterdir()) if folder.is_dir() else 0
+
+
 def compare(element: str, mesh_size: float, repeats: int) -> dict:
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
         _eyemech(element, mesh_size, out / "warm")
@@ -68,7 +79,9 @@ def compare(element: str, mesh_size: float, repeats: int) -> dict:
             "error_eyemech": ours[0][1]["error"], "error_plain": theirs[0][1]["error"],
             "newton_eyemech": ours[0][1]["newton"], "newton_plain": theirs[0][1]["newton"],
             "wall_eyemech_s": round(wall_ours, 3), "wall_plain_s": round(wall_theirs, 3),
-            "ratio": round(wall_ours / wall_theirs, 3), "repeats": repeats}
+            "ratio": round(wall_ours / wall_theirs, 3), "repeats": repeats,
+            "load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2),
+            "jit_cache_files": _jit_cache_files()}
 
 
 def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
