@@ -4,6 +4,8 @@ A form takes functions and parameters and returns UFL; nothing here builds a mes
 assembles, solves or writes a file.
 """
 
+# first, before any form is built: Constants in a canonical operand order
+from eyemech.forms import ordering  # noqa: F401, I001
 from eyemech.forms.cavity import (
     axis_volumes,
     enclosed_volume,

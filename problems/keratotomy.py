@@ -191,14 +191,16 @@ class Cornea:
             residual += support
         self.residual_blocks = list(ufl.extract_blocks(residual))
         # the glassy shear modulus (the load step) scales the pressure Schur complement
-        self.iterative = params.linear_solver(params.mu_inf + params.mu_v, dx)
+        self.iterative = params.linear_solver(material.mu_inf + material.mu_v, dx)
         self._central_anterior(V, fdim, params.fit_diameter / 2)
         self.has_cuts = incisions > 0
         if self.has_cuts:
             N = ufl.FacetNormal(mesh)
             cut = ds(self.tagged.tag("incision"))
             area = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(1.0 * cut)))
-            self._gape = dolfinx.fem.form(-2.0 / area * ufl.dot(self.u, N) * cut)
+            # a Constant: the cut's area follows the mesh (a literal compiles anew per mesh)
+            scale = dolfinx.fem.Constant(mesh, -2.0 / area)
+            self._gape = dolfinx.fem.form(scale * ufl.dot(self.u, N) * cut)
         self.comm = comm
 
     def _central_anterior(self, V, fdim: int, radius: float) -> None:

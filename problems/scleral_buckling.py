@@ -483,7 +483,9 @@ class BucklingModel:
         self.initial_volume.value = volume0
         area = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
             dolfinx.fem.Constant(mesh, 1.0) * self.wall)), op=MPI.SUM)
-        self.wall_area = area
+        # Constants: the area follows the mesh, and either as a literal compiles the residual anew
+        self.wall_area = dolfinx.fem.Constant(mesh, area)
+        self.bulk_modulus = dolfinx.fem.Constant(mesh, params.bulk_modulus)
 
         # the buckle: placed after step 1 at the clearance from the inflated sclera
         self.axial_position, self.buckle_angle = self._buckle_axial_position()
@@ -563,8 +565,8 @@ class BucklingModel:
         params, family = self.params, self.family
         v, qP, q_tire = tests[0], tests[-2], tests[-1]
         liquid = liquid_law_residual(self.P, qP, self.u, self.wall, self.wall_area, self.initial_volume,
-                                     self.initial_pressure, params.bulk_modulus)
-        pinned = self.initial_volume / params.bulk_modulus * (self.P - self.pressure_target) \
+                                     self.initial_pressure, self.bulk_modulus)
+        pinned = self.initial_volume / self.bulk_modulus * (self.P - self.pressure_target) \
             / self.wall_area * qP * self.wall
         residual = (solid_residual(self.law, family, self.fields, tests, dx)
                     + follower_pressure(self.P, self.u, v, self.wall)

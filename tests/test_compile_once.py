@@ -14,7 +14,7 @@ import subprocess
 import pytest
 from mpi4py import MPI
 
-from eyemech.problems import liquid_sphere, sphere_inflation
+from eyemech.problems import keratotomy, liquid_sphere, scleral_buckling, sphere_inflation
 from eyemech.problems.run.context import RunOptions
 
 QUIET = RunOptions(fields=False, pictures=False)
@@ -34,6 +34,70 @@ def test_a_sweep_over_modulus_and_mesh_size_compiles_nothing_after_its_first_cas
     for c10, size in zip(MODULI[1:], sizes[1:]):
         scene.run(scene.Parameters(c10=c10, mesh_size=size), comm=MPI.COMM_SELF, options=QUIET)
     assert compilations[first:] == []
+
+
+def test_keratotomy_with_new_moduli_and_mesh_size_compiles_nothing_after_its_first_case(compilations):
+    """Both corneas (intact and 8 incisions, a quarter) in two short creep runs (2 fixed
+    steps): the second case's moduli, relaxation time, IOP and mesh size are new to this
+    process and the cache. ≈ 5 s a case."""
+    short = dict(symmetry="quarter", azimuthal_divisions=8, t_end=600.0, first_dt=300.0,
+                 time_stepping="fixed")
+
+    def case(mesh_size: float) -> keratotomy.Parameters:
+        return keratotomy.Parameters(mu_inf=0.03 + 0.02 * random.random(),
+                                     mu_v=0.02 + 0.02 * random.random(),
+                                     tau=3000.0 + 1000.0 * random.random(),
+                                     iop_mmHg=14.0 + 2.0 * random.random(),
+                                     mesh_size=mesh_size, **short)
+
+    keratotomy.run(case(2.0), comm=MPI.COMM_SELF, options=QUIET)
+    first = len(compilations)
+    keratotomy.run(case(1.7), comm=MPI.COMM_SELF, options=QUIET)
+    assert compilations[first:] == []
+
+
+def test_eye_with_new_moduli_penalty_and_mesh_compiles_nothing_after_its_first_case(compilations):
+    """The eye without the settling step (three stages): the coarse resolution (8 cube
+    edges), then mesh_size = 2.2 mm (10 edges) with new c_sclera, penalty factor (the
+    buckle's penalty follows both and the element size), detachment height (the cavity
+    wall's area and volume), bulk modulus and IOP. ≈ 11 and 20 s. The lead's finding, 5
+    Jacobian blocks compiled again in a process's second run, came from UFL's operand
+    order (forms/ordering.py, tested below on its own)."""
+
+    def case(**overrides) -> scleral_buckling.Parameters:
+        return scleral_buckling.Parameters(settle=False, c_sclera=0.08 + 0.01 * random.random(),
+                                           penalty_factor=20.0 + 10.0 * random.random(), **overrides)
+
+    scleral_buckling.run(case(resolution="coarse"), comm=MPI.COMM_SELF, options=QUIET)
+    first = len(compilations)
+    scleral_buckling.run(case(mesh_size=2.2, detachment_height=0.4 + 0.2 * random.random(),
+                              bulk_modulus=2000.0 + 100.0 * random.random(),
+                              iop_mmHg=14.0 + 2.0 * random.random()),
+                         comm=MPI.COMM_SELF, options=QUIET)
+    assert compilations[first:] == []
+
+
+@pytest.mark.parametrize("later", [(109, 117), (209, 217), (1009, 1017)])
+def test_a_forms_signature_does_not_depend_on_its_constants_creation_counts(later):
+    """The same form over two Constants created 9th and 17th in a process, or later
+    (a later run of a scene): UFL orders a product's operands by ``repr``, whose
+    count '17' sorts before '9' but '117' after '109', so without forms/ordering.py the
+    form is ``b·a`` in the first run and ``a·b`` in the second: a new signature and a
+    new compilation (measured on the coarse eye: 10 of 66 forms)."""
+    import basix.ufl
+    import ufl
+    from ufl.constant import Constant
+
+    import eyemech.forms  # noqa: F401  (installs the order)
+
+    def signature(first: int, second: int) -> str:
+        cell = "tetrahedron"
+        domain = ufl.Mesh(basix.ufl.element("Lagrange", cell, 1, shape=(3,)))
+        u = ufl.Coefficient(ufl.FunctionSpace(domain, basix.ufl.element("Lagrange", cell, 1)))
+        a, b = Constant(domain, count=first), Constant(domain, count=second)
+        return ((a * b + a / b) * u * ufl.dx).signature()
+
+    assert signature(9, 17) == signature(*later)
 
 
 def test_sweep_csv_records_each_cases_form_compilation_near_zero_after_the_first(tmp_path):
@@ -81,3 +145,36 @@ def test_interpolated_stress_has_one_signature_in_every_run():
 
     assert signature(True) == signature(True)
     assert signature(False) != signature(False)  # the labels are what differs
+
+
+def test_a_cached_form_is_found_without_listing_the_cache_folder(tmp_path, compilations, monkeypatch):
+    """problems/run/jit_cache.py: the second build of a form finds the compiled module by
+    its file name (FFCx 0.11 lists the whole cache folder for every form, 35 ms with
+    13,000 files), compiles nothing and assembles the same number; a folder listing
+    raises here, so FFCx's own lookup would fail the test."""
+    import importlib.machinery
+
+    import dolfinx
+    import ufl
+
+    from eyemech.problems.run import jit_cache
+
+    jit_cache.install()
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    c = dolfinx.fem.Constant(mesh, 3.0)
+    options = {"cache_dir": str(tmp_path / "jit")}
+
+    def area_times_c() -> float:
+        form = dolfinx.fem.form(c * ufl.dx(domain=mesh), jit_options=options)
+        return dolfinx.fem.assemble_scalar(form)
+
+    assert area_times_c() == pytest.approx(3.0)
+    assert len(compilations) == 1
+
+    def listing(*_args, **_kwargs):
+        raise AssertionError("the JIT cache folder was listed")
+
+    monkeypatch.setattr(importlib.machinery.FileFinder, "_fill_cache", listing)
+    c.value = 5.0
+    assert area_times_c() == pytest.approx(5.0)
+    assert len(compilations) == 1

@@ -11,7 +11,9 @@ from typing import Any
 
 from mpi4py import MPI
 
+from eyemech.forms import ordering  # noqa: F401  (UFL's operand order: forms/ordering.py)
 from eyemech.meshes import MeshError
+from eyemech.problems.run import jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
@@ -54,6 +56,7 @@ class RunContext:
     def __init__(self, scene: str, params: SceneParameters, comm: MPI.Comm | None,
                  out: str | Path | None, options: RunOptions | None):
         check(params)  # bad input stops here, before anything is created or solved
+        jit_cache.install()  # a cached form found by its file name (problems/run/jit_cache.py)
         self.comm = comm if comm is not None else MPI.COMM_WORLD
         self.out = Path(out) if out is not None else None
         self.options = options or RunOptions()
