@@ -44,6 +44,7 @@ hangs on the zonules: linear-elastic bars (E = ``zonule_modulus``, cross-section
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from pathlib import Path
 from typing import Literal
@@ -102,9 +103,12 @@ from eyemech.problems.solve.driver import (
     SecantPredictor,
     SolveFailure,
     Stepping,
+    StepRecord,
     follow_path,
 )
 from eyemech.problems.solve.linear_solvers import SolverChoice
+
+log = logging.getLogger("eyemech")
 
 # refraction from the geometry: diopters per mm of axial length (Gullstrand's schematic
 # eye, emmetropic: ≈ 2.7 D/mm) and the keratometric index that turns the anterior
@@ -201,8 +205,13 @@ class Parameters(SceneParameters, SolverChoice):
     drainage: Literal["none", "external"] = field(
         "none", "external: the subretinal fluid is drained in step 4 (with the settled state): "
         "the subretinal faces lose the liquid pressure, the vitreous pressure presses the "
-        "detached retina onto the choroid. Does not converge yet: Newton stalls within the "
-        "first 10 % of the drainage (docs/scleral_buckling.md, Subretinal drainage)")
+        "detached retina onto the choroid; the retina's snap onto the choroid is followed in "
+        "pseudo-time (drainage_drag_step) and the end state is solved without the drag "
+        "(docs/scleral_buckling.md, Subretinal drainage)")
+    drainage_drag_step: float = field(
+        0.05, "drainage: the retina's largest pseudo-time move per solve under the full IOP "
+        "(drag η = IOP / this on its subretinal face, relative to the last solved state; "
+        "switched off for the final solve of step 4)", "mm")
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm")
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm")
@@ -281,6 +290,8 @@ class Parameters(SceneParameters, SolverChoice):
         if self.drainage != "none" and self.detachment_height == 0:
             raise ParameterError("drainage", "there is no subretinal fluid to drain: the retina "
                                  "is attached (detachment_height = 0)")
+        if self.drainage_drag_step <= 0:
+            raise ParameterError("drainage_drag_step", "must be positive")
         if self.drainage != "none" and not self.settle:
             raise ParameterError("drainage", "drainage acts in step 4 (the settled state, where "
                                  "the liquid volume is free): it needs settle = true")
@@ -436,9 +447,18 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
         model.free_tire()
     if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
         model.release_liquid()
-    values = model.measure()
+    counts, settling = record.counts(), {}
+    if abs(record.load - 4.0) < 1e-12 and model.params.drainage != "none":
+        before = model.solver.counts.copy()
+        settling = model.settle_retina()
+        extra = StepRecord.work(model.solver.counts - before)  # counted with this step
+        counts = {"attempts": counts["attempts"] + extra["attempts"],
+                  "newton_iterations_all": counts["newton_iterations_all"] + extra["iterations_all"],
+                  **{k: counts[k] + extra[k] for k in ("jacobians", "factorisations",
+                                                      "symbolic_factorisations")}}
+    values = model.measure() | settling
     ctx.record_step(step=record.step, load=record.load, stage=stage,
-                    newton_iterations=record.iterations, cuts=record.cuts, **record.counts(),
+                    newton_iterations=record.iterations, cuts=record.cuts, **counts,
                     krylov_iterations=record.linear_iterations,
                     residuals=record.residuals, **values)
     model.sutures.update_directions(model.u, model.suture_anchors())
@@ -447,6 +467,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
         model.release_tire_from_band()
     if abs(record.load - round(record.load)) < 1e-12:
         model.stage_results[int(round(record.load))] = values
+    if record.load >= 3.0 - 1e-12:  # the drainage's drag pulls towards this state
+        model.drag_reference.x.array[:] = model.u.x.array
     writer.state(record.load, stage, picture=abs(record.load - round(record.load)) < 1e-12)
 
 
@@ -498,6 +520,9 @@ class BucklingModel:
         self.suture_pull = dolfinx.fem.Constant(mesh, 0.0)  # sutures' inward resultant
         self.held_force = 0.0  # the sclera's force on the tire at the end of step 2
         self.drained = dolfinx.fem.Constant(mesh, 0.0)      # subretinal pressure removed
+        # the retina's pseudo-time drag in step 4 (drainage): η and the last solved state
+        self.retina_drag = dolfinx.fem.Constant(mesh, 0.0)
+        self.drag_reference = dolfinx.fem.Function(self.u.function_space, name="u_drag_reference")
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
         # a Constant, not a literal: the penalty follows the mesh size and the sclera's
@@ -557,6 +582,9 @@ class BucklingModel:
                                              sutures' loop and the band (steps 3-4, loop)
           − ∫ d P J F⁻ᵀN·v dA               drainage: the subretinal faces lose the liquid
                                              pressure over step 4 (d from 0 to 1)
+          + ∫ η (u − u_last)·v dA             drainage: pseudo-time drag on the retina's
+                                             subretinal face (step 4; off for the final
+                                             solve, :meth:`settle_retina`)
 
         The zonule bars and the retina–choroid contact are added node-wise by hooks of the
         nonlinear solver (:meth:`_zonules`, :meth:`_retina_contact`)."""
@@ -579,6 +607,8 @@ class BucklingModel:
             subretinal = ds(tuple(self.eye.tag(name) for name in ("retina_detached",
                                                                   "choroid_detached")))
             residual += follower_pressure(-self.drained * self.P, self.u, v, subretinal)
+            retina_face = ds(self.eye.tag("retina_detached"))
+            residual += self.retina_drag * ufl.inner(self.u - self.drag_reference, v) * retina_face
         if params.buckle_attachment == "sutured":
             tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.contact_penalty,
                                         contact_ds(self.eye.tag("sclera_outer")))
@@ -817,6 +847,58 @@ class BucklingModel:
             self.tire_hold.value = (1.0 - float(np.clip(load - 2.0, 0.0, 1.0))) * self.held_force
         self.drained.value = float(np.clip(load - 3.0, 0.0, 1.0)) \
             if self.params.drainage != "none" else 0.0
+        self.retina_drag.value = self.drag_coefficient() if self.drained.value > 0 else 0.0
+
+    def drag_coefficient(self) -> float:
+        """η (MPa/mm) such that the full IOP moves a free retina by ``drainage_drag_step``
+        per solve: a 0.5 mm blister snaps onto the choroid in about ten solves instead of
+        in one Newton step that load control cannot take (a shallow dome pressed on its
+        convex side; docs/scleral_buckling.md, Subretinal drainage)."""
+        return self.iop / self.params.drainage_drag_step
+
+    def settle_retina(self, tolerance: float = 1e-4, max_solves: int = 80) -> dict:
+        """End of step 4 with drainage: pseudo-time solves at full drainage, each dragged
+        towards the last, until the largest nodal move is below ``tolerance`` (mm); a
+        failed solve is restored and retried with the drag doubled (a shorter pseudo-time
+        step), an easy one (≤ 4 iterations) halves it (down to base/1024). Then
+        the drag is switched off and the eye solved once more, so that the state reported
+        is an equilibrium of the undragged residual. If that last solve fails, the dragged
+        state is kept and ``retina_drag_free`` says so."""
+        base = self.drag_coefficient()
+        solves, move, eta = 0, math.inf, base
+        while solves < max_solves and move > tolerance and eta <= 1024 * base:
+            self.drag_reference.x.array[:] = self.u.x.array
+            self.retina_drag.value = eta
+            state = self.solver.save_state()
+            converged, iterations = self.solver.solve()
+            solves += 1
+            if not converged:
+                log.info("retina settling solve %d: η = %.3g MPa/mm failed (%s)", solves, eta,
+                         self.solver.reason())
+                self.solver.restore_state(state)
+                eta *= 2.0
+                continue
+            if iterations <= 4:  # a longer pseudo-time step: the tail of the settling
+                eta = max(base / 1024, 0.5 * eta)
+            move = self.ctx.comm.allreduce(float(np.abs(self.u.x.array
+                                                        - self.drag_reference.x.array).max()),
+                                           op=MPI.MAX)
+            log.info("retina settling solve %d: η = %.3g MPa/mm, %d iterations, move %.3g mm",
+                     solves, eta, iterations, move)
+        self.drag_reference.x.array[:] = self.u.x.array
+        state = self.solver.save_state()
+        self.retina_drag.value = 0.0
+        free, _ = self.solver.solve()
+        log.info("retina settling: drag-free solve %s (%s)", "converged" if free else "failed",
+                 self.solver.reason())
+        if not free:
+            self.solver.restore_state(state)
+            self.retina_drag.value = eta
+        # the drag's traction left in a kept dragged state: bounded by η times the last move
+        traction = 0.0 if free else eta * move
+        return {"retina_settling_solves": solves + 1, "retina_settling_last_move_mm": move,
+                "retina_drag_free": bool(free),
+                "retina_drag_traction_max_mmHg": traction / MMHG}
 
     def couple_liquid(self) -> None:
         """End of step 1: V_ini and P_ini from the inflated eye, liquid law on, and the
@@ -887,9 +969,10 @@ class BucklingModel:
         for name, f in zip(("u", "p", "P", "tire_travel"), self.fields):
             checkpoints.function(name, f)
         checkpoints.function("u_tied", self.u_tied)
+        checkpoints.function("u_drag_reference", self.drag_reference)
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
                      "base_radius", "indentation", "tied", "acute_pressure", "tire_free",
-                     "tire_hold", "suture_pull", "drained"):
+                     "tire_hold", "suture_pull", "drained", "retina_drag"):
             checkpoints.constant(name, getattr(self, name))
         checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
                                               "magnitude": self.sutures.magnitude},
