@@ -206,8 +206,9 @@ class Parameters(SceneParameters, SolverChoice):
         "none", "external: the subretinal fluid is drained in step 4 (with the settled state): "
         "the subretinal faces lose the liquid pressure, the vitreous pressure presses the "
         "detached retina onto the choroid; the retina's snap onto the choroid is followed in "
-        "pseudo-time (drainage_drag_step) and the end state is solved without the drag "
-        "(docs/scleral_buckling.md, Subretinal drainage)")
+        "pseudo-time (drainage_drag_step), then solved once without the drag; where that "
+        "fails (the coarse and default eyes) the dragged state is kept and its drag traction "
+        "reported (docs/scleral_buckling.md, Subretinal drainage)")
     drainage_drag_step: float = field(
         0.05, "drainage: the retina's largest pseudo-time move per solve under the full IOP "
         "(drag η = IOP / this on its subretinal face, relative to the last solved state; "
@@ -523,6 +524,10 @@ class BucklingModel:
         # the retina's pseudo-time drag in step 4 (drainage): η and the last solved state
         self.retina_drag = dolfinx.fem.Constant(mesh, 0.0)
         self.drag_reference = dolfinx.fem.Function(self.u.function_space, name="u_drag_reference")
+        self.retina_face_dofs = np.zeros(0, dtype=np.int32)  # set when there is a detachment
+        if "retina_detached" in self.eye.names:
+            blocks = facet_nodes(self.u.function_space, self.eye.facets("retina_detached"))
+            self.retina_face_dofs = (3 * blocks[:, None] + np.arange(3)).ravel()
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
         # a Constant, not a literal: the penalty follows the mesh size and the sclera's
@@ -865,7 +870,7 @@ class BucklingModel:
         is an equilibrium of the undragged residual. If that last solve fails, the dragged
         state is kept and ``retina_drag_free`` says so."""
         base = self.drag_coefficient()
-        solves, move, eta = 0, math.inf, base
+        solves, move, retina_move, eta = 0, math.inf, math.inf, base
         while solves < max_solves and move > tolerance and eta <= 1024 * base:
             self.drag_reference.x.array[:] = self.u.x.array
             self.retina_drag.value = eta
@@ -883,8 +888,12 @@ class BucklingModel:
             move = self.ctx.comm.allreduce(float(np.abs(self.u.x.array
                                                         - self.drag_reference.x.array).max()),
                                            op=MPI.MAX)
-            log.info("retina settling solve %d: η = %.3g MPa/mm, %d iterations, move %.3g mm",
-                     solves, eta, iterations, move)
+            change = self.u.x.array - self.drag_reference.x.array
+            retina_move = self.ctx.comm.allreduce(
+                float(np.abs(change[self.retina_face_dofs]).max(initial=0.0)), op=MPI.MAX)
+            log.info("retina settling solve %d: η = %.3g MPa/mm, %d iterations, move %.3g mm "
+                     "(retina's subretinal face %.3g mm)", solves, eta, iterations, move,
+                     retina_move)
         self.drag_reference.x.array[:] = self.u.x.array
         state = self.solver.save_state()
         self.retina_drag.value = 0.0
@@ -894,9 +903,11 @@ class BucklingModel:
         if not free:
             self.solver.restore_state(state)
             self.retina_drag.value = eta
-        # the drag's traction left in a kept dragged state: bounded by η times the last move
-        traction = 0.0 if free else eta * move
+        # the drag's traction left in a kept dragged state: η times the retina face's last
+        # move (a component's largest; the drag acts on that face only)
+        traction = 0.0 if free else eta * retina_move
         return {"retina_settling_solves": solves + 1, "retina_settling_last_move_mm": move,
+                "retina_settling_last_retina_move_mm": retina_move,
                 "retina_drag_free": bool(free),
                 "retina_drag_traction_max_mmHg": traction / MMHG}
 

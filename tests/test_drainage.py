@@ -42,14 +42,15 @@ def test_drainage_alone_closes_the_tear(drained):
 def test_the_settling_is_reported_and_counted(drained):
     after = drained.quantities["after_settling"]
     # measured: 81 settling solves (the cap, 80, plus the drag-free one), the last move
-    # 6.3e-4 mm, the drag-free solve not converged, so the dragged state is kept with a
-    # drag traction bounded by η · move = 6.0 mmHg. The drag opposes the retina's last
-    # move (towards the choroid), so it cannot be what holds the rim on the choroid
+    # 6.3e-4 mm (5.8e-4 mm on the retina's subretinal face), the drag-free solve not
+    # converged, so the dragged state is kept with a drag traction of η · move = 5.6 mmHg.
+    # Below the 15 mmHg that press the retina: without the drag the pressed rim would
+    # still carry a positive contact pressure
     assert after["retina_settling_last_move_mm"] < 2e-3
     if after["retina_drag_free"]:
         assert after["retina_drag_traction_max_mmHg"] == 0.0
     else:
-        assert 0.0 < after["retina_drag_traction_max_mmHg"] < 15.0
+        assert 0.0 < after["retina_drag_traction_max_mmHg"] < 0.6 * 15.0
     # every settling solve is counted with the last step (measured 82 attempts)
     last = drained.steps[-1]
     assert last["attempts"] >= after["retina_settling_solves"]
