@@ -51,6 +51,7 @@ from typing import Literal
 
 import dolfinx
 import dolfinx.fem
+import dolfinx.mesh
 import numpy as np
 import ufl
 from mpi4py import MPI
@@ -585,8 +586,9 @@ class BucklingModel:
                                              always with suture_model = bites), or the
                                              balance of the sclera's contact force with the
                                              sutures' loop and the band (steps 3-4, loop)
-          − ∫ d P J F⁻ᵀN·v dA               drainage: the subretinal faces lose the liquid
-                                             pressure over step 4 (d from 0 to 1)
+          − ∫ d w P J F⁻ᵀN·v dA             drainage: the subretinal faces lose the liquid
+                                             pressure over step 4 (d from 0 to 1), all but
+                                             the choroid under the tear (w = 0, :meth:`_dried`)
           + ∫ η (u − u_last)·v dA             drainage: pseudo-time drag on the retina's
                                              subretinal face (step 4; off for the final
                                              solve, :meth:`settle_retina`)
@@ -611,7 +613,8 @@ class BucklingModel:
         if params.drainage != "none":
             subretinal = ds(tuple(self.eye.tag(name) for name in ("retina_detached",
                                                                   "choroid_detached")))
-            residual += follower_pressure(-self.drained * self.P, self.u, v, subretinal)
+            residual += follower_pressure(-self.drained * self._dried() * self.P, self.u, v,
+                                          subretinal)
             retina_face = ds(self.eye.tag("retina_detached"))
             residual += self.retina_drag * ufl.inner(self.u - self.drag_reference, v) * retina_face
         if params.buckle_attachment == "sutured":
@@ -620,6 +623,24 @@ class BucklingModel:
             residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
         return residual
+
+    def _dried(self) -> dolfinx.fem.Function:
+        """1 on the cells whose subretinal face drainage dries, 0 on the choroid's cells
+        under the tear's hole: the vitreous keeps wetting the choroid there through the
+        hole. Under the hole: the cell's midpoint within ``tear_radius`` (arc on the
+        sclera's radius) of the tear's centre, as the mesh removes the retina's cells."""
+        mesh, geo = self.eye.mesh, self.geometry
+        weight = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 0)), name="dried")
+        weight.x.array[:] = 1.0
+        if geo.tear_radius > 0:
+            cells = np.arange(len(weight.x.array), dtype=np.int32)
+            mid = dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim, cells)
+            unit = mid / np.linalg.norm(mid, axis=1, keepdims=True)
+            centre = np.array([0.0, math.sin(math.radians(geo.tear_angle)),
+                               math.cos(math.radians(geo.tear_angle))])
+            arc = geo.sclera_radius * np.arccos(np.clip(unit @ centre, -1.0, 1.0))
+            weight.x.array[arc < geo.tear_radius] = 0.0
+        return weight
 
     def _tire_row(self, contact, test, measure):
         """The tire travel's row: free = 1 (loop) balances the sclera's contact force on

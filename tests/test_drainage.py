@@ -28,9 +28,9 @@ def test_drainage_alone_closes_the_tear(drained):
     assert before["tear_closed_nts"] is False
     assert before["tear_rim_gap_max_mm"] > 0.9
     assert before["retina_penalty_contact_area_mm2"] == 0.0
-    # drained: the whole rim on the choroid (measured −0.002 mm, the penalty's
-    # penetration; 96 mm² of retina pressed, whole eye; deepest penetration 0.013 mm,
-    # 7 % of the retina's 0.2 mm)
+    # drained: the whole rim on the choroid (measured −0.007 mm, the penalty's
+    # penetration; 96 mm² of retina pressed, whole eye; deepest penetration 0.011 mm,
+    # 6 % of the retina's 0.2 mm)
     assert after["tear_closed_nts"] is True
     assert after["tear_rim_gap_max_mm"] < 0.01
     assert after["retina_penalty_contact_area_mm2"] > 80.0
@@ -42,8 +42,8 @@ def test_drainage_alone_closes_the_tear(drained):
 def test_the_settling_is_reported_and_counted(drained):
     after = drained.quantities["after_settling"]
     # measured: 81 settling solves (the cap, 80, plus the drag-free one), the last move
-    # 6.3e-4 mm (5.8e-4 mm on the retina's subretinal face), the drag-free solve not
-    # converged, so the dragged state is kept with a drag traction of η · move = 5.6 mmHg.
+    # 7.5e-4 mm (6.1e-4 mm on the retina's subretinal face), the drag-free solve not
+    # converged, so the dragged state is kept with a drag traction of η · move = 5.9 mmHg.
     # Below the 15 mmHg that press the retina: without the drag the pressed rim would
     # still carry a positive contact pressure
     assert after["retina_settling_last_move_mm"] < 2e-3
