@@ -44,12 +44,14 @@ hangs on the zonules: linear-elastic bars (E = ``zonule_modulus``, cross-section
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from pathlib import Path
 from typing import Literal
 
 import dolfinx
 import dolfinx.fem
+import dolfinx.mesh
 import numpy as np
 import ufl
 from mpi4py import MPI
@@ -102,9 +104,12 @@ from eyemech.problems.solve.driver import (
     SecantPredictor,
     SolveFailure,
     Stepping,
+    StepRecord,
     follow_path,
 )
 from eyemech.problems.solve.linear_solvers import SolverChoice
+
+log = logging.getLogger("eyemech")
 
 # refraction from the geometry: diopters per mm of axial length (Gullstrand's schematic
 # eye, emmetropic: ≈ 2.7 D/mm) and the keratometric index that turns the anterior
@@ -201,8 +206,14 @@ class Parameters(SceneParameters, SolverChoice):
     drainage: Literal["none", "external"] = field(
         "none", "external: the subretinal fluid is drained in step 4 (with the settled state): "
         "the subretinal faces lose the liquid pressure, the vitreous pressure presses the "
-        "detached retina onto the choroid. Does not converge yet: Newton stalls within the "
-        "first 10 % of the drainage (docs/scleral_buckling.md, Subretinal drainage)")
+        "detached retina onto the choroid; the retina's snap onto the choroid is followed in "
+        "pseudo-time (drainage_drag_step), then solved once without the drag; where that "
+        "fails (the coarse and default eyes) the dragged state is kept and its drag traction "
+        "reported (docs/scleral_buckling.md, Subretinal drainage)")
+    drainage_drag_step: float = field(
+        0.05, "drainage: the retina's largest pseudo-time move per solve under the full IOP "
+        "(drag η = IOP / this on its subretinal face, relative to the last solved state; "
+        "switched off for the final solve of step 4)", "mm")
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm")
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm")
@@ -281,6 +292,8 @@ class Parameters(SceneParameters, SolverChoice):
         if self.drainage != "none" and self.detachment_height == 0:
             raise ParameterError("drainage", "there is no subretinal fluid to drain: the retina "
                                  "is attached (detachment_height = 0)")
+        if self.drainage_drag_step <= 0:
+            raise ParameterError("drainage_drag_step", "must be positive")
         if self.drainage != "none" and not self.settle:
             raise ParameterError("drainage", "drainage acts in step 4 (the settled state, where "
                                  "the liquid volume is free): it needs settle = true")
@@ -436,9 +449,18 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
         model.free_tire()
     if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
         model.release_liquid()
-    values = model.measure()
+    counts, settling = record.counts(), {}
+    if abs(record.load - 4.0) < 1e-12 and model.params.drainage != "none":
+        before = model.solver.counts.copy()
+        settling = model.settle_retina()
+        extra = StepRecord.work(model.solver.counts - before)  # counted with this step
+        counts = {"attempts": counts["attempts"] + extra["attempts"],
+                  "newton_iterations_all": counts["newton_iterations_all"] + extra["iterations_all"],
+                  **{k: counts[k] + extra[k] for k in ("jacobians", "factorisations",
+                                                      "symbolic_factorisations")}}
+    values = model.measure() | settling
     ctx.record_step(step=record.step, load=record.load, stage=stage,
-                    newton_iterations=record.iterations, cuts=record.cuts, **record.counts(),
+                    newton_iterations=record.iterations, cuts=record.cuts, **counts,
                     krylov_iterations=record.linear_iterations,
                     residuals=record.residuals, **values)
     model.sutures.update_directions(model.u, model.suture_anchors())
@@ -447,6 +469,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
         model.release_tire_from_band()
     if abs(record.load - round(record.load)) < 1e-12:
         model.stage_results[int(round(record.load))] = values
+    if record.load >= 3.0 - 1e-12:  # the drainage's drag pulls towards this state
+        model.drag_reference.x.array[:] = model.u.x.array
     writer.state(record.load, stage, picture=abs(record.load - round(record.load)) < 1e-12)
 
 
@@ -500,6 +524,13 @@ class BucklingModel:
         self.suture_pull = dolfinx.fem.Constant(mesh, 0.0)  # sutures' inward resultant
         self.held_force = 0.0  # the sclera's force on the tire at the end of step 2
         self.drained = dolfinx.fem.Constant(mesh, 0.0)      # subretinal pressure removed
+        # the retina's pseudo-time drag in step 4 (drainage): η and the last solved state
+        self.retina_drag = dolfinx.fem.Constant(mesh, 0.0)
+        self.drag_reference = dolfinx.fem.Function(self.u.function_space, name="u_drag_reference")
+        self.retina_face_dofs = np.zeros(0, dtype=np.int32)  # set when there is a detachment
+        if "retina_detached" in self.eye.names:
+            blocks = facet_nodes(self.u.function_space, self.eye.facets("retina_detached"))
+            self.retina_face_dofs = (3 * blocks[:, None] + np.arange(3)).ravel()
         element_size = 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
         self.penalty = params.penalty_factor * 6.0 * params.c_sclera / element_size
         # a Constant, not a literal: the penalty follows the mesh size and the sclera's
@@ -557,8 +588,12 @@ class BucklingModel:
                                              always with suture_model = bites), or the
                                              balance of the sclera's contact force with the
                                              sutures' loop and the band (steps 3-4, loop)
-          − ∫ d P J F⁻ᵀN·v dA               drainage: the subretinal faces lose the liquid
-                                             pressure over step 4 (d from 0 to 1)
+          − ∫ d w P J F⁻ᵀN·v dA             drainage: the subretinal faces lose the liquid
+                                             pressure over step 4 (d from 0 to 1), all but
+                                             the choroid under the tear (w = 0, :meth:`_dried`)
+          + ∫ η (u − u_last)·v dA             drainage: pseudo-time drag on the retina's
+                                             subretinal face (step 4; off for the final
+                                             solve, :meth:`settle_retina`)
 
         The zonule bars and the retina–choroid contact are added node-wise by hooks of the
         nonlinear solver (:meth:`_zonules`, :meth:`_retina_contact`)."""
@@ -580,13 +615,34 @@ class BucklingModel:
         if params.drainage != "none":
             subretinal = ds(tuple(self.eye.tag(name) for name in ("retina_detached",
                                                                   "choroid_detached")))
-            residual += follower_pressure(-self.drained * self.P, self.u, v, subretinal)
+            residual += follower_pressure(-self.drained * self._dried() * self.P, self.u, v,
+                                          subretinal)
+            retina_face = ds(self.eye.tag("retina_detached"))
+            residual += self.retina_drag * ufl.inner(self.u - self.drag_reference, v) * retina_face
         if params.buckle_attachment == "sutured":
             tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.contact_penalty,
                                         contact_ds(self.eye.tag("sclera_outer")))
             residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
         return residual
+
+    def _dried(self) -> dolfinx.fem.Function:
+        """1 on the cells whose subretinal face drainage dries, 0 on the choroid's cells
+        under the tear's hole: the vitreous keeps wetting the choroid there through the
+        hole. Under the hole: the cell's midpoint within ``tear_radius`` (arc on the
+        sclera's radius) of the tear's centre, as the mesh removes the retina's cells."""
+        mesh, geo = self.eye.mesh, self.geometry
+        weight = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 0)), name="dried")
+        weight.x.array[:] = 1.0
+        if geo.tear_radius > 0:
+            cells = np.arange(len(weight.x.array), dtype=np.int32)
+            mid = dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim, cells)
+            unit = mid / np.linalg.norm(mid, axis=1, keepdims=True)
+            centre = np.array([0.0, math.sin(math.radians(geo.tear_angle)),
+                               math.cos(math.radians(geo.tear_angle))])
+            arc = geo.sclera_radius * np.arccos(np.clip(unit @ centre, -1.0, 1.0))
+            weight.x.array[arc < geo.tear_radius] = 0.0
+        return weight
 
     def _tire_row(self, contact, test, measure):
         """The tire travel's row: free = 1 (loop) balances the sclera's contact force on
@@ -819,6 +875,64 @@ class BucklingModel:
             self.tire_hold.value = (1.0 - float(np.clip(load - 2.0, 0.0, 1.0))) * self.held_force
         self.drained.value = float(np.clip(load - 3.0, 0.0, 1.0)) \
             if self.params.drainage != "none" else 0.0
+        self.retina_drag.value = self.drag_coefficient() if self.drained.value > 0 else 0.0
+
+    def drag_coefficient(self) -> float:
+        """η (MPa/mm) such that the full IOP moves a free retina by ``drainage_drag_step``
+        per solve: a 0.5 mm blister snaps onto the choroid in about ten solves instead of
+        in one Newton step that load control cannot take (a shallow dome pressed on its
+        convex side; docs/scleral_buckling.md, Subretinal drainage)."""
+        return self.iop / self.params.drainage_drag_step
+
+    def settle_retina(self, tolerance: float = 1e-4, max_solves: int = 80) -> dict:
+        """End of step 4 with drainage: pseudo-time solves at full drainage, each dragged
+        towards the last, until the largest nodal move is below ``tolerance`` (mm); a
+        failed solve is restored and retried with the drag doubled (a shorter pseudo-time
+        step), an easy one (≤ 4 iterations) halves it (down to base/1024). Then
+        the drag is switched off and the eye solved once more, so that the state reported
+        is an equilibrium of the undragged residual. If that last solve fails, the dragged
+        state is kept and ``retina_drag_free`` says so."""
+        base = self.drag_coefficient()
+        solves, move, retina_move, eta = 0, math.inf, math.inf, base
+        while solves < max_solves and move > tolerance and eta <= 1024 * base:
+            self.drag_reference.x.array[:] = self.u.x.array
+            self.retina_drag.value = eta
+            state = self.solver.save_state()
+            converged, iterations = self.solver.solve()
+            solves += 1
+            if not converged:
+                log.info("retina settling solve %d: η = %.3g MPa/mm failed (%s)", solves, eta,
+                         self.solver.reason())
+                self.solver.restore_state(state)
+                eta *= 2.0
+                continue
+            if iterations <= 4:  # a longer pseudo-time step: the tail of the settling
+                eta = max(base / 1024, 0.5 * eta)
+            move = self.ctx.comm.allreduce(float(np.abs(self.u.x.array
+                                                        - self.drag_reference.x.array).max()),
+                                           op=MPI.MAX)
+            change = self.u.x.array - self.drag_reference.x.array
+            retina_move = self.ctx.comm.allreduce(
+                float(np.abs(change[self.retina_face_dofs]).max(initial=0.0)), op=MPI.MAX)
+            log.info("retina settling solve %d: η = %.3g MPa/mm, %d iterations, move %.3g mm "
+                     "(retina's subretinal face %.3g mm)", solves, eta, iterations, move,
+                     retina_move)
+        self.drag_reference.x.array[:] = self.u.x.array
+        state = self.solver.save_state()
+        self.retina_drag.value = 0.0
+        free, _ = self.solver.solve()
+        log.info("retina settling: drag-free solve %s (%s)", "converged" if free else "failed",
+                 self.solver.reason())
+        if not free:
+            self.solver.restore_state(state)
+            self.retina_drag.value = eta
+        # the drag's traction left in a kept dragged state: η times the retina face's last
+        # move (a component's largest; the drag acts on that face only)
+        traction = 0.0 if free else eta * retina_move
+        return {"retina_settling_solves": solves + 1, "retina_settling_last_move_mm": move,
+                "retina_settling_last_retina_move_mm": retina_move,
+                "retina_drag_free": bool(free),
+                "retina_drag_traction_max_mmHg": traction / MMHG}
 
     def couple_liquid(self) -> None:
         """End of step 1: V_ini and P_ini from the inflated eye, liquid law on, and the
@@ -889,9 +1003,10 @@ class BucklingModel:
         for name, f in zip(("u", "p", "P", "tire_travel"), self.fields):
             checkpoints.function(name, f)
         checkpoints.function("u_tied", self.u_tied)
+        checkpoints.function("u_drag_reference", self.drag_reference)
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
                      "base_radius", "indentation", "tied", "acute_pressure", "tire_free",
-                     "tire_hold", "suture_pull", "drained"):
+                     "tire_hold", "suture_pull", "drained", "retina_drag"):
             checkpoints.constant(name, getattr(self, name))
         checkpoints.value("sutures", lambda: {"directions": self.sutures.directions,
                                               "magnitude": self.sutures.magnitude},

@@ -2,8 +2,8 @@
 loop over the tire pushes it in until the sclera's contact force balances the pull, and
 its travel grows with the pull; drainage without a detachment (or without the settled
 step it acts in) is refused. Tear closure after suturing at the defaults is checked by
-``test_scleral_buckling.test_the_tear_closes_after_suturing``. Drainage itself does not
-converge yet (docs/scleral_buckling.md, "Subretinal drainage"): no test of its effect."""
+``test_scleral_buckling.test_the_tear_closes_after_suturing``; drainage's effect by
+``test_drainage``."""
 
 from __future__ import annotations
 
