@@ -226,7 +226,7 @@ class Parameters(SceneParameters, SolverChoice):
                                           "mm")
     # Newton's budget (docs/bench/scleral-buckling.md); the reference method: predictor=none,
     # jacobian_reuse=0, buckle_step=0.25, step_effort=iterations, hard_step_effort=0,
-    # line_search=bt, settle_line_search=bt
+    # line_search=bt
     predictor: Literal["secant", "none"] = field(
         "secant", "start each load step from the secant through the stage's last two converged "
         "states (none: from the last converged state)")
@@ -249,10 +249,11 @@ class Parameters(SceneParameters, SolverChoice):
     settle_ramp: Literal["linear", "log"] = field(
         "linear", "step 4's pressure ramp from the acute IOP to the pre-operative one: linear in "
         "P, or log (linear in ln P: equal pressure ratios per unit of load)")
-    settle_line_search: Literal["basic", "bt"] = field(
-        "basic", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
-        "once with bt); bt creeps at its 0.1 floor in the first settling load step, whose "
-        "first residual is only P's pinned row (docs/scleral_buckling.md, Newton's budget)")
+    settle_line_search: Literal["bt", "basic"] = field(
+        "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
+        "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
+        "at its 0.1 floor in the first settling load step, more at the paper's resolution "
+        "(docs/scleral_buckling.md, Newton's budget)")
     hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
 
@@ -868,9 +869,7 @@ class BucklingModel:
         """End of step 3 (the acute state): from here the liquid's volume is free and its
         pressure is driven back to the pre-operative IOP, as aqueous outflow does within
         hours of surgery; P's row is pinned to the ramp again. Newton's line search from here:
-        ``settle_line_search`` (full steps by default: the first settling load step starts
-        from P's row alone, a residual below the full step's second-order remainder, and bt
-        crept there at its 0.1 floor; docs/scleral_buckling.md, Newton's budget)."""
+        ``settle_line_search`` (docs/scleral_buckling.md, Newton's budget)."""
         self.acute_pressure.value = self.cavity_pressure()
         self.coupled.value = 0.0
         if "snes_linesearch_type" not in self.ctx.options.newton.petsc:

@@ -365,8 +365,8 @@ def _stage_factorisations(result, stage: int) -> int:
 
 
 def test_full_steps_in_the_settling_step_save_factorisations():
-    """``settle_line_search``: full Newton steps in step 4 (the default) against backtracking
-    (bt) on the coarse eye with the settling step. The first settling load step starts from
+    """``settle_line_search``: full Newton steps in step 4 (``basic``) against backtracking
+    (bt, the default) on the coarse eye with the settling step. The first settling load step starts from
     P's pinned row alone (‖F_0‖ ≈ 1.6e-3 on the default mesh): the full step's second-order
     remainder in the displacement rows is larger, bt clamps its step at 0.1 and the residual
     creeps × 0.9 per iteration (there 22 iterations, 21 factorisations) where full steps
