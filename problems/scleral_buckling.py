@@ -255,8 +255,16 @@ class Parameters(SceneParameters, SolverChoice):
         "basic", "Newton's line search while the buckle moves in (step 2): basic = the full step "
         "(a failed solve repeated once with bt before the load step is cut); bt = backtracking "
         "on the residual's norm, which creeps at its 0.1 floor where a step crosses the "
-        "contact's kink. Steps 3-4, where retina pairs change triangles, backtrack (bt) "
-        "(docs/scleral_buckling.md, Which contact chatters)")
+        "contact's kink. Step 3, where retina pairs change triangles, backtracks (bt); step 4 "
+        "as settle_line_search says (docs/scleral_buckling.md, Which contact chatters)")
+    settle_ramp: Literal["linear", "log"] = field(
+        "linear", "step 4's pressure ramp from the acute IOP to the pre-operative one: linear in "
+        "P, or log (linear in ln P: equal pressure ratios per unit of load)")
+    settle_line_search: Literal["bt", "basic"] = field(
+        "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
+        "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
+        "at its 0.1 floor in the first settling load step, more at the paper's resolution "
+        "(docs/scleral_buckling.md, Newton's budget)")
     hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
 
@@ -423,6 +431,14 @@ def _max_step(params: Parameters, buckle_step: float = 0.25) -> float:
     return min(0.75 / span, buckle_step * thickness / params.indentation / span)
 
 
+def settle_pressure(acute: float, iop: float, f: float, ramp: str) -> float:
+    """Step 4's pressure target at the fraction ``f`` of the step: linear in P, or in
+    ln P (``log``; both positive pressures)."""
+    if ramp == "log" and acute > 0 and iop > 0:
+        return acute ** (1.0 - f) * iop ** f
+    return (1.0 - f) * acute + f * iop
+
+
 def _span(params: Parameters) -> float:
     """Length of the load path: 3 stages, 4 with the settling step."""
     return 4.0 if params.settle else 3.0
@@ -548,7 +564,8 @@ class BucklingModel:
         self.bcs = self._boundary_conditions()
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
         newton = dataclasses.replace(ctx.options.newton, reuse_contraction=params.jacobian_reuse,
-                                     fallback_line_search="bt" if params.line_search == "basic"
+                                     fallback_line_search="bt" if "basic" in (
+                                         params.line_search, params.settle_line_search)
                                      else ctx.options.newton.fallback_line_search)
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings,
@@ -865,7 +882,8 @@ class BucklingModel:
             self.pressure_target.value = min(load, 1.0) * self.iop
         else:  # step 4: the IOP returns from its acute value to the pre-operative one
             f = min(load - 3.0, 1.0)
-            self.pressure_target.value = (1 - f) * float(self.acute_pressure.value) + f * self.iop
+            self.pressure_target.value = settle_pressure(float(self.acute_pressure.value),
+                                                         self.iop, f, self.params.settle_ramp)
         self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
         self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
         self.update_suture_pull()
@@ -956,18 +974,22 @@ class BucklingModel:
                                               "iop_mmHg": self.cavity_pressure() / MMHG}
 
     def backtrack(self) -> None:
-        """End of step 2: backtracking (bt) from here. The retina's node-to-surface pairs
-        change triangles in steps 3-4 (a jump in their gap, not a kink): full steps cycled
-        there at the paper's resolution (docs/scleral_buckling.md, Which contact chatters)."""
+        """End of step 2: backtracking (bt) in step 3. The retina's node-to-surface pairs
+        change triangles there (a jump in their gap, not a kink): full steps in steps 3-4 cost
+        more at the paper's resolution (docs/scleral_buckling.md, Which contact chatters);
+        step 4's line search is ``settle_line_search`` (:meth:`release_liquid`)."""
         if "snes_linesearch_type" not in self.ctx.options.newton.petsc:
             self.solver.snes.getLineSearch().setType("bt")
 
     def release_liquid(self) -> None:
         """End of step 3 (the acute state): from here the liquid's volume is free and its
         pressure is driven back to the pre-operative IOP, as aqueous outflow does within
-        hours of surgery; P's row is pinned to the ramp again."""
+        hours of surgery; P's row is pinned to the ramp again. Newton's line search from here:
+        ``settle_line_search`` (docs/scleral_buckling.md, Newton's budget)."""
         self.acute_pressure.value = self.cavity_pressure()
         self.coupled.value = 0.0
+        if "snes_linesearch_type" not in self.ctx.options.newton.petsc:
+            self.solver.snes.getLineSearch().setType(self.params.settle_line_search)
 
     def _sclera_radius_under_buckle(self) -> float:
         """Largest distance from the optic axis of the deformed sclera within the
