@@ -356,3 +356,50 @@ def test_load_steps_follow_the_effort_and_each_stage_limit():
     assert stepping.next_increment(0.4, record(8), 1.0) == pytest.approx(0.2)  # 0.1 of the span
     assert stepping.first_step(1.0) == pytest.approx(0.1)
     assert Stepping(initial_step=0.5, max_step=0.25).first_step(0.0) == 0.5  # no stage limits
+
+
+def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
+    """The sphere's default (``--factorisation auto`` at P2P1) reaches MUMPS as LDLᵀ (PETSc's
+    cholesky on the symmetric indefinite Jacobian, ‖A−Aᵀ‖/‖A‖ = 1.2e-16): the same Newton
+    history and answer as ``--factorisation lu`` to round-off, with about half its factor
+    entries (INFOG(29))."""
+    from eyemech.scripts.cli import main
+
+    def run(factorisation: str) -> tuple[dict, str, int]:
+        out = tmp_path / factorisation
+        code = main(["run", "sphere-inflation", "--set", "mesh_size=4.0", "--factorisation",
+                     factorisation, "--out", str(out), "--no-fields", "--no-pictures", "--quiet"])
+        assert code == 0
+        factor = solvers[-1].factor_matrix()
+        assert factor is not None and factor.getType() == "mumps"
+        assert factor.getMumpsIcntl(14) == code_icntl_14()
+        pc_type = solvers[-1].snes.getKSP().getPC().getType()
+        return json.loads((out / "results.json").read_text()), pc_type, factor.getMumpsInfog(29)
+
+    lu, lu_pc, lu_entries = run("lu")
+    ldlt, ldlt_pc, ldlt_entries = run("auto")
+    assert (lu_pc, ldlt_pc) == ("lu", "cholesky")
+    # one triangle of a symmetric ordering: 0.50 of LU's entries at h = 1 (4.18 M / 8.31 M)
+    assert ldlt_entries < 0.6 * lu_entries, (ldlt_entries, lu_entries)
+    (step_lu,), (step_ldlt,) = lu["steps"], ldlt["steps"]
+    assert step_ldlt["newton_iterations"] == step_lu["newton_iterations"]
+    # the last residual is round-off (1e-15): compare the ones above it
+    np.testing.assert_allclose(step_ldlt["residuals"][:-1], step_lu["residuals"][:-1], rtol=1e-9)
+    assert step_ldlt["inner_radius_deformed"] == pytest.approx(step_lu["inner_radius_deformed"],
+                                                               rel=1e-12)
+    check_counts(ldlt)
+
+
+def test_factorisation_choice():
+    """"auto" is the solver's scene choice (LDLᵀ only at the sphere's P2P1, LU at Q2P1, where
+    LDLᵀ's ordering costs 1.5× LU's flops); an unknown name is a ParameterError naming it."""
+    from eyemech.problems.run.parameters import ParameterError
+
+    assert (sphere_inflation.auto_factorisation("P2P1"),
+            sphere_inflation.auto_factorisation("Q2P1")) == ("ldlt", "lu")
+    assert NewtonOptions().as_petsc(auto="ldlt")["pc_type"] == "cholesky"
+    assert NewtonOptions().as_petsc()["pc_type"] == "lu"
+    assert NewtonOptions(factorisation="lu").as_petsc(auto="ldlt")["pc_type"] == "lu"
+    assert NewtonOptions(factorisation="ldlt").as_petsc()["pc_type"] == "cholesky"
+    with pytest.raises(ParameterError, match="factorisation"):
+        NewtonOptions(factorisation="cholesky")
