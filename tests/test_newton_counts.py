@@ -25,7 +25,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from eyemech.problems import scleral_buckling, sphere_inflation
+from eyemech.problems import cook_membrane, scleral_buckling, sphere_inflation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts
 from eyemech.problems.solve import driver
@@ -391,12 +391,14 @@ def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
 
 
 def test_factorisation_choice():
-    """"auto" is the solver's scene choice (LDLᵀ only at the sphere's P2P1, LU at Q2P1, where
-    LDLᵀ's ordering costs 1.5× LU's flops); an unknown name is a ParameterError naming it."""
+    """"auto" is the solver's scene choice (LDLᵀ at the sphere's P2P1 but LU at its Q2P1, where
+    LDLᵀ's ordering costs 1.5× LU's flops; LDLᵀ at Cook's membrane's default Q2P1, where it
+    halves them); an unknown name is a ParameterError naming it."""
     from eyemech.problems.run.parameters import ParameterError
 
     assert (sphere_inflation.auto_factorisation("P2P1"),
             sphere_inflation.auto_factorisation("Q2P1")) == ("ldlt", "lu")
+    assert cook_membrane.auto_factorisation("Q2P1") == "ldlt"
     assert NewtonOptions().as_petsc(auto="ldlt")["pc_type"] == "cholesky"
     assert NewtonOptions().as_petsc()["pc_type"] == "lu"
     assert NewtonOptions(factorisation="lu").as_petsc(auto="ldlt")["pc_type"] == "lu"
