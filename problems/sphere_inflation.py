@@ -86,11 +86,10 @@ class Parameters(SceneParameters, SolverChoice):
 def auto_factorisation(element: str) -> str:
     """The factorisation ``--factorisation auto`` uses. The Jacobian is symmetric (the residual
     is the energy's gradient; the follower pressure's stiffness is symmetric on the closed
-    cavity: ‖A−Aᵀ‖/‖A‖ = 1.2e-16). MUMPS LDLᵀ halves LU's factor and flops at P2P1 (4.18 M
-    against 8.31 M entries, 1.7 against 3.4 GFlop) but at Q2P1 its symmetric ordering costs
-    1.5× LU's flops (6.2 against 4.2 GFlop) and twice its time: docs/atlas/peer-comparison.md,
-    "Symmetric factorisation"."""
-    return "ldlt" if element == "P2P1" else "lu"
+    cavity: ‖A−Aᵀ‖/‖A‖ = 1.2e-16), and MUMPS LDLᵀ with its [u, p]-pair ordering halves LU's
+    factor and flops at both elements (P2P1 4.20 M against 8.31 M entries, Q2P1 5.21 M against
+    10.19 M): docs/atlas/peer-comparison.md, "Symmetric factorisation"."""
+    return "ldlt" if element in ("P2P1", "Q2P1") else "lu"
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,

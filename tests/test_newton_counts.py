@@ -373,6 +373,7 @@ def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
         factor = solvers[-1].factor_matrix()
         assert factor is not None and factor.getType() == "mumps"
         assert factor.getMumpsIcntl(14) == code_icntl_14()
+        assert factor.getMumpsIcntl(12) == (2 if factorisation == "auto" else 1)
         pc_type = solvers[-1].snes.getKSP().getPC().getType()
         return json.loads((out / "results.json").read_text()), pc_type, factor.getMumpsInfog(29)
 
@@ -391,15 +392,19 @@ def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
 
 
 def test_factorisation_choice():
-    """"auto" is the solver's scene choice (LDLᵀ at the sphere's P2P1 but LU at its Q2P1, where
-    LDLᵀ's ordering costs 1.5× LU's flops; LDLᵀ at Cook's membrane's default Q2P1, where it
-    halves them); an unknown name is a ParameterError naming it."""
+    """"auto" is the solver's scene choice (LDLᵀ at the sphere's and Cook's membrane's P2P1 and
+    Q2P1, measured to halve LU's factor), LDLᵀ comes with MUMPS's [u, p]-pair ordering (ICNTL(12)
+    = 2 with ICNTL(6) = 5: without it the sphere's Q2P1 factor took 1.5× LU's flops); an unknown
+    name is a ParameterError naming it."""
     from eyemech.problems.run.parameters import ParameterError
 
     assert (sphere_inflation.auto_factorisation("P2P1"),
-            sphere_inflation.auto_factorisation("Q2P1")) == ("ldlt", "lu")
+            sphere_inflation.auto_factorisation("Q2P1")) == ("ldlt", "ldlt")
     assert cook_membrane.auto_factorisation("Q2P1") == "ldlt"
     assert NewtonOptions().as_petsc(auto="ldlt")["pc_type"] == "cholesky"
+    ldlt = NewtonOptions().as_petsc(auto="ldlt")
+    assert (ldlt["mat_mumps_icntl_12"], ldlt["mat_mumps_icntl_6"]) == ("2", "5")
+    assert "mat_mumps_icntl_12" not in NewtonOptions().as_petsc()
     assert NewtonOptions().as_petsc()["pc_type"] == "lu"
     assert NewtonOptions(factorisation="lu").as_petsc(auto="ldlt")["pc_type"] == "lu"
     assert NewtonOptions(factorisation="ldlt").as_petsc()["pc_type"] == "cholesky"
