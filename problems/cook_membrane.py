@@ -67,7 +67,7 @@ class Parameters(SceneParameters):
 
 def auto_factorisation(element: str) -> str:
     """The factorisation ``--factorisation auto`` uses: MUMPS LDLᵀ where it was measured to
-    halve LU's factor (the Jacobian is symmetric, ‖A−Aᵀ‖/‖A‖ = 6e-17; default mesh: Q2P1 0.36 M
+    halve LU's factor (the Jacobian is symmetric, ‖A−Aᵀ‖/‖A‖ = 6e-17; default mesh: Q2P1 0.38 M
     against 0.72 M entries, P2P1 0.51 M against 0.96 M, the same tip displacement to 15 digits:
     docs/atlas/peer-comparison.md, "Symmetric factorisation"), LU elsewhere."""
     return "ldlt" if element in ("Q2P1", "P2P1") else "lu"
