@@ -47,6 +47,10 @@ def _parser() -> argparse.ArgumentParser:
                        help="override one parameter (repeatable)")
         p.add_argument("--petsc", action="append", default=[], metavar="OPTION=VALUE",
                        help="PETSc option for the Newton solver, e.g. snes_linesearch_type=bt")
+        p.add_argument("--factorisation", choices=("auto", "lu", "ldlt"), default="auto",
+                       help="the direct solver's factorisation: MUMPS LU, MUMPS LDLᵀ (symmetric "
+                            "Jacobians only), or auto: the scene's choice, LU unless LDLᵀ was "
+                            "measured to pay (docs/atlas/peer-comparison.md)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
         p.add_argument("--no-fields", action="store_true", help="do not write VTX fields")
         p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
@@ -241,7 +245,8 @@ def _options(args):
     )
     from eyemech.problems.solve.driver import NewtonOptions
 
-    newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()})
+    newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()},
+                           factorisation=args.factorisation)
     check_petsc_options(newton.petsc)  # unknown names and unreadable values: exit 2 now
     try:
         steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)

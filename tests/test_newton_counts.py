@@ -25,7 +25,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from eyemech.problems import scleral_buckling, sphere_inflation
+from eyemech.problems import cook_membrane, scleral_buckling, sphere_inflation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts
 from eyemech.problems.solve import driver
@@ -391,3 +391,57 @@ def test_full_steps_in_the_settling_step_save_factorisations():
     assert _stage_factorisations(full, 4) <= 0.5 * _stage_factorisations(backtracking, 4)
     assert full.as_json()["solver_counts"]["factorisations"] < \
         backtracking.as_json()["solver_counts"]["factorisations"]
+
+
+def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
+    """The sphere's default (``--factorisation auto`` at P2P1) reaches MUMPS as LDLᵀ (PETSc's
+    cholesky on the symmetric indefinite Jacobian, ‖A−Aᵀ‖/‖A‖ = 1.2e-16): the same Newton
+    history and answer as ``--factorisation lu`` to round-off, with about half its factor
+    entries (INFOG(29))."""
+    from eyemech.scripts.cli import main
+
+    def run(factorisation: str) -> tuple[dict, str, int]:
+        out = tmp_path / factorisation
+        code = main(["run", "sphere-inflation", "--set", "mesh_size=4.0", "--factorisation",
+                     factorisation, "--out", str(out), "--no-fields", "--no-pictures", "--quiet"])
+        assert code == 0
+        factor = solvers[-1].factor_matrix()
+        assert factor is not None and factor.getType() == "mumps"
+        assert factor.getMumpsIcntl(14) == code_icntl_14()
+        assert factor.getMumpsIcntl(12) == (2 if factorisation == "auto" else 1)
+        pc_type = solvers[-1].snes.getKSP().getPC().getType()
+        return json.loads((out / "results.json").read_text()), pc_type, factor.getMumpsInfog(29)
+
+    lu, lu_pc, lu_entries = run("lu")
+    ldlt, ldlt_pc, ldlt_entries = run("auto")
+    assert (lu_pc, ldlt_pc) == ("lu", "cholesky")
+    # one triangle of a symmetric ordering: 0.50 of LU's entries at h = 1 (4.18 M / 8.31 M)
+    assert ldlt_entries < 0.6 * lu_entries, (ldlt_entries, lu_entries)
+    (step_lu,), (step_ldlt,) = lu["steps"], ldlt["steps"]
+    assert step_ldlt["newton_iterations"] == step_lu["newton_iterations"]
+    # the last residual is round-off (1e-15): compare the ones above it
+    np.testing.assert_allclose(step_ldlt["residuals"][:-1], step_lu["residuals"][:-1], rtol=1e-9)
+    assert step_ldlt["inner_radius_deformed"] == pytest.approx(step_lu["inner_radius_deformed"],
+                                                               rel=1e-12)
+    check_counts(ldlt)
+
+
+def test_factorisation_choice():
+    """"auto" is the solver's scene choice (LDLᵀ at the sphere's and Cook's membrane's P2P1 and
+    Q2P1, measured to halve LU's factor), LDLᵀ comes with MUMPS's [u, p]-pair ordering (ICNTL(12)
+    = 2 with ICNTL(6) = 5: without it the sphere's Q2P1 factor took 1.5× LU's flops); an unknown
+    name is a ParameterError naming it."""
+    from eyemech.problems.run.parameters import ParameterError
+
+    assert (sphere_inflation.auto_factorisation("P2P1"),
+            sphere_inflation.auto_factorisation("Q2P1")) == ("ldlt", "ldlt")
+    assert cook_membrane.auto_factorisation("Q2P1") == "ldlt"
+    assert NewtonOptions().as_petsc(auto="ldlt")["pc_type"] == "cholesky"
+    ldlt = NewtonOptions().as_petsc(auto="ldlt")
+    assert (ldlt["mat_mumps_icntl_12"], ldlt["mat_mumps_icntl_6"]) == ("2", "5")
+    assert "mat_mumps_icntl_12" not in NewtonOptions().as_petsc()
+    assert NewtonOptions().as_petsc()["pc_type"] == "lu"
+    assert NewtonOptions(factorisation="lu").as_petsc(auto="ldlt")["pc_type"] == "lu"
+    assert NewtonOptions(factorisation="ldlt").as_petsc()["pc_type"] == "cholesky"
+    with pytest.raises(ParameterError, match="factorisation"):
+        NewtonOptions(factorisation="cholesky")

@@ -46,6 +46,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
+from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts, Timings
 
 if TYPE_CHECKING:
@@ -53,6 +54,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("eyemech")
 
+FACTORISATIONS = ("auto", "lu", "ldlt")
 
 
 class SolveFailure(RuntimeError):
@@ -81,6 +83,10 @@ class NewtonOptions:
     stol: float = 0.0
     max_it: int = 15
     linear_solver: str = "mumps"  # mumps | superlu_dist | petsc (LU) | iterative via petsc
+    # the direct factorisation: "lu", "ldlt" (MUMPS LDLᵀ of a symmetric indefinite Jacobian,
+    # PETSc's cholesky; one triangle is read) or "auto" (the solver's scene choice, LU unless
+    # it declares LDLᵀ measured to pay: docs/atlas/peer-comparison.md, "Symmetric factorisation")
+    factorisation: str = "auto"
     petsc: dict[str, str] = dataclasses.field(default_factory=dict)
     # modified Newton: the last Jacobian (and its factorisation) is kept while Newton
     # contracts, ‖F_k‖ ≤ θ ‖F_k−1‖, and across solves until ``NonlinearSolver.
@@ -103,9 +109,16 @@ class NewtonOptions:
     # the step; "": no retry; docs/scleral_buckling.md, "Which contact chatters")
     fallback_line_search: str = ""
 
-    def as_petsc(self, linear: dict | None = None) -> dict[str, str]:
-        """SNES options, then the KSP/PC options: MUMPS LU, or ``linear`` (an iterative
-        solver's, see :mod:`~eyemech.problems.solve.linear_solvers`); ``petsc`` overrides all."""
+    def __post_init__(self) -> None:
+        if self.factorisation not in FACTORISATIONS:
+            raise ParameterError("factorisation", f"{self.factorisation!r} is not one of "
+                                 + ", ".join(FACTORISATIONS))
+
+    def as_petsc(self, linear: dict | None = None, auto: str = "lu") -> dict[str, str]:
+        """SNES options, then the KSP/PC options: MUMPS LU or LDLᵀ (``factorisation``;
+        ``auto`` is what "auto" selects), or ``linear`` (an iterative solver's, see
+        :mod:`~eyemech.problems.solve.linear_solvers`); ``petsc`` overrides all."""
+        factorisation = auto if self.factorisation == "auto" else self.factorisation
         options = {
             "snes_type": "newtonls",
             "snes_linesearch_type": self.line_search,
@@ -115,7 +128,7 @@ class NewtonOptions:
             "snes_max_it": self.reuse_max_it if self.reuse_contraction > 0 else self.max_it,
             "snes_error_if_not_converged": False,
             "ksp_type": "preonly",
-            "pc_type": "lu",
+            "pc_type": "cholesky" if factorisation == "ldlt" else "lu",
             "pc_factor_mat_solver_type": self.linear_solver,
             # MUMPS: more working space for the indefinite saddle-point systems
             "mat_mumps_icntl_14": 100,
@@ -124,6 +137,12 @@ class NewtonOptions:
             for key in ("pc_factor_mat_solver_type", "mat_mumps_icntl_14"):
                 del options[key]
             options.update(linear)
+        elif factorisation == "ldlt":
+            # MUMPS LDLᵀ orders the saddle point's [u, p] pairs together (ICNTL(12) = 2, the
+            # compressed ordering, which needs ICNTL(6) = 5 to find the pairs): on the sphere's
+            # Q2P1 half the factor and flops of its default ordering (5.2 M against 9.0 M
+            # entries), docs/atlas/peer-comparison.md, "Symmetric factorisation"
+            options.update({"mat_mumps_icntl_12": 2, "mat_mumps_icntl_6": 5})
         options.update(self.petsc)
         return {k: str(v) for k, v in options.items()}
 
@@ -168,6 +187,9 @@ class NonlinearSolver:
     (:class:`~eyemech.problems.solve.linear_solvers.IterativeSolver`: its ``options``,
     ``install(solver)`` after the options are set, ``update(x, A)`` after every
     Jacobian and its hooks).
+    ``auto_factorisation``: "lu" or "ldlt", what ``options.factorisation = "auto"`` selects;
+    "ldlt" only for a Jacobian that is symmetric (an energy's Hessian) and where LDLᵀ was
+    measured faster than LU.
     """
 
     _count = 0
@@ -176,8 +198,9 @@ class NonlinearSolver:
                  options: NewtonOptions | None = None, timings: Timings | None = None,
                  residual_hooks: Sequence[ResidualHook] = (),
                  jacobian_hooks: Sequence[JacobianHook] = (),
-                 matrix_kind: str | None = None, iterative=None):
+                 matrix_kind: str | None = None, iterative=None, auto_factorisation: str = "lu"):
         self.iterative = iterative
+        self.auto_factorisation = auto_factorisation  # what options.factorisation "auto" selects
         self.options = options or NewtonOptions()
         self.timings = timings or Timings()
         self.unknowns = list(unknowns) if isinstance(unknowns, (list, tuple)) else [unknowns]
@@ -264,7 +287,8 @@ class NonlinearSolver:
     def _set_options(self, prefix: str) -> None:
         linear = None if self.iterative is None else self.iterative.options(len(self.unknowns))
         self._petsc_options = {f"{prefix}{key}": value
-                               for key, value in self.options.as_petsc(linear).items()}
+                               for key, value in self.options.as_petsc(
+                                   linear, self.auto_factorisation).items()}
         self._insert_options()
         self.snes.setFromOptions()
         self.snes.getKSP().setFromOptions()

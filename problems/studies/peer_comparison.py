@@ -2,7 +2,9 @@
 defaults (P2P1 on tetrahedra, Q2P1 on hexahedra) timed side by side with
 :mod:`eyemech.problems.reference.plain_dolfinx_sphere`, which solves the same discrete
 problem (same mesh, same elements, Newton with MUMPS LU, relative residual 1e-9, the
-whole load in one step), so the errors match and the wall times compare.
+whole load in one step), so the errors match and the wall times compare. eyemech runs at
+its defaults, which factor the P2P1 Jacobian with MUMPS LDLᵀ (docs/atlas/peer-comparison.md,
+"Symmetric factorisation").
 
 Wall time is that of the whole process, as a user meets it: ``eyemech run ... --no-fields
 --no-pictures`` against ``python -m ...plain_dolfinx_sphere``, start-up and imports
