@@ -445,3 +445,18 @@ def test_factorisation_choice():
     assert NewtonOptions(factorisation="ldlt").as_petsc()["pc_type"] == "cholesky"
     with pytest.raises(ParameterError, match="factorisation"):
         NewtonOptions(factorisation="cholesky")
+
+
+def test_results_state_the_newton_stopping_test():
+    """results.json's ``newton_tolerances``: the stopping test the run's Newton solves used
+    (issue 26: a result states the accuracy it was converged to), here SNES's default
+    ‖F‖ ≤ max(1e-10, 1e-9 ‖F_0‖), and ``--petsc snes_rtol`` is what it then states."""
+    options = RunOptions(fields=False, pictures=False, quiet=True)
+    params = sphere_inflation.Parameters(mesh_size=4.0)
+    default = sphere_inflation.run(params, comm=MPI.COMM_SELF, options=options).as_json()
+    assert default["newton_tolerances"] == [{"solver": "SNES Newton", "rtol": 1e-9, "atol": 1e-10,
+                                             "norm": "l2 norm of the assembled residual"}]
+    tighter = RunOptions(fields=False, pictures=False, quiet=True,
+                         newton=NewtonOptions(petsc={"snes_rtol": "1e-11"}))
+    stated = sphere_inflation.run(params, comm=MPI.COMM_SELF, options=tighter).as_json()
+    assert [c["rtol"] for c in stated["newton_tolerances"]] == [1e-11]

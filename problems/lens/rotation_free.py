@@ -79,6 +79,8 @@ import time
 import numpy as np
 from numba import njit
 
+from eyemech.problems.run.results import record_stopping_criterion
+
 FREE, CLAMPED = 0, 1
 BOUNDARY_KINDS = {"free": FREE, "simply": FREE, "clamped": CLAMPED}
 
@@ -794,6 +796,7 @@ class Dynamics:
         self.solver = SymmetricSolver(shell, fixed, upper=upper)
         self._fixed = fixed
         self.rtol, self.atol, self.max_iterations = rtol, atol, max_iterations
+        record_stopping_criterion("rotation-free Newton", rtol, atol, "l2 norm of the residual")
         self.u = np.zeros(shell.n_dofs)
         self.v = np.zeros(shell.n_dofs)
         self.force = np.zeros(shell.n_dofs)

@@ -115,6 +115,17 @@ class SolverCounts:
 # reports what was added while it ran.
 SOLVER_COUNTS = SolverCounts()
 
+# the stopping tests of the Newton solvers built in this process, in order, each a dict
+# (solver, rtol, atol, norm): results.json's ``newton_tolerances`` lists the distinct ones
+# of its run, so a result states the accuracy it was converged to
+STOPPING_CRITERIA: list[dict[str, Any]] = []
+
+
+def record_stopping_criterion(solver: str, rtol: float, atol: float, norm: str) -> None:
+    """Newton stops at ‖F‖ ≤ max(atol, rtol ‖F_ref‖) in ``norm`` (called by each solver)."""
+    STOPPING_CRITERIA.append({"solver": solver, "rtol": float(rtol), "atol": float(atol),
+                              "norm": norm})
+
 
 @dataclasses.dataclass
 class Result:
@@ -140,6 +151,7 @@ class Result:
 
     def __post_init__(self) -> None:
         self._counts_at_start = SOLVER_COUNTS.copy()
+        self._criteria_at_start = len(STOPPING_CRITERIA)
 
     def __setattr__(self, name: str, value: Any) -> None:
         super().__setattr__(name, value)
@@ -153,10 +165,19 @@ class Result:
             return dict(self.solver_counts)
         return (SOLVER_COUNTS - self._counts_at_start).as_dict()
 
+    def stopping_criteria(self) -> list[dict[str, Any]]:
+        """The distinct Newton stopping tests of the solvers this run built."""
+        distinct: list[dict[str, Any]] = []
+        for criterion in STOPPING_CRITERIA[getattr(self, "_criteria_at_start", 0):]:
+            if criterion not in distinct:
+                distinct.append(criterion)
+        return distinct
+
     def as_json(self) -> dict[str, Any]:
         counts = self.counts()
         data = dataclasses.asdict(self)
         data["solver_counts"] = counts
+        data["newton_tolerances"] = self.stopping_criteria()
         data["versions"] = versions()
         data["machine"] = machine()
         return to_jsonable(data)

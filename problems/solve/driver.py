@@ -47,7 +47,12 @@ from petsc4py import PETSc
 
 from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
 from eyemech.problems.run.parameters import ParameterError
-from eyemech.problems.run.results import SOLVER_COUNTS, SolverCounts, Timings
+from eyemech.problems.run.results import (
+    SOLVER_COUNTS,
+    SolverCounts,
+    Timings,
+    record_stopping_criterion,
+)
 
 if TYPE_CHECKING:
     from eyemech.problems.run.checkpoint import Checkpoints
@@ -223,6 +228,8 @@ class NonlinearSolver:
         if iterative is not None:
             iterative.install(self)
         self._forget_options()
+        rtol, atol, _stol, _max_it = self.snes.getTolerances()
+        record_stopping_criterion("SNES Newton", rtol, atol, "l2 norm of the assembled residual")
         self.residual_history: list[float] = []
         self.linear_iterations = 0  # Krylov iterations of the last Newton solve (all its steps)
         self.counts = SolverCounts()       # work of all solves of this solver
