@@ -38,7 +38,7 @@ import numpy as np
 
 from eyemech.problems.lens.fold import EASY_ITERATIONS, blocked_dofs
 from eyemech.problems.lens.injector import Plunger, turn_about_x
-from eyemech.problems.lens.model import InjectorLayout, rolled
+from eyemech.problems.lens.model import InjectorLayout, require_ipctk, rolled
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
 from eyemech.problems.lens.rotation_free import Dynamics, FastLens, MeshInputError
 from eyemech.problems.lens.surface_contact import NodalObstacles, SurfaceSelfContact
@@ -141,11 +141,7 @@ def optic_measures(lens: FastLens, u: np.ndarray) -> dict:
 def self_contact(lens: FastLens, params) -> SurfaceSelfContact | None:
     if not params.self_contact:
         return None
-    try:
-        import ipctk  # noqa: F401
-    except ImportError as err:
-        raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
-                             "or set self_contact=false") from err
+    require_ipctk()
     return SurfaceSelfContact(lens.shell.X, lens.shell.tri, params.self_contact_distance,
                               params.self_contact_stiffness, friction=params.friction, slip=params.friction_slip)
 

@@ -210,17 +210,22 @@ def load_state(path: Path, shell: LensShell) -> None:
     shell.u.x.scatter_forward()
 
 
+def require_ipctk() -> None:
+    """Self-contact needs ipctk (the ``iol`` extra): refuse before any solve if it is missing."""
+    try:
+        import ipctk  # noqa: F401
+    except ImportError as err:
+        raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
+                             "or set self_contact=false") from err
+
+
 def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=None):
     """The lens' self-contact (:class:`~eyemech.problems.contact.ipc.SelfContact`), or
     None when ``self_contact`` is off. Needs ipctk (the ``iol`` extra); on N ranks rank 0
     evaluates it on the gathered lens."""
     if not params.self_contact:
         return None
-    try:
-        import ipctk  # noqa: F401
-    except ImportError as err:
-        raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
-                             "or set self_contact=false") from err
+    require_ipctk()
     from eyemech.problems.contact.ipc import SelfContact
 
     return SelfContact(shell.u, params.self_contact_distance, params.self_contact_stiffness,
