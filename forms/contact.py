@@ -261,6 +261,14 @@ def smoothed_penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float
     return pressure, slope
 
 
+def tangential_slips(normal: np.ndarray, anchor: np.ndarray, positions: np.ndarray):
+    """Lagged Coulomb friction's slips on arrays: projectors P = I − n⊗n onto the contact
+    planes, slips s = P (x − a) from the anchors a, and |s| (one row per slider)."""
+    projector = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
+    slip = np.einsum("nij,nj->ni", projector, positions - anchor)
+    return projector, slip, np.linalg.norm(slip, axis=1)
+
+
 def contact_traction(obstacle, u, penalty):
     """t = α ⟨−g⟩ n: the force per reference area the obstacle exerts on the body."""
     return penalty * penetration(obstacle, u) * obstacle_normal(obstacle, u)

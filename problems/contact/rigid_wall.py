@@ -44,7 +44,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from eyemech.forms.contact import smoothed_penalty_pressure
+from eyemech.forms.contact import smoothed_penalty_pressure, tangential_slips
 
 
 class NodalContact:
@@ -114,9 +114,7 @@ class NodalContact:
     def _slip(self, x: np.ndarray):
         """(nodes, μλ, tangential projectors P, slips s, |s|) of the lagged sliders at x."""
         nodes, weight, normal, anchor = self._lagged
-        projector = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
-        slip = np.einsum("nij,nj->ni", projector, x[nodes] - anchor)
-        return nodes, weight, projector, slip, np.linalg.norm(slip, axis=1)
+        return (nodes, weight, *tangential_slips(normal, anchor, x[nodes]))
 
     def _f1(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """f₁(r)/r and f₁′(r) of the smoothed Coulomb law (finite at r = 0)."""

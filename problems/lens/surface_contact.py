@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from eyemech.forms.contact import tangential_slips
+
 
 class SelfContactError(RuntimeError):
     """A state the barrier cannot start from (intersecting, or pairs within d̂ at rest)."""
@@ -235,9 +237,7 @@ class NodalObstacles:
     def _slip(self, x: np.ndarray):
         """(vertices, μλ, projectors P = I − n⊗n, slips s = P(x − a), |s|) of the sliders."""
         nodes, weight, normal, anchor = self._lagged
-        projector = np.eye(3)[None] - np.einsum("ni,nj->nij", normal, normal)
-        slip = np.einsum("nij,nj->ni", projector, x[nodes] - anchor)
-        return nodes, weight, projector, slip, np.linalg.norm(slip, axis=1)
+        return (nodes, weight, *tangential_slips(normal, anchor, x[nodes]))
 
     def _f0_f1(self, r: np.ndarray):
         """IPC's smoothed Coulomb: f₀(r), f₁(r)/r and f₁′(r) (finite at r = 0), ε = ``slip``."""
