@@ -155,6 +155,13 @@ def penalty(degree: int, factor: float, h_edge):
     return factor * degree * (degree + 1) / h_edge
 
 
+def normal_height(mesh):
+    """2|T|/|e|: the cell's height over the facet. The trace inverse inequality
+    ‖∂v/∂ν‖²_e ≤ C p²/h ‖∇v‖²_T holds with this h on stretched cells; the cell diameter
+    is the long side and underestimates the penalty a clamped edge needs there."""
+    return 2.0 * ufl.CellVolume(mesh) / ufl.FacetArea(mesh)
+
+
 def shell_energy(u, material: ShellMaterial, orientation, *, degree: int, penalty_factor,
                  dx: ufl.Measure, dS: ufl.Measure, ds_clamped: ufl.Measure | None = None,
                  kinematics: Kinematics = "nonlinear"):
@@ -179,7 +186,7 @@ def shell_energy(u, material: ShellMaterial, orientation, *, degree: int, penalt
     if ds_clamped is not None:
         theta = clamped_rotation(geo)
         edges += (-ufl.dot(nu, M * nu) * theta
-                  + 0.5 * penalty(degree, penalty_factor, size) * D * theta ** 2) * ds_clamped
+                  + 0.5 * penalty(degree, penalty_factor, normal_height(mesh)) * D * theta ** 2) * ds_clamped
     return bulk + edges
 
 

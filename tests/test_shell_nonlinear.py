@@ -28,11 +28,12 @@ Tolerances (from the refinement measured on the team VM, P2 crossed)
   the study's 8-division row (so the study's 16-division row, within 5.5 % of the table
   at every load, is the convergence evidence for this computation). 8 divisions is the
   only mesh fast enough here (~40 Newton iterations of 7 920 dofs, ~20 s on the VM).
-- Levy's plate at Q = 95: centre deflection error −1.48 / −1.14 / −0.99 / −0.91 % on
-  8 / 16 / 24 / 32 divisions, converging from below like h¹ towards ≈ −0.7 % (the
-  difference of the Koiter shell from Levy's von Kármán series, truncated). The test
-  uses 8 divisions and 2 %: the measured −1.48 % plus margin; a linear plate would be
-  +42 % (1.298 h).
+- Levy's plate at Q = 95: centre deflection error −2.48 / −1.31 / −0.94 % on
+  8 / 16 / 32 divisions, converging from below towards ≈ −0.7 % (the difference of the
+  Koiter shell from Levy's von Kármán series, truncated); the clamped edges' penalty is
+  the coercive one on the cells' normal height (forms/shell.py ``normal_height``). The
+  test uses 8 divisions and 3 %: the measured −2.48 % plus margin; a linear plate would
+  be +42 % (1.298 h).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from eyemech.problems.studies._common import read_csv
 QUIET = RunOptions(fields=False, pictures=False)
 STUDY_CSV = Path(__file__).resolve().parents[1] / "docs" / "studies" / "shell_hemisphere_nonlinear.csv"
 LEVY_DIVISIONS = 8
-LEVY_TOLERANCE = 0.02  # measured -1.48 % at 8 divisions, -0.91 % at 32 (docstring)
+LEVY_TOLERANCE = 0.03  # measured -2.48 % at 8 divisions, -1.31 % at 16, -0.94 % at 32
 HEMISPHERE_TOLERANCE = 0.25  # linear locking error at 8 divisions (23 %) + 2 % (docstring)
 
 
