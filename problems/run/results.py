@@ -121,10 +121,14 @@ SOLVER_COUNTS = SolverCounts()
 STOPPING_CRITERIA: list[dict[str, Any]] = []
 
 
-def record_stopping_criterion(solver: str, rtol: float, atol: float, norm: str) -> None:
-    """Newton stops at ‖F‖ ≤ max(atol, rtol ‖F_ref‖) in ``norm`` (called by each solver)."""
-    STOPPING_CRITERIA.append({"solver": solver, "rtol": float(rtol), "atol": float(atol),
-                              "norm": norm})
+def record_stopping_criterion(solver: str, rtol: float, atol: float, norm: str,
+                              stol: float = 0.0) -> None:
+    """Newton stops at ‖F‖ ≤ max(atol, rtol ‖F_ref‖) in ``norm`` (called by each solver),
+    or, where ``stol`` > 0, at an update ‖δu‖ ≤ stol ‖u‖ (recorded only then)."""
+    criterion = {"solver": solver, "rtol": float(rtol), "atol": float(atol), "norm": norm}
+    if stol > 0.0:
+        criterion["stol"] = float(stol)
+    STOPPING_CRITERIA.append(criterion)
 
 
 @dataclasses.dataclass

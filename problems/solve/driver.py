@@ -228,8 +228,8 @@ class NonlinearSolver:
         if iterative is not None:
             iterative.install(self)
         self._forget_options()
-        rtol, atol, _stol, _max_it = self.snes.getTolerances()
-        record_stopping_criterion("SNES Newton", rtol, atol, "l2 norm of the assembled residual")
+        rtol, atol, stol, _max_it = self.snes.getTolerances()
+        record_stopping_criterion("SNES Newton", rtol, atol, "l2 norm of the assembled residual", stol)
         self.residual_history: list[float] = []
         self.linear_iterations = 0  # Krylov iterations of the last Newton solve (all its steps)
         self.counts = SolverCounts()       # work of all solves of this solver
