@@ -93,18 +93,42 @@ def _abs_azimuth(x):
     return ufl.atan2(ufl.sqrt(x[0] ** 2 + 1e-24), x[1])
 
 
-def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indentation,
+@dataclasses.dataclass(frozen=True)
+class BuckleSizes:
+    """The buckle's dimensions as they enter the forms (mm; the tire's half arc in
+    radians): dolfinx Constants in a scene, so that new sizes reuse the compiled forms
+    (tests/test_compile_once.py), or floats. :meth:`of` makes them from a
+    :class:`BuckleShape` with ``constant`` (a float → UFL-value factory)."""
+
+    band_width: object
+    band_thickness: object
+    tire_width: object
+    tire_height: object
+    corner_radius: object
+    tire_half_arc: object
+
+    @classmethod
+    def of(cls, shape: BuckleShape, constant=float) -> BuckleSizes:
+        return cls(constant(shape.band_width), constant(shape.band_thickness),
+                   constant(shape.tire_width), constant(shape.tire_height),
+                   constant(shape.corner_radius), constant(math.radians(0.5 * shape.tire_arc_deg)))
+
+
+def buckle_rings(sizes: BuckleSizes, axial_position, base_radius, indentation,
                  tire_indentation=None):
-    """(tire, band) ring obstacles (both at ``base_radius``); ``base_radius`` and the
-    travels may be Constants or Real-space Functions; the tire's travel is the band's
-    unless ``tire_indentation`` is given."""
-    height = max(shape.tire_height, 1e-6)
+    """(tire, band) ring obstacles (both at ``base_radius``); the sizes, the axial
+    position, ``base_radius`` and the travels may be Constants or Real-space Functions;
+    the tire's travel is the band's unless ``tire_indentation`` is given. The corner
+    radius is capped by half of each profile's sides (UFL ``min_value``, so that it
+    stays a Constant)."""
+    height = ufl.max_value(sizes.tire_height, 1e-6)
     tire = RoundedRectangle(center=(base_radius + 0.5 * height, axial_position),
-                            width=height, height=shape.tire_width,
-                            corner_radius=min(shape.corner_radius, 0.5 * height, 0.5 * shape.tire_width))
-    band = RoundedRectangle(center=(base_radius + 0.5 * shape.band_thickness, axial_position),
-                            width=shape.band_thickness, height=shape.band_width,
-                            corner_radius=min(shape.corner_radius, 0.5 * shape.band_thickness))
+                            width=height, height=sizes.tire_width,
+                            corner_radius=ufl.min_value(sizes.corner_radius, ufl.min_value(
+                                0.5 * height, 0.5 * sizes.tire_width)))
+    band = RoundedRectangle(center=(base_radius + 0.5 * sizes.band_thickness, axial_position),
+                            width=sizes.band_thickness, height=sizes.band_width,
+                            corner_radius=ufl.min_value(sizes.corner_radius, 0.5 * sizes.band_thickness))
     tire_travel = indentation if tire_indentation is None else tire_indentation
     return Ring(indentation=tire_travel, profile=tire), Ring(indentation=indentation, profile=band)
 
@@ -112,22 +136,34 @@ def buckle_rings(shape: BuckleShape, axial_position: float, base_radius, indenta
 @dataclasses.dataclass(frozen=True)
 class Buckle:
     """Union of the band ring and the (arc-limited) tire: ``gap(x)`` is the smaller
-    signed distance."""
+    signed distance. ``shape`` decides the forms' structure (band, tire, arc-limited or
+    not); ``sizes`` and ``axial_position`` are the numbers in them (Constants in a
+    scene; floats from ``shape`` when ``sizes`` is None)."""
 
     shape: BuckleShape
-    axial_position: float
+    axial_position: object
     base_radius: object
     indentation: object
     tire_indentation: object | None = None  # None: the tire moves with the band
+    sizes: BuckleSizes | None = None
+
+    @property
+    def dimensions(self) -> BuckleSizes:
+        return self.sizes if self.sizes is not None else BuckleSizes.of(self.shape)
+
+    @property
+    def arc_limited(self) -> bool:
+        """Whether the tire is cut to an arc: a wedge in the forms (structural)."""
+        return self.shape.tire_arc_deg < 360.0
 
     def gap(self, x):
-        tire, band = buckle_rings(self.shape, self.axial_position, self.base_radius,
+        tire, band = buckle_rings(self.dimensions, self.axial_position, self.base_radius,
                                   self.indentation, self.tire_indentation)
         gaps = []
         if self.shape.has_tire:
             g = tire.gap(x)
-            if self.shape.tire_arc_deg < 360.0:
-                half = math.radians(0.5 * self.shape.tire_arc_deg)
+            if self.arc_limited:
+                half = self.dimensions.tire_half_arc
                 rho = ufl.sqrt(x[0] ** 2 + x[1] ** 2 + 1e-24)
                 over = ufl.min_value(ufl.max_value(_abs_azimuth(x) - half, -0.5 * math.pi),
                                      0.5 * math.pi)
@@ -141,28 +177,32 @@ class Buckle:
         """1 on the sclera under the buckle (axially within the element's width at
         that meridian), 0 elsewhere; ``x`` a position that does not depend on the
         unknowns (the pre-operative one), so the weight carries no derivative."""
+        sizes = self.dimensions
         z = abs(x[2] - self.axial_position)
         weights = []
         if self.shape.has_tire:
-            inside = ufl.le(z, 0.5 * self.shape.tire_width)
-            if self.shape.tire_arc_deg < 360.0:
-                inside = ufl.And(inside, ufl.le(_abs_azimuth(x),
-                                                math.radians(0.5 * self.shape.tire_arc_deg)))
+            inside = ufl.le(z, 0.5 * sizes.tire_width)
+            if self.arc_limited:
+                inside = ufl.And(inside, ufl.le(_abs_azimuth(x), sizes.tire_half_arc))
             weights.append(ufl.conditional(inside, 1.0, 0.0))
         if self.shape.has_band:
-            weights.append(ufl.conditional(ufl.le(z, 0.5 * self.shape.band_width), 1.0, 0.0))
+            weights.append(ufl.conditional(ufl.le(z, 0.5 * sizes.band_width), 1.0, 0.0))
         return weights[0] if len(weights) == 1 else ufl.max_value(*weights)
 
     def footprint_mask(self, x: np.ndarray) -> np.ndarray:
-        """:meth:`footprint_weight` on an array of points (n, 3)."""
-        z = np.abs(x[:, 2] - self.axial_position)
-        azimuth = np.degrees(np.arctan2(np.abs(x[:, 0]), x[:, 1]))
+        """:meth:`footprint_weight` on an array of points (n, 3), from the same numbers
+        (a Constant's current value)."""
+        sizes = self.dimensions
+        z = np.abs(x[:, 2] - float(self.axial_position))
+        azimuth = np.arctan2(np.abs(x[:, 0]), x[:, 1])
         mask = np.zeros(len(x), bool)
         if self.shape.has_tire:
-            mask |= (z <= 0.5 * self.shape.tire_width) & \
-                (azimuth <= 0.5 * self.shape.tire_arc_deg)
+            within = z <= 0.5 * float(sizes.tire_width)
+            if self.arc_limited:
+                within &= azimuth <= float(sizes.tire_half_arc)
+            mask |= within
         if self.shape.has_band:
-            mask |= z <= 0.5 * self.shape.band_width
+            mask |= z <= 0.5 * float(sizes.band_width)
         return mask
 
 

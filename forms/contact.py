@@ -135,7 +135,8 @@ class Torus(_OfRevolution):
 @dataclasses.dataclass(frozen=True)
 class RoundedRectangle:
     """Centre (ρc, zc), full ``width`` (along ρ) and ``height`` (along z), corners
-    rounded with ``corner_radius`` (0 = sharp). Signed distance (Quílez)."""
+    rounded with ``corner_radius`` (0 = sharp). Signed distance (Quílez). The sizes
+    may be UFL values (Constants): then the caller keeps the corner radius in range."""
 
     center: tuple[float, float]
     width: float
@@ -143,6 +144,9 @@ class RoundedRectangle:
     corner_radius: float = 0.0
 
     def __post_init__(self):
+        sizes = (self.corner_radius, self.width, self.height)
+        if not all(isinstance(a, (int, float)) for a in sizes):
+            return
         if not 0 <= self.corner_radius <= 0.5 * min(self.width, self.height):
             raise ValueError("corner_radius must lie in [0, min(width, height)/2]")
 
@@ -220,7 +224,7 @@ def penalty_energy(obstacle, u, penalty, measure):
     return 0.5 * penalty * penetration(obstacle, u) ** 2 * measure
 
 
-def smoothed_penalty_density(g, penalty, smoothing: float):
+def smoothed_penalty_density(g, penalty, smoothing):
     """The penalty energy per area φ(g) with its kink rounded off over |g| < ε (UFL):
 
         φ = ½ α g² + α ε²/6        g ≤ −ε
@@ -231,8 +235,9 @@ def smoothed_penalty_density(g, penalty, smoothing: float):
     (:func:`smoothed_penalty_pressure` evaluates the same law on arrays). ε = 0 is the
     plain ½ α ⟨−g⟩². Why: a C² energy keeps Newton from cycling on points that sit at
     g ≈ 0 (measured on the buckle: a 2-cycle at residual 1e-4 without it); the price is a
-    pressure up to αε/4 for gaps below ε (a stand-off ≤ ε)."""
-    if smoothing <= 0:
+    pressure up to αε/4 for gaps below ε (a stand-off ≤ ε). ε = 0 (a number) and ε > 0
+    are two forms; ε > 0 may be a Constant, so that its value compiles nothing new."""
+    if isinstance(smoothing, (int, float)) and smoothing <= 0:
         return 0.5 * penalty * ufl.max_value(-g, 0.0) ** 2
     eps = smoothing
     return ufl.conditional(
@@ -241,7 +246,7 @@ def smoothed_penalty_density(g, penalty, smoothing: float):
                         penalty * (eps - g) ** 3 / (12 * eps)))
 
 
-def smoothed_penalty_energy(obstacle, u, penalty, smoothing: float, measure):
+def smoothed_penalty_energy(obstacle, u, penalty, smoothing, measure):
     """Π_c = ∫ φ(g(X + u)) dA over ``measure`` with φ of :func:`smoothed_penalty_density`."""
     return smoothed_penalty_density(obstacle.gap(deformed_position(u)), penalty, smoothing) * measure
 

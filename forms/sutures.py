@@ -18,17 +18,18 @@ import math
 import ufl
 
 
-def bite_weight(X, centre, bite_radius: float):
+def bite_weight(X, centre, bite_radius):
     """w(X): a paraboloid bump of unit integral (on a flat surface) around ``centre``."""
     distance2 = ufl.dot(X - centre, X - centre)
     return ufl.max_value(1.0 - distance2 / bite_radius**2, 0.0) / (0.5 * math.pi * bite_radius**2)
 
 
-def suture_residual(forces, centres, bite_radius: float, v, measure):
+def suture_residual(forces, centres, bite_radius, v, measure):
     """−Σ_s ∫ F_s·v w_s dA: the external work of the suture forces (residual sign).
 
     ``forces`` and ``centres`` are sequences of 3-vectors (dolfinx Constants for the
-    forces so a scene can turn and scale them between steps)."""
+    forces so a scene can turn and scale them between steps; Constants or tuples for the
+    centres), ``bite_radius`` a number or a Constant."""
     X = ufl.SpatialCoordinate(measure.ufl_domain())
     work = sum(ufl.dot(F, v) * bite_weight(X, ufl.as_vector(c), bite_radius)
                for F, c in zip(forces, centres))

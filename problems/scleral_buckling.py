@@ -69,6 +69,7 @@ from eyemech.forms import (
 from eyemech.forms.buckle import (
     Buckle,
     BuckleShape,
+    BuckleSizes,
     band_stop_force,
     pinned_travel_residual,
     slip,
@@ -531,8 +532,13 @@ class BucklingModel:
         self.axial_position, self.buckle_angle = self._buckle_axial_position()
         self.base_radius = dolfinx.fem.Constant(mesh, 2 * self.geometry.sclera_radius)
         self.indentation = dolfinx.fem.Constant(mesh, 0.0)  # the band's (prescribed) travel
-        self.buckle = Buckle(params.buckle_shape(), self.axial_position, self.base_radius,
-                             self.indentation, tire_indentation=self.tire_travel)
+        # its sizes and axial position as Constants: a sweep over them (buckling-planning)
+        # reuses the compiled residual; which elements there are and whether the tire is
+        # arc-limited change the forms' structure (docs/atlas/peer-comparison.md)
+        shape = params.buckle_shape()
+        self.buckle = Buckle(shape, dolfinx.fem.Constant(mesh, self.axial_position), self.base_radius,
+                             self.indentation, tire_indentation=self.tire_travel,
+                             sizes=BuckleSizes.of(shape, lambda value: dolfinx.fem.Constant(mesh, value)))
         # the force-driven tire (suture_model = loop): its travel is free from step 3 on
         self.tire_loop = params.suture_model == "loop" and params.buckle_shape().has_tire
         self.tire_free = dolfinx.fem.Constant(mesh, 0.0)
@@ -624,7 +630,10 @@ class BucklingModel:
                     + follower_pressure(self.P, self.u, v, self.wall)
                     + self.coupled * liquid + (1 - self.coupled) * pinned)
         contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
-        contact = smoothed_penalty_energy(self.buckle, self.u, self.contact_penalty, params.contact_smoothing,
+        # ε = 0 and ε > 0 are two forms; ε's value is a Constant
+        smoothing = dolfinx.fem.Constant(self.eye.mesh, params.contact_smoothing) \
+            if params.contact_smoothing > 0 else 0.0
+        contact = smoothed_penalty_energy(self.buckle, self.u, self.contact_penalty, smoothing,
                                           contact_ds(self.eye.tag("sclera_outer")))
         self.contact_energy = contact
         residual += ufl.derivative(contact, self.u, v)
@@ -694,8 +703,7 @@ class BucklingModel:
         self.tire_stiffness = dolfinx.fem.Constant(mesh, self.penalty * max(footprint, 1.0))
         # one form for every bite: its centre and radius are Constants
         centre = dolfinx.fem.Constant(mesh, np.zeros(3))
-        radius = dolfinx.fem.Constant(mesh, float(self.params.suture_bite_radius))
-        share = dolfinx.fem.form(bite_weight(X, centre, radius) * measure)
+        share = dolfinx.fem.form(bite_weight(X, centre, self.sutures.bite_radius) * measure)
         shares = []
         for point in self.sutures.points:
             centre.value[:] = point.centre

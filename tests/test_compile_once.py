@@ -77,6 +77,30 @@ def test_eye_with_new_moduli_penalty_and_mesh_compiles_nothing_after_its_first_c
     assert compilations[first:] == []
 
 
+def test_eye_with_a_new_buckle_and_sutures_compiles_nothing_after_its_first_case(compilations):
+    """The planning map's factors (``eyemech study buckling-planning``): the coarse eye
+    twice, settle = false, half the default travel, the second case with a new buckle
+    position, band and tire widths, tire height, corner radius, tire arc, suture width,
+    bite radius and penalty smoothing ε (> 0 in both: ε = 0 is another form). The
+    buckle's sizes and position, the bites' centres and radius and ε are Constants
+    (forms/buckle.py, forms/sutures.py); a literal among them would compile the eye's
+    residual and Jacobian blocks again. ≈ 10 s a case."""
+
+    def case() -> scleral_buckling.Parameters:
+        return scleral_buckling.Parameters(
+            resolution="coarse", settle=False, indentation=0.75,
+            buckle_position=12.0 + random.random(), band_width=2.0 + random.random(),
+            tire_width=6.5 + random.random(), tire_height=0.8 + 0.4 * random.random(),
+            buckle_corner_radius=0.2 + 0.2 * random.random(), tire_arc_deg=80.0 + 20.0 * random.random(),
+            suture_width=9.0 + random.random(), suture_bite_radius=0.8 + 0.4 * random.random(),
+            contact_smoothing=0.002 + 0.002 * random.random())
+
+    scleral_buckling.run(case(), comm=MPI.COMM_SELF, options=QUIET)
+    first = len(compilations)
+    scleral_buckling.run(case(), comm=MPI.COMM_SELF, options=QUIET)
+    assert compilations[first:] == []
+
+
 @pytest.mark.parametrize("later", [(109, 117), (209, 217), (1009, 1017)])
 def test_a_forms_signature_does_not_depend_on_its_constants_creation_counts(later):
     """The same form over two Constants created 9th and 17th in a process, or later

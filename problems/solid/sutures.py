@@ -32,13 +32,15 @@ class SutureForces:
         self.points = points
         self.probe = NodeProbe(V, np.array([p.centre for p in points]), candidates)
         self.forces = [dolfinx.fem.Constant(mesh, np.zeros(3)) for _ in points]
+        # Constants, not literals: the bites' places follow the buckle's position and the
+        # suture width, and literals would compile the eye's residual anew for each of them
+        self.centres = [dolfinx.fem.Constant(mesh, np.array(p.centre, dtype=float)) for p in points]
+        self.bite_radius = dolfinx.fem.Constant(mesh, float(bite_radius))
         self.directions = np.zeros((len(points), 3))
         self.magnitude = 0.0
-        self.bite_radius = bite_radius
 
     def residual(self, v, measure):
-        return suture_residual(self.forces, [p.centre for p in self.points], self.bite_radius, v,
-                               measure)
+        return suture_residual(self.forces, self.centres, self.bite_radius, v, measure)
 
     def set_magnitude(self, magnitude: float) -> None:
         self.magnitude = magnitude
