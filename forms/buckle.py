@@ -23,6 +23,15 @@ the ring's and the wedge's (exact away from the edges where both are positive).
 The wedge's distance is ρ sin(|φ| − φ₀/2), clamped to ±90° of overshoot so that
 points deep inside the wedge stay inside.
 
+A radial tire (``orientation = radial``, segmental only) lies along the tear's
+meridian instead of across it: a ring about the x axis (the normal of the symmetry
+plane, through the eye's centre) whose cross-section in the (ρ', x) half-plane is the
+same rounded rectangle, ``tire_width`` across the meridian (along x) and
+``tire_height`` radially, cut by the wedge |β − β₀| ≤ ``tire_length``/(2 R) about x
+(β = atan2(y, z) the polar angle along the meridian, β₀ the tire's centre, R the
+sclera's radius on which the length is measured). Its base radius is measured from
+the x axis, and it travels towards the eye's centre.
+
 Sutured buckle: the sclera under the buckle's footprint is tied to it tangentially
 (:func:`tangential_tie_energy`): sutures hold band and tire on the sclera, which
 must not slide along them (with a frictionless obstacle it does: the eye is
@@ -46,6 +55,7 @@ import ufl
 from eyemech.forms.contact import Ring, RoundedRectangle
 
 KINDS = ("encircling+segmental", "encircling", "segmental")
+ORIENTATIONS = ("circumferential", "radial")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,6 +69,34 @@ class BuckleShape:
     corner_radius: float = 0.3
     kind: str = "encircling+segmental"
     tire_arc_deg: float = 360.0
+    orientation: str = "circumferential"
+    tire_length: float = 12.0    # radial tire: its extent along the meridian (mm)
+    sclera_radius: float = 11.5  # radial tire: the sphere on which tire_length is measured
+
+    def __post_init__(self):
+        if self.orientation not in ORIENTATIONS:
+            raise ValueError(f"orientation {self.orientation!r}: one of {ORIENTATIONS}")
+        if self.radial and self.has_band:
+            # the tie and the band's stop act about one axis: a radial tire is segmental
+            raise ValueError("a radial tire is segmental: no band with it")
+
+    @property
+    def radial(self) -> bool:
+        return self.orientation == "radial"
+
+    @property
+    def axis(self) -> int:
+        """Index of the tire's axis of revolution: z (2) for band and circumferential
+        tire, x (0, the symmetry plane's normal) for a radial tire."""
+        return 0 if self.radial else 2
+
+    @property
+    def half_arc(self) -> float:
+        """Half the tire's angular extent (rad): about z (circumferential), or along
+        the meridian about x (radial)."""
+        if self.radial:
+            return 0.5 * self.tire_length / self.sclera_radius
+        return math.radians(0.5 * self.tire_arc_deg)
 
     @property
     def has_band(self) -> bool:
@@ -76,7 +114,10 @@ class BuckleShape:
         return max(widths) if widths else self.band_width
 
     def on_tire(self, azimuth_deg: float) -> bool:
-        """Whether the meridian at ``azimuth_deg`` from the tear passes under the tire."""
+        """Whether the meridian at ``azimuth_deg`` from the tear passes under the tire
+        (a radial tire lies on the tear's meridian only)."""
+        if self.radial:
+            return self.has_tire and abs(azimuth_deg) < 1e-9
         return self.has_tire and abs(azimuth_deg) <= 0.5 * self.tire_arc_deg + 1e-9
 
     def element_at(self, azimuth_deg: float) -> tuple[float, float] | None:
@@ -93,6 +134,13 @@ def _abs_azimuth(x):
     return ufl.atan2(ufl.sqrt(x[0] ** 2 + 1e-24), x[1])
 
 
+def _wedge_gap(angle_off, half_arc, rho):
+    """Signed distance to the wedge |angle_off| ≤ half_arc: ρ sin(|off| − half),
+    the overshoot clamped to ±90° so that points deep inside stay inside."""
+    over = ufl.min_value(ufl.max_value(angle_off - half_arc, -0.5 * math.pi), 0.5 * math.pi)
+    return rho * ufl.sin(over)
+
+
 @dataclasses.dataclass(frozen=True)
 class BuckleSizes:
     """The buckle's dimensions as they enter the forms (mm; the tire's half arc in
@@ -105,24 +153,26 @@ class BuckleSizes:
     tire_width: object
     tire_height: object
     corner_radius: object
-    tire_half_arc: object
+    tire_half_arc: object  # radians: about z (circumferential) or along the meridian (radial)
 
     @classmethod
     def of(cls, shape: BuckleShape, constant=float) -> BuckleSizes:
         return cls(constant(shape.band_width), constant(shape.band_thickness),
                    constant(shape.tire_width), constant(shape.tire_height),
-                   constant(shape.corner_radius), constant(math.radians(0.5 * shape.tire_arc_deg)))
+                   constant(shape.corner_radius), constant(shape.half_arc))
 
 
 def buckle_rings(sizes: BuckleSizes, axial_position, base_radius, indentation,
-                 tire_indentation=None):
+                 tire_indentation=None, tire_axis: int = 2):
     """(tire, band) ring obstacles (both at ``base_radius``); the sizes, the axial
     position, ``base_radius`` and the travels may be Constants or Real-space Functions;
     the tire's travel is the band's unless ``tire_indentation`` is given. The corner
     radius is capped by half of each profile's sides (UFL ``min_value``, so that it
-    stays a Constant)."""
+    stays a Constant). ``tire_axis`` = 0: a radial tire, about the x axis through the
+    eye's centre, centred on the symmetry plane x = 0."""
     height = ufl.max_value(sizes.tire_height, 1e-6)
-    tire = RoundedRectangle(center=(base_radius + 0.5 * height, axial_position),
+    tire_centre = 0.0 if tire_axis == 0 else axial_position
+    tire = RoundedRectangle(center=(base_radius + 0.5 * height, tire_centre),
                             width=height, height=sizes.tire_width,
                             corner_radius=ufl.min_value(sizes.corner_radius, ufl.min_value(
                                 0.5 * height, 0.5 * sizes.tire_width)))
@@ -130,7 +180,9 @@ def buckle_rings(sizes: BuckleSizes, axial_position, base_radius, indentation,
                             width=sizes.band_thickness, height=sizes.band_width,
                             corner_radius=ufl.min_value(sizes.corner_radius, 0.5 * sizes.band_thickness))
     tire_travel = indentation if tire_indentation is None else tire_indentation
-    return Ring(indentation=tire_travel, profile=tire), Ring(indentation=indentation, profile=band)
+    axis = tuple(float(i == tire_axis) for i in range(3))
+    return (Ring(axis=axis, indentation=tire_travel, profile=tire),
+            Ring(indentation=indentation, profile=band))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,6 +198,21 @@ class Buckle:
     indentation: object
     tire_indentation: object | None = None  # None: the tire moves with the band
     sizes: BuckleSizes | None = None
+    polar_angle: object = 0.0  # radial tire: its centre's angle β₀ from +z along the meridian
+
+    def _tire_angle_off(self, x):
+        """|angle| of x from the tire's centre about its axis: |φ| about z from the
+        tear's meridian (circumferential), |β − β₀| along the meridian (radial)."""
+        if self.shape.radial:
+            return abs(ufl.atan2(x[1], x[2]) - self.polar_angle)
+        return _abs_azimuth(x)
+
+    def axis_distance(self, x):
+        """Distance of x from the tire's axis of revolution (UFL or arrays (n, 3))."""
+        i, j = (self.shape.axis + 1) % 3, (self.shape.axis + 2) % 3
+        if isinstance(x, np.ndarray):
+            return np.hypot(x[..., i], x[..., j])
+        return ufl.sqrt(x[i] ** 2 + x[j] ** 2 + 1e-24)
 
     @property
     def dimensions(self) -> BuckleSizes:
@@ -154,20 +221,17 @@ class Buckle:
     @property
     def arc_limited(self) -> bool:
         """Whether the tire is cut to an arc: a wedge in the forms (structural)."""
-        return self.shape.tire_arc_deg < 360.0
+        return self.shape.radial or self.shape.tire_arc_deg < 360.0
 
     def gap(self, x):
         tire, band = buckle_rings(self.dimensions, self.axial_position, self.base_radius,
-                                  self.indentation, self.tire_indentation)
+                                  self.indentation, self.tire_indentation, self.shape.axis)
         gaps = []
         if self.shape.has_tire:
             g = tire.gap(x)
             if self.arc_limited:
-                half = self.dimensions.tire_half_arc
-                rho = ufl.sqrt(x[0] ** 2 + x[1] ** 2 + 1e-24)
-                over = ufl.min_value(ufl.max_value(_abs_azimuth(x) - half, -0.5 * math.pi),
-                                     0.5 * math.pi)
-                g = ufl.max_value(g, rho * ufl.sin(over))
+                g = ufl.max_value(g, _wedge_gap(self._tire_angle_off(x), self.dimensions.tire_half_arc,
+                                                self.axis_distance(x)))
             gaps.append(g)
         if self.shape.has_band:
             gaps.append(band.gap(x))
@@ -181,9 +245,10 @@ class Buckle:
         z = abs(x[2] - self.axial_position)
         weights = []
         if self.shape.has_tire:
-            inside = ufl.le(z, 0.5 * sizes.tire_width)
+            across = abs(x[0]) if self.shape.radial else z
+            inside = ufl.le(across, 0.5 * sizes.tire_width)
             if self.arc_limited:
-                inside = ufl.And(inside, ufl.le(_abs_azimuth(x), sizes.tire_half_arc))
+                inside = ufl.And(inside, ufl.le(self._tire_angle_off(x), sizes.tire_half_arc))
             weights.append(ufl.conditional(inside, 1.0, 0.0))
         if self.shape.has_band:
             weights.append(ufl.conditional(ufl.le(z, 0.5 * sizes.band_width), 1.0, 0.0))
@@ -194,23 +259,29 @@ class Buckle:
         (a Constant's current value)."""
         sizes = self.dimensions
         z = np.abs(x[:, 2] - float(self.axial_position))
-        azimuth = np.arctan2(np.abs(x[:, 0]), x[:, 1])
+        if self.shape.radial:
+            across = np.abs(x[:, 0])
+            angle = np.abs(np.arctan2(x[:, 1], x[:, 2]) - float(self.polar_angle))
+        else:
+            across, angle = z, np.arctan2(np.abs(x[:, 0]), x[:, 1])
         mask = np.zeros(len(x), bool)
         if self.shape.has_tire:
-            within = z <= 0.5 * float(sizes.tire_width)
+            within = across <= 0.5 * float(sizes.tire_width)
             if self.arc_limited:
-                within &= azimuth <= float(sizes.tire_half_arc)
+                within &= angle <= float(sizes.tire_half_arc)
             mask |= within
         if self.shape.has_band:
             mask |= z <= 0.5 * float(sizes.band_width)
         return mask
 
 
-def tangential_components(x, w):
-    """(w·e_z, w·e_φ) of a vector w at position x: the directions along which the
-    sclera slides on a buckle of revolution about z."""
-    rho = ufl.sqrt(x[0] ** 2 + x[1] ** 2 + 1e-24)
-    return w[2], (x[0] * w[1] - x[1] * w[0]) / rho
+def tangential_components(x, w, axis: int = 2):
+    """(w·e_a, w·e_φ) of a vector w at position x: the directions along which the
+    sclera slides on a buckle of revolution about the coordinate axis ``axis`` (z: band
+    and circumferential tire; x: radial tire)."""
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    rho = ufl.sqrt(x[i] ** 2 + x[j] ** 2 + 1e-24)
+    return w[axis], (x[i] * w[j] - x[j] * w[i]) / rho
 
 
 def tangential_tie_energy(buckle: Buckle, u, u_tied, stiffness, measure):
@@ -222,15 +293,26 @@ def tangential_tie_energy(buckle: Buckle, u, u_tied, stiffness, measure):
     the radial direction stays free for the contact."""
     X = ufl.SpatialCoordinate(measure.ufl_domain())
     x0 = X + u_tied
-    along, around = tangential_components(x0, u - u_tied)
+    along, around = tangential_components(x0, u - u_tied, buckle.shape.axis)
     return 0.5 * stiffness * buckle.footprint_weight(x0) * (along**2 + around**2) * measure
 
 
-def slip(x0: np.ndarray, du: np.ndarray) -> np.ndarray:
+def slip(x0: np.ndarray, du: np.ndarray, axis: int = 2) -> np.ndarray:
     """|(du)_t| at positions x0 (numpy twin of :func:`tangential_components`)."""
-    rho = np.hypot(x0[:, 0], x0[:, 1])
-    around = (x0[:, 0] * du[:, 1] - x0[:, 1] * du[:, 0]) / rho
-    return np.hypot(du[:, 2], around)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    rho = np.hypot(x0[:, i], x0[:, j])
+    around = (x0[:, i] * du[:, j] - x0[:, j] * du[:, i]) / rho
+    return np.hypot(du[:, axis], around)
+
+
+def forward_slip(x0: np.ndarray, du: np.ndarray, axis: int = 2) -> np.ndarray:
+    """The slip's component towards the cornea along the tire's long direction: +z on
+    a buckle about z; on a radial tire (about x) −e_β, e_β = (0, cos β, −sin β) the
+    direction of growing polar angle β = atan2(y, z) along the meridian."""
+    if axis == 2:
+        return du[:, 2]
+    beta = np.arctan2(x0[:, 1], x0[:, 2])
+    return -np.cos(beta) * du[:, 1] + np.sin(beta) * du[:, 2]
 
 
 def band_stop_force(tire_travel, band_travel, stiffness):

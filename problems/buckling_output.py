@@ -102,6 +102,8 @@ def _buckle_outline(model):
     if base > 1.5 * model.geometry.sclera_radius:
         return None
     shape = model.params.buckle_shape()
+    if shape.radial:
+        return _radial_tire_outline(model, shape)
     z0 = model.axial_position
     polygons = []
     if shape.on_tire(0.0):  # the tire at the tear (at its own travel), the band over it
@@ -121,4 +123,17 @@ def _buckle_outline(model):
         closed = polygon + polygon[:1]
         for a, b in zip(closed[:-1], closed[1:]):
             points += [(-0.01, a[0], z0 + a[1]), (-0.01, b[0], z0 + b[1])]
+    return np.array(points)
+
+
+def _radial_tire_outline(model, shape, segments: int = 24):
+    """A radial tire's section in the symmetry plane: the annular sector between its
+    inner face (at its travel) and its outer one, over its length along the meridian."""
+    inner = float(model.base_radius.value) - model.tire_travel_value()
+    angles = math.radians(model.buckle_angle) + shape.half_arc * np.linspace(-1.0, 1.0, segments + 1)
+    ring = [(inner, t) for t in angles] + [(inner + shape.tire_height, t) for t in angles[::-1]]
+    closed = ring + ring[:1]
+    points = []
+    for (ra, ta), (rb, tb) in zip(closed[:-1], closed[1:]):
+        points += [(-0.01, ra * math.sin(ta), ra * math.cos(ta)), (-0.01, rb * math.sin(tb), rb * math.cos(tb))]
     return np.array(points)

@@ -71,6 +71,7 @@ from eyemech.forms.buckle import (
     BuckleShape,
     BuckleSizes,
     band_stop_force,
+    forward_slip,
     pinned_travel_residual,
     slip,
     tangential_tie_energy,
@@ -177,8 +178,15 @@ class Parameters(SceneParameters, SolverChoice):
     buckle_attachment: Literal["sutured", "frictionless"] = field(
         "sutured", "sutured: the sclera under the buckle's footprint is tied to it tangentially "
         "from step 2 on; frictionless: it may slide along the buckle")
-    tire_arc_deg: float = field(90.0, "arc of the silicone tire about the optic axis, centred "
-                                "on the tear's meridian (360: a full ring)", "deg")
+    tire_arc_deg: float = field(90.0, "arc of the circumferential silicone tire about the optic "
+                                "axis, centred on the tear's meridian (360: a full ring)", "deg")
+    tire_orientation: Literal["circumferential", "radial"] = field(
+        "circumferential", "circumferential: the tire's long axis runs round the eye (arc "
+        "tire_arc_deg); radial: along the tear's meridian (length tire_length, centred at "
+        "buckle_position), tire_width across it, sutured either side; radial needs "
+        "buckle=segmental and suture_azimuths=0 (docs/scleral_buckling.md, Radial tire)")
+    tire_length: float = field(12.0, "radial tire: its length along the meridian, measured on "
+                               "the sclera", "mm")
     buckle_position: float = field(
         12.5, "buckle centre behind the limbus, along the sclera. 12.5: the tear (centre 11.5 mm "
         "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
@@ -275,7 +283,7 @@ class Parameters(SceneParameters, SolverChoice):
                               "band_thickness", "tire_width", "suture_width", "penalty_factor",
                               "retina_penalty_factor", "c_lens", "lens_diameter",
                               "lens_thickness", "zonule_modulus", "zonule_area",
-                              "suture_bite_radius",
+                              "suture_bite_radius", "tire_length",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
         if not 0 <= self.jacobian_reuse < 1:
@@ -309,6 +317,7 @@ class Parameters(SceneParameters, SolverChoice):
         if self.buckle_clearance < 0:
             raise ParameterError("buckle_clearance", "the buckle would start inside the eye "
                                  f"({self.buckle_clearance} mm); it must be >= 0")
+        self._validate_orientation()
         shape = self.buckle_shape()
         if self.suture_azimuths and any(shape.element_at(a) is None for a in self.suture_azimuths):
             raise ParameterError("suture_azimuths", "a suture lies off the segmental tire (its arc "
@@ -327,7 +336,9 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("indentation", f"{self.indentation} mm would push the buckle "
                                  f"through the eye's axis (sclera radius {geometry.sclera_radius} mm)")
         arc_to_pole = math.radians(180.0 - geometry.limbus_angle) * geometry.sclera_radius
-        if not shape.footprint < self.buckle_position < arc_to_pole - 2 * geometry.optic_nerve_radius:
+        if shape.radial:
+            self._validate_radial_extent(arc_to_pole - 2 * geometry.optic_nerve_radius)
+        elif not shape.footprint < self.buckle_position < arc_to_pole - 2 * geometry.optic_nerve_radius:
             raise ParameterError("buckle_position", f"must put the buckle on the sclera between the "
                                  f"limbus and the optic nerve ({shape.footprint:.1f}–"
                                  f"{arc_to_pole - 2 * geometry.optic_nerve_radius:.1f} mm)")
@@ -338,6 +349,36 @@ class Parameters(SceneParameters, SolverChoice):
         except Exception as err:
             key = "lens_diameter" if "lens" in str(err) else self.resolution_key()
             raise ParameterError(key, str(err)) from None
+
+    def _validate_orientation(self) -> None:
+        """A radial tire is used alone (segmental: a band all round would run across it,
+        and the tie and the band's stop act about one axis); its sutures cross it on the
+        tear's meridian; tire_arc_deg and tire_length belong each to one orientation."""
+        if self.tire_orientation == "radial":
+            if self.buckle != "segmental":
+                raise ParameterError("tire_orientation", f"radial with buckle={self.buckle}: a "
+                                     "radial tire is a segmental buckle (set buckle=segmental)")
+            if self.tire_arc_deg != 90.0:
+                raise ParameterError("tire_arc_deg", "sets a circumferential tire's arc; a radial "
+                                     "tire's extent is tire_length")
+            if tuple(self.suture_azimuths) != (0.0,):
+                raise ParameterError("suture_azimuths", "a radial tire lies on the tear's meridian: "
+                                     "its sutures cross it there (suture_azimuths=0)")
+        elif self.tire_length != 12.0:
+            raise ParameterError("tire_length", "sets a radial tire's length (tire_orientation="
+                                 "radial); a circumferential tire's extent is tire_arc_deg")
+
+    def _validate_radial_extent(self, meridian: float) -> None:
+        """The radial tire on the sclera between the limbus and the optic nerve's margin
+        (``meridian`` mm of arc from the limbus)."""
+        if self.tire_length >= meridian:
+            raise ParameterError("tire_length", f"{self.tire_length} mm is longer than the meridian "
+                                 f"from the limbus to the optic nerve ({meridian:.1f} mm)")
+        half = 0.5 * self.tire_length
+        if not half < self.buckle_position < meridian - half:
+            raise ParameterError("buckle_position", f"puts the {self.tire_length} mm radial tire "
+                                 f"off the sclera: its centre must lie {half:.1f}–{meridian - half:.1f} "
+                                 "mm behind the limbus")
 
     def resolution_key(self) -> str:
         if self.mesh_size > 0:
@@ -370,7 +411,8 @@ class Parameters(SceneParameters, SolverChoice):
 
     def buckle_shape(self) -> BuckleShape:
         return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,
-                           self.buckle_corner_radius, self.buckle, self.tire_arc_deg)
+                           self.buckle_corner_radius, self.buckle, self.tire_arc_deg,
+                           self.tire_orientation, self.tire_length, self.geometry().sclera_radius)
 
     def stiffness(self) -> dict[str, float]:
         return {t: getattr(self, f"c_{t}") for t in TISSUES}
@@ -538,7 +580,8 @@ class BucklingModel:
         shape = params.buckle_shape()
         self.buckle = Buckle(shape, dolfinx.fem.Constant(mesh, self.axial_position), self.base_radius,
                              self.indentation, tire_indentation=self.tire_travel,
-                             sizes=BuckleSizes.of(shape, lambda value: dolfinx.fem.Constant(mesh, value)))
+                             sizes=BuckleSizes.of(shape, lambda value: dolfinx.fem.Constant(mesh, value)),
+                             polar_angle=dolfinx.fem.Constant(mesh, math.radians(self.buckle_angle)))
         # the force-driven tire (suture_model = loop): its travel is free from step 3 on
         self.tire_loop = params.suture_model == "loop" and params.buckle_shape().has_tire
         self.tire_free = dolfinx.fem.Constant(mesh, 0.0)
@@ -730,10 +773,8 @@ class BucklingModel:
         pull = 0.0
         for point, direction, share, on_tire in zip(self.sutures.points, self.sutures.directions,
                                                     self.bite_shares, self.on_tire):
-            if on_tire:
-                psi = math.radians(point.azimuth_deg)
-                pull += self.sutures.magnitude * share * float(
-                    direction[0] * math.sin(psi) + direction[1] * math.cos(psi))
+            if on_tire:  # the loop's reaction on the tire: −F_s, along the inward direction
+                pull -= self.sutures.magnitude * share * float(direction @ self._inward(point))
         self.suture_pull.value = pull if self.tire_loop else 0.0
 
     def free_tire(self) -> None:
@@ -865,6 +906,8 @@ class BucklingModel:
         """Both bites of each suture, ``suture_width`` apart along the meridian,
         centred on the buckle, on the sclera's outer surface."""
         geo, theta = self.geometry, math.radians(self.buckle_angle)
+        if self.params.tire_orientation == "radial":
+            return self._radial_suture_points(theta)
         half = self.params.suture_width / 2 / geo.sclera_radius
         points = []
         for azimuth in self.params.suture_azimuths:
@@ -875,6 +918,18 @@ class BucklingModel:
                 centre = (rho * math.sin(psi), rho * math.cos(psi), geo.sclera_radius * math.cos(t))
                 points.append(SuturePoint(azimuth, side, centre))
         return points
+
+    def _radial_suture_points(self, theta: float) -> list[SuturePoint]:
+        """A radial tire's sutures cross it at a quarter of its length either side of
+        its centre, each with its bites ``suture_width`` apart across the meridian: the
+        bite at x = +w/2 is in the half model (side +1), its mirror at −w/2 is the
+        symmetry's (the half model carries half of each suture)."""
+        radius = self.geometry.sclera_radius
+        across = 0.5 * self.params.suture_width
+        ring = math.sqrt(radius**2 - across**2)  # the bite's distance from the x axis
+        quarter = 0.25 * self.params.tire_length / radius
+        return [SuturePoint(0.0, 1, (across, ring * math.sin(t), ring * math.cos(t)))
+                for t in (theta - quarter, theta + quarter)]
 
     # -- the load path --------------------------------------------------------------
     @staticmethod
@@ -1000,21 +1055,26 @@ class BucklingModel:
             self.solver.snes.getLineSearch().setType(self.params.settle_line_search)
 
     def _sclera_radius_under_buckle(self) -> float:
-        """Largest distance from the optic axis of the deformed sclera within the
-        buckle's axial span: the buckle's flat inner face must clear all of it."""
+        """Largest distance from the buckle's axis (the optic axis; x for a radial tire)
+        of the deformed sclera within the buckle's span: the buckle's flat inner face
+        must clear all of it."""
         V = self.u.function_space
         owned = V.dofmap.index_map.size_local
         blocks = self.sclera_nodes[self.sclera_nodes < owned]
         x = V.tabulate_dof_coordinates()[blocks] + self.u.x.array.reshape(-1, 3)[blocks]
-        half = 0.5 * self.params.buckle_shape().footprint
-        near = np.abs(x[:, 2] - self.axial_position) <= half
-        local = float(np.hypot(x[near, 0], x[near, 1]).max()) if near.any() else 0.0
+        if self.buckle.shape.radial:  # the tire's flat inner face clears its whole footprint
+            near = self.buckle.footprint_mask(x)
+        else:
+            near = np.abs(x[:, 2] - self.axial_position) <= 0.5 * self.params.buckle_shape().footprint
+        local = float(self.buckle.axis_distance(x[near]).max()) if near.any() else 0.0
         return self.ctx.comm.allreduce(local, op=MPI.MAX)
 
     def suture_anchors(self) -> np.ndarray:
         """Where each suture leaves the buckle: the tire's outer corner on its side,
         in the suture's meridional plane (directions for the next step)."""
         shape = self.params.buckle_shape()
+        if shape.radial:
+            return self._radial_suture_anchors()
         anchors = []
         for point in self.sutures.points:
             width, height = shape.element_at(point.azimuth_deg)
@@ -1025,6 +1085,27 @@ class BucklingModel:
             z = self.axial_position + point.side * 0.5 * width
             anchors.append([rho * math.sin(psi), rho * math.cos(psi), z])
         return np.array(anchors)
+
+    def _radial_suture_anchors(self) -> np.ndarray:
+        """A radial tire's suture leaves it at its outer corner on the bite's side
+        (x = +w/2), in the plane through the x axis and the bite."""
+        shape = self.params.buckle_shape()
+        rho = float(self.base_radius.value) + shape.tire_height
+        rho -= self.tire_travel_value() if self.tire_loop else float(self.indentation.value)
+        anchors = []
+        for point in self.sutures.points:
+            t = math.atan2(point.centre[1], point.centre[2])
+            anchors.append([0.5 * shape.tire_width, rho * math.sin(t), rho * math.cos(t)])
+        return np.array(anchors)
+
+    def _inward(self, point: SuturePoint) -> np.ndarray:
+        """The tire's inward travel direction at a suture's meridian: towards the optic
+        axis (−e_ρ about z), or for a radial tire towards the x axis in the bite's plane."""
+        if self.buckle.shape.radial:
+            t = math.atan2(point.centre[1], point.centre[2])
+            return -np.array([0.0, math.sin(t), math.cos(t)])
+        psi = math.radians(point.azimuth_deg)
+        return -np.array([math.sin(psi), math.cos(psi), 0.0])
 
     def register_checkpoint(self, checkpoints) -> None:
         """Everything a restart needs besides the load (docs/restart.md): the unknowns,
@@ -1082,7 +1163,7 @@ class BucklingModel:
         reference_axial = self.apex.nodes[0][2] - self.pole.nodes[0][2]
         under = self.under_buckle.positions(self.u)[0]
         before = self.reference_positions.get("under_buckle", self.under_buckle.nodes)[0]
-        indentation = math.hypot(before[0], before[1]) - math.hypot(under[0], under[1])
+        indentation = float(self.buckle.axis_distance(before) - self.buckle.axis_distance(under))
         in_contact = gaps < self.params.tear_closure_tolerance
         detached_area = self.detached_area()
         zonules = self.zonules.summary() if self.zonules is not None else {}
@@ -1157,7 +1238,8 @@ class BucklingModel:
         """Tangential motion (axial and circumferential) of the sclera's outer nodes under
         the buckle's footprint since the buckle was placed (end of step 1): the buckle
         moves only radially, so this is the slip along it. ``buckle_slip_axial_mean_mm``
-        > 0: the sclera moved forward (towards the cornea) under the buckle."""
+        > 0: the sclera moved forward (towards the cornea) under the buckle (along the
+        optic axis; along the meridian under a radial tire)."""
         if not self.preoperative:
             return {}
         V = self.u.function_space
@@ -1167,11 +1249,12 @@ class BucklingModel:
         x0 = V.tabulate_dof_coordinates()[nodes] + tied
         under = self.buckle.footprint_mask(x0)
         du = self.u.x.array.reshape(-1, 3)[nodes][under] - tied[under]
-        values = slip(x0[under], du)
+        values = slip(x0[under], du, self.buckle.shape.axis)
         comm = self.ctx.comm
         count = comm.allreduce(int(under.sum()), op=MPI.SUM)
         return {"buckle_slip_max_mm": comm.allreduce(float(values.max(initial=0.0)), op=MPI.MAX),
-                "buckle_slip_axial_mean_mm": comm.allreduce(float(du[:, 2].sum()), op=MPI.SUM)
+                "buckle_slip_axial_mean_mm": comm.allreduce(float(forward_slip(
+                    x0[under], du, self.buckle.shape.axis).sum()), op=MPI.SUM)
                 / max(count, 1),
                 "buckle_footprint_nodes": count}
 

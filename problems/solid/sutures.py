@@ -20,7 +20,7 @@ from eyemech.problems.solid.probes import NodeProbe
 @dataclasses.dataclass(frozen=True)
 class SuturePoint:
     azimuth_deg: float   # about the optic axis, 0 = the tear's meridian (+y)
-    side: int            # −1 posterior, +1 anterior of the buckle
+    side: int            # −1 posterior, +1 anterior of the buckle (radial tire: +1 the +x side)
     centre: tuple[float, float, float]
 
 
