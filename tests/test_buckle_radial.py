@@ -1,0 +1,99 @@
+"""The radial tire (tire_orientation = radial, issue 21 item 1) on the coarse eye: it
+indents the sclera under the tear along its meridian, lengthens the eye less than an
+encircling band, its sutured footprint does not slide, and bad radial buckles are
+refused before any solve (docs/scleral_buckling.md, Radial tire)."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import run_cli
+
+from eyemech.problems import scleral_buckling as sb
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
+
+QUIET = RunOptions(fields=False, pictures=False)
+# 1 mm of travel held through step 3 (suture_model = bites: with the loop a tire
+# without a band rises to the sutures' balance, docs/scleral_buckling.md), so that the
+# comparison with the band is of the buckles at equal travel
+RADIAL = dict(buckle="segmental", tire_orientation="radial", suture_azimuths="0",
+              indentation="1.0", suture_model="bites", settle="false")
+
+
+def _run(**overrides):
+    return sb.run(build(sb.Parameters, {"resolution": "coarse", **overrides}), options=QUIET)
+
+
+@pytest.fixture(scope="module")
+def radial():
+    result = _run(**RADIAL)
+    assert result.status == "ok", result.message
+    return result.quantities
+
+
+def test_radial_tire_indents_the_tears_meridian_by_its_travel(radial):
+    # the probe on the tear's meridian under the tire's centre moves towards the tire's
+    # axis by the travel less the 0.05 mm clearance (measured 0.897 mm after buckling,
+    # 0.942 mm after suturing, of 1.0; 1.40 of 1.5 mm at the default travel); deeper
+    # than the travel only by the penalty's penetration, hundredths of a mm
+    for stage in ("after_buckling", "after_suturing"):
+        q = radial[stage]
+        assert q["buckle_travel_mm"] == q["tire_travel_mm"] == 1.0
+        assert 0.85 < q["buckle_indentation_mm"] < 1.0, stage
+
+
+def test_radial_tire_lengthens_the_eye_less_than_an_encircling_band(radial):
+    # an encircling band squeezes the whole equator and lengthens the eye (clinical
+    # series: ~+0.8 mm); a radial element indents one meridian only (measured after
+    # suturing at 1 mm travel: radial +0.124 mm, +0.19 D; encircling +0.726 mm, −2.77 D)
+    band = _run(buckle="encircling", indentation="1.0", settle="false")
+    assert band.status == "ok", band.message
+    encircling = band.quantities["after_suturing"]
+    radial_change = radial["after_suturing"]["axial_length_change_mm"]
+    assert encircling["axial_length_change_mm"] > 0.3
+    assert abs(radial_change) < 0.5 * encircling["axial_length_change_mm"]
+    assert radial["after_suturing"]["refraction_change_D"] > encircling["refraction_change_D"]
+
+
+def test_radial_tires_sutured_footprint_does_not_slide(radial):
+    # tied, the sclera under the tire slips only by the tie penalty's compliance, as under
+    # the circumferential tire (tests/test_buckle_types.py: bound 0.05 mm); the slip is
+    # measured about the tire's own axis (x), across and along the meridian (measured
+    # 0.018 / 0.027 mm max after buckling / suturing, mean forward slip along the
+    # meridian −0.001 / −0.002 mm)
+    for stage in ("after_buckling", "after_suturing"):
+        q = radial[stage]
+        assert q["buckle_footprint_nodes"] >= 8   # 3.5 × 12 mm of the half tire (measured 10)
+        assert q["buckle_slip_max_mm"] < 0.05, stage
+        assert abs(q["buckle_slip_axial_mean_mm"]) < 0.01, stage
+
+
+@pytest.mark.parametrize("overrides, key", [
+    ({"tire_orientation": "radial"}, "tire_orientation"),  # with the band (the default buckle)
+    ({"tire_orientation": "radial", "buckle": "encircling"}, "tire_orientation"),
+    ({"tire_orientation": "radial", "buckle": "segmental"}, "suture_azimuths"),
+    ({**RADIAL, "tire_length": "28"}, "tire_length"),      # the meridian is 27.0 mm
+    ({**RADIAL, "tire_length": "0"}, "tire_length"),
+    ({**RADIAL, "buckle_position": "5"}, "buckle_position"),    # its front end past the limbus
+    ({**RADIAL, "buckle_position": "22"}, "buckle_position"),   # its back end on the nerve
+    ({**RADIAL, "tire_arc_deg": "60"}, "tire_arc_deg"),    # an arc means a circumferential tire
+    ({"tire_length": "10"}, "tire_length"),                # a length means a radial tire
+])
+def test_bad_radial_tires_are_refused(overrides, key):
+    with pytest.raises(ParameterError) as info:
+        build(sb.Parameters, overrides)
+    assert info.value.key == key
+
+
+@pytest.mark.parametrize("settings, key", [
+    (["tire_orientation=radial"], "tire_orientation"),
+    (["tire_orientation=radial", "buckle=segmental", "suture_azimuths=0", "tire_length=30"],
+     "tire_length"),
+    (["tire_orientation=radial", "buckle=segmental", "suture_azimuths=0", "buckle_position=25"],
+     "buckle_position"),
+])
+def test_bad_radial_tire_exits_2(tmp_path, settings, key):
+    arguments = [a for s in settings for a in ("--set", s)]
+    code, _, err = run_cli("run", "scleral-buckling", *arguments, "--out", str(tmp_path))
+    assert code == 2
+    assert key in err
