@@ -97,3 +97,24 @@ def test_bad_radial_tire_exits_2(tmp_path, settings, key):
     code, _, err = run_cli("run", "scleral-buckling", *arguments, "--out", str(tmp_path))
     assert code == 2
     assert key in err
+
+
+def test_radial_tire_of_new_sizes_compiles_nothing_after_its_first_case(compilations):
+    """A planning sweep over the radial tire: its length, width, height and centre
+    (the wedge's half angle, the profile and the polar angle β₀ are Constants) and the
+    suture width (the bites' centres) are new in the second case; a literal among them
+    would compile the eye's residual and Jacobian blocks again (as
+    tests/test_compile_once.py for the circumferential buckle). ≈ 10 s a case."""
+    import random
+
+    def case() -> sb.Parameters:
+        return build(sb.Parameters, {
+            "resolution": "coarse", **RADIAL, "indentation": "0.75",
+            "tire_length": str(10.0 + 2.0 * random.random()),
+            "tire_width": str(6.0 + random.random()), "tire_height": str(0.8 + 0.4 * random.random()),
+            "buckle_position": str(12.0 + random.random()), "suture_width": str(8.0 + random.random())})
+
+    sb.run(case(), options=QUIET)
+    first = len(compilations)
+    sb.run(case(), options=QUIET)
+    assert compilations[first:] == []
