@@ -196,7 +196,8 @@ class Parameters(SceneParameters, SolverChoice):
         "\"The tear at the defaults\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
-    tire_width: float = field(7.0, "silicone tire width (axial)", "mm")
+    tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
+                              "tire)", "mm")
     tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm")
