@@ -1207,12 +1207,19 @@ class BucklingModel:
     def _widest_rim_node(self, rim: np.ndarray) -> float:
         """Reference polar angle (degrees from the anterior pole) of the tear-rim node with
         the widest node-to-surface gap ``rim`` (ordered as the pairing's rim nodes; nan
-        when none is paired). The same on every rank: the pairing is gathered."""
+        when none is paired). The same on every rank: the pairing is gathered. Gaps within
+        ``RIM_TIE`` (mm) of the widest count as tied (a closed rim's nodes all sit at the
+        penalty's penetration, and their order there is round-off, which differs between
+        partitions): of those, the anterior-most node is reported."""
         paired = np.isfinite(rim)
         if not paired.any():
             return float("nan")
-        x = self.pairing.slave_x[self.tear_rim][paired][np.argmax(rim[paired])]
-        return math.degrees(math.acos(x[2] / np.linalg.norm(x)))
+        x = self.pairing.slave_x[self.tear_rim][paired]
+        polar = np.degrees(np.arccos(x[:, 2] / np.linalg.norm(x, axis=1)))
+        tied = rim[paired] >= rim[paired].max() - self.RIM_TIE
+        return float(polar[tied].min())
+
+    RIM_TIE = 1e-4
 
     def detached_area(self) -> float:
         if not self.detached:

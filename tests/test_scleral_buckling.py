@@ -118,9 +118,10 @@ def test_the_tear_closes_after_suturing(coarse):
     assert sutured["retina_contact_area_mm2"] > 0.0
     assert sutured["retina_pressed_nodes"] >= 1
     assert sutured["max_penetration_mm"] < 1e-3
-    # the widest gap is reported with its rim node's polar angle: a node of the coarse
-    # tear's rim (78.75-90°, the tear's centre at 88°)
-    assert 78.7 <= sutured["tear_rim_widest_polar_deg"] <= 90.1
+    # the widest gap is reported with its rim node's polar angle: the coarse tear's rim
+    # spans 78.75-90° (centre 88°) and its anterior edge, by the tire's corner, is the
+    # one left open (measured 78.96°: 0.046 mm there, the other rim nodes pressed)
+    assert 78.7 <= sutured["tear_rim_widest_polar_deg"] < 80.0
     # the sutures' loop (suture_model = loop) presses the tire in with less than the
     # sclera pushes it out (measured 0.30 N against 1.53 N, whole eye): the band holds
     # the tire at its travel, so the closure is the bites' pull, not a deeper tire
