@@ -82,6 +82,10 @@ from numba import njit
 from eyemech.problems.run.results import record_stopping_criterion
 
 FREE, CLAMPED = 0, 1
+# the kernels' floating-point licences: reassociation and fused multiply–adds (vectorised sums;
+# the answers change at round-off: the derivative checks of tests/test_rotation_free.py), but
+# not "nnan"/"ninf" — a degenerate state must still give a non-finite residual that Newton sees
+FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 BOUNDARY_KINDS = {"free": FREE, "simply": FREE, "clamped": CLAMPED}
 
 
@@ -302,10 +306,10 @@ def _scaling(xi):
 # --------------------------------------------------------------------------------------------
 # element kernels (numba)
 # --------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
-    """CST energy ½ h A C(E):E; adds its gradient (9) and Hessian (9 × 9) to grad/hess
-    (a1, a2: scratch 3-vectors, dE: 3 × 9)."""
+    """CST energy ½ h A C(E):E; adds its gradient (9) and the p ≤ q entries of its Hessian
+    (9 × 9) to grad/hess (a1, a2: scratch 3-vectors, dE: 3 × 9)."""
     a1[:] = 0.0
     a2[:] = 0.0
     for i in range(3):
@@ -328,15 +332,15 @@ def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
             dE[2, 3 * i + c] = 0.5 * (d[i, 0] * a2[c] + d[i, 1] * a1[c])
     for p in range(9):
         grad[p] += k * (S11 * dE[0, p] + S22 * dE[1, p] + S12 * dE[2, p])
-    if want_hess:
+    if want_hess:  # the p ≤ q entries (``bending_element``)
         for p in range(9):
             g0 = C11 * dE[0, p] + lam * dE[1, p]
             g1 = lam * dE[0, p] + C11 * dE[1, p]
             g2 = 4.0 * mu * dE[2, p]
-            for q in range(9):
+            for q in range(p, 9):
                 hess[p, q] += k * (g0 * dE[0, q] + g1 * dE[1, q] + g2 * dE[2, q])
         for i in range(3):
-            for j in range(3):
+            for j in range(i, 3):
                 s = k * (S11 * d[i, 0] * d[j, 0] + S22 * d[i, 1] * d[j, 1]
                          + S12 * 0.5 * (d[i, 0] * d[j, 1] + d[i, 1] * d[j, 0]))
                 for c in range(3):
@@ -344,12 +348,15 @@ def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
     return energy
 
 
-@njit(cache=True)
-def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work, mirror=True):
-    """Patch bending energy ½ D A [ν (tr κ)² + (1−ν) κ:κ] of one triangle (x: 6 × 3 patch
-    positions, vertices 0–2 first); adds its gradient (18) and Hessian (18 × 18). ``work``:
-    scratch (``bending_scratch()``), so the element loop allocates nothing. ``mirror=False``:
-    only the Hessian's p ≤ q entries are guaranteed (what the upper-triangle scatter reads)."""
+@njit(cache=True, fastmath=FASTMATH)
+def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
+    """Bending energy ½ D A [ν (tr κ)² + (1−ν) κ:κ] of one triangle (x: stencil positions,
+    vertices 0–2 first); adds its gradient (3 × stencil) and the p ≤ q entries of its
+    Hessian (what the upper-triangle scatter reads; ``assemble`` mirrors them for the full
+    pattern). ``work``: scratch (``bending_scratch()``), so the element loop allocates
+    nothing. The curvature part is nonzero only in the blocks of a vertex (0–2) with any
+    stencil node: the (vertex, node ≥ 3) blocks are w_j N_iᵀ, the vertex–vertex blocks have
+    all four terms; computing the i ≤ j blocks alone halves this part (0.79 → ms: docs/iol.md §4b)."""
     Cs, Nn, H, dk, SC, S, M = work
     NP = B.shape[1]
     e1x, e1y, e1z = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
@@ -401,10 +408,7 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work, mirro
         g1 = k_b * (nu * dk[0, p] + dk[1, p])
         g2 = k_b * c1 * dk[2, p]
         for q in range(p, 3 * NP):
-            v = g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q]
-            hess[p, q] += v
-            if mirror and q != p:
-                hess[q, p] += v
+            hess[p, q] += g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q]
     # Σ_k m_k ∇²κ_k with y = k_b Σ_k m_k H_k (∇²κ is linear in H)
     y0 = k_b * (m0 * H[0, 0] + m1 * H[1, 0] + m2 * H[2, 0])
     y1 = k_b * (m0 * H[0, 1] + m1 * H[1, 1] + m2 * H[2, 1])
@@ -425,23 +429,22 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work, mirro
     alpha = (-1.0, 1.0, 0.0)
     beta = (-1.0, 0.0, 1.0)
     wk0, wk1, wk2 = k_b * m0, k_b * m1, k_b * m2
-    for i in range(NP):
+    for i in range(3):  # blocks (i, j ≥ i); none between two non-vertex nodes
         wi = wk0 * B[0, i] + wk1 * B[1, i] + wk2 * B[2, i]
-        for j in range(NP):
-            if i >= 3 and j >= 3:
-                break  # no curvature-part terms between two non-vertex nodes
+        for j in range(i, 3):
+            wj = wk0 * B[0, j] + wk1 * B[1, j] + wk2 * B[2, j]
+            ab, ba = alpha[i] * beta[j], beta[i] * alpha[j]
+            for a in range(3):
+                for c in range(a if j == i else 0, 3):
+                    hess[3 * i + a, 3 * j + c] += (
+                        wi * Nn[j, a, c] + wj * Nn[i, c, a]
+                        + Cs[i, 0, a] * SC[j, 0, c] + Cs[i, 1, a] * SC[j, 1, c] + Cs[i, 2, a] * SC[j, 2, c]
+                        + ab * M[a, c] + ba * M[c, a])
+        for j in range(3, NP):
             wj = wk0 * B[0, j] + wk1 * B[1, j] + wk2 * B[2, j]
             for a in range(3):
                 for c in range(3):
-                    v = 0.0
-                    if j < 3:
-                        v += wi * Nn[j, a, c]
-                    if i < 3:
-                        v += wj * Nn[i, c, a]
-                    if i < 3 and j < 3:
-                        v += Cs[i, 0, a] * SC[j, 0, c] + Cs[i, 1, a] * SC[j, 1, c] + Cs[i, 2, a] * SC[j, 2, c]
-                        v += alpha[i] * beta[j] * M[a, c] + beta[i] * alpha[j] * M[c, a]
-                    hess[3 * i + a, 3 * j + c] += v
+                    hess[3 * i + a, 3 * j + c] += wj * Nn[i, c, a]
     return energy
 
 
@@ -464,13 +467,13 @@ def bending_scratch(n_nodes):
             np.zeros((3, 3, 3)), np.zeros((3, 3)), np.zeros((3, 3)))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, scatter_local, scatter_pos,
              grad, data, want_hess, bending_only, mirror):
     """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``:
     triangle t adds its element matrix's flat entries ``scatter_local[k]`` at
     ``data[scatter_pos[k]]`` for k in ``scatter_start[t]:scatter_start[t + 1]`` (``scatter_lists``;
-    ``mirror=False`` when they read only its p ≤ q entries)."""
+    ``mirror=True``: the kernels' p ≤ q entries copied to q > p, for the full pattern)."""
     lam = E * nu / (1.0 - nu * nu)
     mu = 0.5 * E / (1.0 + nu)
     energy = 0.0
@@ -488,10 +491,14 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, 
         if want_hess:
             hb[:, :] = 0.0
         D = E * h ** 3 / (12.0 * (1.0 - nu * nu))
-        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work, mirror)
+        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work)
         if not bending_only:
             energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gb[:9], hb[:9, :9], want_hess,
                                        a1, a2, dE)
+        if want_hess and mirror:  # the kernels wrote the p ≤ q entries
+            for p in range(3 * NP):
+                for q in range(p + 1, 3 * NP):
+                    hb[q, p] = hb[p, q]
         for i in range(NP):
             for cc in range(3):
                 grad[3 * nodes[t, i] + cc] += gb[3 * i + cc]
@@ -807,8 +814,13 @@ class Dynamics:
         self.grad = np.zeros(shell.n_dofs)
         self.extra = []
         # Newton's start (`_predict`): "select" takes the one of u_n, u_n + Δt v_n and
-        # u_n + Δt (2 v_n − v_{n−1}) with the smallest residual; "previous" takes u_n (statics)
+        # u_n + Δt (2 v_n − v_{n−1}) with the smallest incremental potential; "previous" takes
+        # u_n (statics)
         self.predictor = "select"
+        # (u, ∇Π(u), Π(u)) of the last gradient pass: the next step starts where this one
+        # ended, so R(u_n) needs no new pass when nothing but the shell enters the gradient
+        self._last_pass: tuple[np.ndarray, np.ndarray, float] | None = None
+        self._strain_energy = 0.0  # Π(u) (shell + extra terms) of the last `_system` call
         self.v_previous: np.ndarray | None = None
         # None: a fresh Hessian and factorisation every iteration (Newton). A number s: every step
         # starts with fresh factors, which later iterations of the step reuse while each reduces
@@ -925,6 +937,7 @@ class Dynamics:
         self.u = np.array(u0, dtype=float)
         self.v = np.zeros_like(self.u) if v0 is None else np.array(v0, dtype=float)
         self.v_previous = None
+        self._last_pass = None
         self.clock = dict.fromkeys(self.clock, 0.0)
         self.counts = dict.fromkeys(self.counts, 0)
 
@@ -934,7 +947,7 @@ class Dynamics:
         self.grad[:] = 0.0
         if with_jacobian and self.contact is not None:
             self.shell_data[:] = 0.0
-            self.shell.evaluate(u, self.grad, self.shell_data, upper=True)
+            energy = self.shell.evaluate(u, self.grad, self.shell_data, upper=True)
             self._contact_terms(u, True)  # may grow the pattern (new data / mass arrays)
             self.data[:] = 0.0
             self.data[self._shell_map] = self.shell_data
@@ -947,27 +960,60 @@ class Dynamics:
             self.counts["jacobians"] += 1
         elif with_jacobian:
             self.data[:] = 0.0
-            self.shell.evaluate(u, self.grad, self.data, upper=self.upper)
+            energy = self.shell.evaluate(u, self.grad, self.data, upper=self.upper)
             for term in self.extra:
-                term(u, self.grad, self.data)
+                energy += term(u, self.grad, self.data)
             self.data += coefficient * self.mass_data
             if self.obstacles is not None:
                 self._obstacle_terms(u, True)
             self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
             self.counts["jacobians"] += 1
         else:
-            self.shell.evaluate(u, self.grad)
+            energy = self.shell.evaluate(u, self.grad)
             for term in self.extra:
-                term(u, self.grad, None)
+                energy += term(u, self.grad, None)
             if self.contact is not None:
                 self._contact_terms(u, False)
             if self.obstacles is not None:
                 self._obstacle_terms(u, False)
             self.clock["residual"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
         self.counts["residuals"] += 1
+        self._strain_energy = energy
+        if self.contact is None and self.obstacles is None and not self.extra:
+            self._last_pass = (u.copy(), self.grad.copy(), energy)
+        return self._residual(u, u_n, v_n)
+
+    def _residual(self, u, u_n, v_n) -> np.ndarray:
+        """R(u) from the gradient in ``grad``."""
+        coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
         r = self.grad - self.force + self.M @ (coefficient * (u - u_n) - v_n / self.dt)
         r[self.solver.fixed] = 0.0
         return r
+
+    def _start_residual(self, u_n, v_n) -> np.ndarray:
+        """R(u_n), from the last gradient pass where it was at u_n and nothing but the shell
+        (whose gradient does not change between steps) entered it; else a new pass."""
+        last = self._last_pass
+        if last is not None and self.contact is None and self.obstacles is None and not self.extra \
+                and np.array_equal(last[0], u_n):
+            self.grad[:] = last[1]
+            self._strain_energy = last[2]
+            return self._residual(u_n, u_n, v_n)
+        return self._system(u_n, u_n, v_n, False)
+
+    def _potential(self, u, u_n, v_n, strain_energy: float) -> float:
+        """``incremental_potential`` with Π(u) (shell and extra terms) given: the gradient pass
+        that gave R(u) returned it, so only the barriers' energies are new work."""
+        coefficient = 1.0 / self.dt ** 2 + self.c / self.dt
+        w = u - u_n
+        value = strain_energy - self.force @ u + w @ (self.M @ (0.5 * coefficient * w - v_n / self.dt))
+        if self.contact is not None or self.obstacles is not None:
+            t0 = time.process_time()
+            x = self.shell.X + u.reshape(-1, 3)
+            value += (0.0 if self.contact is None else self.contact.energy(x)) + \
+                (0.0 if self.obstacles is None else self.obstacles.energy(x))
+            self.clock["contact"] += time.process_time() - t0
+        return value
 
     def incremental_potential(self, u, u_n, v_n) -> float:
         """Φ(u) = Π(u) − f·u + ½ (1/Δt² + c/Δt)(u − u_n)ᵀM(u − u_n) − (u − u_n)ᵀM v_n/Δt,
@@ -1012,26 +1058,28 @@ class Dynamics:
         self.clock["contact"] += time.process_time() - t0
         return fraction
 
-    def _predict(self, u_n, v_n, r_n) -> tuple[np.ndarray, np.ndarray]:
-        """Newton's start and its residual. ``select``: of u_n (residual r_n), the backward-Euler
-        velocity extrapolation u_n + Δt v_n and its acceleration-corrected form
-        u_n + Δt (2 v_n − v_{n−1}), the one with the smallest residual (two gradient passes, a
-        fraction of a Newton iteration). Right after the release the lens decelerates, so an
-        extrapolation overshoots and u_n is best; once the motion is smooth the
-        acceleration-corrected one is (lens release: 100 instead of 119 Newton iterations in
-        30 steps, 2 → 1 per step in the smooth phase)."""
+    def _predict(self, u_n, v_n, r_n, energy_n: float) -> tuple[np.ndarray, np.ndarray]:
+        """Newton's start and its residual. ``select``: of u_n (residual r_n, Π(u_n) =
+        ``energy_n``), the backward-Euler velocity extrapolation u_n + Δt v_n and its
+        acceleration-corrected form u_n + Δt (2 v_n − v_{n−1}), the one with the smallest
+        incremental potential Φ (one gradient pass each, which also gives Π: a fraction of a
+        Newton iteration). The step minimises Φ, so a lower Φ is a start nearer the solution in
+        the energy norm; the residual's norm, dominated by the stiff membrane forces, is not:
+        chosen by ‖R‖, the released lens started from u_n in steps 2–17 and its first Newton
+        update raised ‖R‖ 3–45× (91 iterations in 30 steps; by Φ 82, docs/iol.md §4b)."""
         if self.predictor == "previous" or not np.any(v_n):
             return u_n.copy(), r_n
         candidates = [u_n + self.dt * v_n]
         if self.v_previous is not None:
             candidates.append(u_n + self.dt * (2.0 * v_n - self.v_previous))
-        best, best_r, best_norm = u_n.copy(), r_n, np.linalg.norm(r_n)
+        best, best_r, best_phi = u_n.copy(), r_n, self._potential(u_n, u_n, v_n, energy_n)
         for u in candidates:
             if self.contact is not None and self._collision_free_fraction(u_n, u - u_n) < 1.0:
                 continue  # the barrier is not defined past a crossing
             r = self._system(u, u_n, v_n, False)
-            if np.linalg.norm(r) < best_norm:
-                best, best_r, best_norm = u, r, np.linalg.norm(r)
+            phi = self._potential(u, u_n, v_n, self._strain_energy)
+            if phi < best_phi:
+                best, best_r, best_phi = u, r, phi
         return best, best_r
 
     def _prescribe(self, u_n: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -1052,9 +1100,9 @@ class Dynamics:
         RuntimeError when Newton does not converge (the state is then left at the last
         converged step)."""
         u_n, v_n = self.u.copy(), self.v.copy()
-        r_n = self._system(u_n, u_n, v_n, False)
+        r_n = self._start_residual(u_n, v_n)
         norm0 = np.linalg.norm(r_n)
-        u, r = self._predict(u_n, v_n, r_n)
+        u, r = self._predict(u_n, v_n, r_n, self._strain_energy)
         if self.prescribed is not None:
             u = self._prescribe(u_n, u)
             r = self._system(u, u_n, v_n, False)
