@@ -73,13 +73,13 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
             if t + 1e-9 * time_step < stop < target - 1e-9 * time_step:
                 target = stop
         h = target - t
-        saved = (dyn.u.copy(), dyn.v.copy(), None if dyn.v_previous is None else dyn.v_previous.copy())
+        saved = dyn.save_state()
         apply(target, h)
         dyn.dt = h
         try:
             iterations = dyn.step()
         except RuntimeError as err:
-            dyn.u, dyn.v, dyn.v_previous = saved
+            dyn.restore_state(saved)
             cuts += 1
             dt = 0.5 * h
             if dt < min_fraction * time_step:

@@ -356,7 +356,8 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
     pattern). ``work``: scratch (``bending_scratch()``), so the element loop allocates
     nothing. The curvature part is nonzero only in the blocks of a vertex (0–2) with any
     stencil node: the (vertex, node ≥ 3) blocks are w_j N_iᵀ, the vertex–vertex blocks have
-    all four terms; computing the i ≤ j blocks alone halves this part (0.79 → ms: docs/iol.md §4b)."""
+    all four terms. Only the i ≤ j blocks are computed (the lens's bending Hessian pass 1.01 →
+    0.87 ms against all blocks: docs/iol.md §4b)."""
     Cs, Nn, H, dk, SC, S, M = work
     NP = B.shape[1]
     e1x, e1y, e1z = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
@@ -813,15 +814,18 @@ class Dynamics:
         self.mass_data = shell.upper["mass"] if upper else shell.mass_data
         self.grad = np.zeros(shell.n_dofs)
         self.extra = []
-        # Newton's start (`_predict`): "select" takes the one of u_n, u_n + Δt v_n and
-        # u_n + Δt (2 v_n − v_{n−1}) with the smallest incremental potential; "previous" takes
-        # u_n (statics)
+        # Newton's start (`_predict`): "select" takes the one of u_n and two polynomial
+        # extrapolations of the past positions with the smallest incremental potential;
+        # "previous" takes u_n (statics)
         self.predictor = "select"
+        self.predictor_order = 4  # the higher extrapolation's degree (`_predict`)
         # (u, ∇Π(u), Π(u)) of the last gradient pass: the next step starts where this one
         # ended, so R(u_n) needs no new pass when nothing but the shell enters the gradient
         self._last_pass: tuple[np.ndarray, np.ndarray, float] | None = None
         self._strain_energy = 0.0  # Π(u) (shell + extra terms) of the last `_system` call
-        self.v_previous: np.ndarray | None = None
+        # the velocities before v, newest first, with their step lengths (v_{n−1}, v_{n−2}, …)
+        self.past: tuple[tuple[float, np.ndarray], ...] = ()
+        self.v_step: float | None = None  # the step v was computed over (None: v was given: Δt)
         # None: a fresh Hessian and factorisation every iteration (Newton). A number s: every step
         # starts with fresh factors, which later iterations of the step reuse while each reduces
         # the residual to below s times the previous one (else fresh factors at the new iterate;
@@ -933,10 +937,27 @@ class Dynamics:
                 self._contact_entries = None
         self.clock["contact"] += time.process_time() - t0
 
+    @property
+    def v_previous(self) -> np.ndarray | None:
+        """v_{n−1}, the velocity of the step before the last (None: no such step)."""
+        return self.past[0][1] if self.past else None
+
+    @v_previous.setter
+    def v_previous(self, value: np.ndarray | None) -> None:
+        self.past = () if value is None else ((self.dt, value),)
+
+    def save_state(self) -> tuple:
+        """What ``step`` changes (u, v and the velocity history), for ``restore_state``."""
+        return self.u.copy(), self.v.copy(), self.past, self.v_step
+
+    def restore_state(self, state: tuple) -> None:
+        u, v, self.past, self.v_step = state
+        self.u, self.v = u.copy(), v.copy()
+
     def reset(self, u0: np.ndarray, v0: np.ndarray | None = None) -> None:
         self.u = np.array(u0, dtype=float)
         self.v = np.zeros_like(self.u) if v0 is None else np.array(v0, dtype=float)
-        self.v_previous = None
+        self.past, self.v_step = (), None
         self._last_pass = None
         self.clock = dict.fromkeys(self.clock, 0.0)
         self.counts = dict.fromkeys(self.counts, 0)
@@ -1058,22 +1079,42 @@ class Dynamics:
         self.clock["contact"] += time.process_time() - t0
         return fraction
 
+    def _extrapolation(self, u_n: np.ndarray, v_n: np.ndarray, degree: int) -> np.ndarray:
+        """The polynomial of ``degree`` through u_n and the ``degree`` positions before it
+        (rebuilt from the velocities and their step lengths: u_{n−1} = u_n − h_n v_n, …) at
+        t_n + Δt; with equal steps u_n + Δt v_n, u_n + Δt (2v_n − v_{n−1}),
+        u_n + Δt (3v_n − 3v_{n−1} + v_{n−2}), …"""
+        steps = [self.v_step or self.dt] + [h for h, _ in self.past]
+        velocities = [v_n] + [v for _, v in self.past]
+        times, points = [0.0], [u_n]
+        for k in range(degree):
+            times.append(times[-1] - steps[k])
+            points.append(points[-1] - steps[k] * velocities[k])
+        out = np.zeros_like(u_n)
+        for i, (t_i, p_i) in enumerate(zip(times, points)):
+            weight = np.prod([(self.dt - t_j) / (t_i - t_j) for j, t_j in enumerate(times) if j != i])
+            out += weight * p_i
+        return out
+
     def _predict(self, u_n, v_n, r_n, energy_n: float) -> tuple[np.ndarray, np.ndarray]:
         """Newton's start and its residual. ``select``: of u_n (residual r_n, Π(u_n) =
-        ``energy_n``), the backward-Euler velocity extrapolation u_n + Δt v_n and its
-        acceleration-corrected form u_n + Δt (2 v_n − v_{n−1}), the one with the smallest
-        incremental potential Φ (one gradient pass each, which also gives Π: a fraction of a
-        Newton iteration). The step minimises Φ, so a lower Φ is a start nearer the solution in
-        the energy norm; the residual's norm, dominated by the stiff membrane forces, is not:
-        chosen by ‖R‖, the released lens started from u_n in steps 2–17 and its first Newton
-        update raised ‖R‖ 3–45× (91 iterations in 30 steps; by Φ 82, docs/iol.md §4b)."""
+        ``energy_n``) and the extrapolations of the past positions of degree 2 (u_n + Δt (2v_n −
+        v_{n−1}) for equal steps; degree 1, u_n + Δt v_n, while there is one past step only) and
+        of the highest degree the history gives up to ``predictor_order``, the one with the
+        smallest incremental potential Φ (one gradient pass each, which also gives Π: a fraction
+        of a Newton iteration). The step minimises Φ, so a lower Φ is a start nearer the solution
+        in the energy norm; the residual's norm, dominated by the stiff membrane forces, is not:
+        chosen by ‖R‖ among u_n and the degree-1 and 2 extrapolations, the released lens started
+        from u_n in steps 2–17 and its first update raised ‖R‖ 3–45×. Released lens, 30 steps:
+        91 Newton iterations by ‖R‖, 82 by Φ, 69 by Φ with the degree-4 candidate, which makes
+        the steps from the 18th on one iteration each (docs/iol.md §4b)."""
         if self.predictor == "previous" or not np.any(v_n):
             return u_n.copy(), r_n
-        candidates = [u_n + self.dt * v_n]
-        if self.v_previous is not None:
-            candidates.append(u_n + self.dt * (2.0 * v_n - self.v_previous))
+        available = 1 + len(self.past)
+        degrees = sorted({min(2, available), min(self.predictor_order, available)})
         best, best_r, best_phi = u_n.copy(), r_n, self._potential(u_n, u_n, v_n, energy_n)
-        for u in candidates:
+        for degree in degrees:
+            u = self._extrapolation(u_n, v_n, degree)
             if self.contact is not None and self._collision_free_fraction(u_n, u - u_n) < 1.0:
                 continue  # the barrier is not defined past a crossing
             r = self._system(u, u_n, v_n, False)
@@ -1146,8 +1187,9 @@ class Dynamics:
             u, r, norm = trial, r_trial, new
         self.counts["iterations"] += iterations
         self.u = u
-        self.v_previous = v_n
+        self.past = ((self.v_step or self.dt, v_n),) + self.past[:self.predictor_order - 2]
         self.v = (u - u_n) / self.dt
+        self.v_step = self.dt
         return iterations
 
 
