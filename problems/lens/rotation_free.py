@@ -306,8 +306,18 @@ def _scaling(xi):
 # --------------------------------------------------------------------------------------------
 # element kernels (numba)
 # --------------------------------------------------------------------------------------------
+@njit(inline="always")
+def _add(hess, data, place, direct, p, q, value):
+    """A Hessian entry (p ≤ q) added to the element matrix, or (``direct``) straight to its
+    place ``place[p, q]`` in the CSR values."""
+    if direct:
+        data[place[p, q]] += value
+    else:
+        hess[p, q] += value
+
+
 @njit(cache=True, fastmath=FASTMATH)
-def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
+def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE, data, place, direct):
     """CST energy ½ h A C(E):E; adds its gradient (9) and the p ≤ q entries of its Hessian
     (9 × 9) to grad/hess (a1, a2: scratch 3-vectors, dE: 3 × 9)."""
     a1[:] = 0.0
@@ -338,18 +348,18 @@ def membrane_element(x, d, area, h, lam, mu, grad, hess, want_hess, a1, a2, dE):
             g1 = lam * dE[0, p] + C11 * dE[1, p]
             g2 = 4.0 * mu * dE[2, p]
             for q in range(p, 9):
-                hess[p, q] += k * (g0 * dE[0, q] + g1 * dE[1, q] + g2 * dE[2, q])
+                _add(hess, data, place, direct, p, q, k * (g0 * dE[0, q] + g1 * dE[1, q] + g2 * dE[2, q]))
         for i in range(3):
             for j in range(i, 3):
                 s = k * (S11 * d[i, 0] * d[j, 0] + S22 * d[i, 1] * d[j, 1]
                          + S12 * 0.5 * (d[i, 0] * d[j, 1] + d[i, 1] * d[j, 0]))
                 for c in range(3):
-                    hess[3 * i + c, 3 * j + c] += s
+                    _add(hess, data, place, direct, 3 * i + c, 3 * j + c, s)
     return energy
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
+def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work, data, place, direct):
     """Bending energy ½ D A [ν (tr κ)² + (1−ν) κ:κ] of one triangle (x: stencil positions,
     vertices 0–2 first); adds its gradient (3 × stencil) and the p ≤ q entries of its
     Hessian (what the upper-triangle scatter reads; ``assemble`` mirrors them for the full
@@ -409,7 +419,7 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
         g1 = k_b * (nu * dk[0, p] + dk[1, p])
         g2 = k_b * c1 * dk[2, p]
         for q in range(p, 3 * NP):
-            hess[p, q] += g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q]
+            _add(hess, data, place, direct, p, q, g0 * dk[0, q] + g1 * dk[1, q] + g2 * dk[2, q])
     # Σ_k m_k ∇²κ_k with y = k_b Σ_k m_k H_k (∇²κ is linear in H)
     y0 = k_b * (m0 * H[0, 0] + m1 * H[1, 0] + m2 * H[2, 0])
     y1 = k_b * (m0 * H[0, 1] + m1 * H[1, 1] + m2 * H[2, 1])
@@ -437,15 +447,15 @@ def bending_element(x, B, b, K0, area, D, nu, grad, hess, want_hess, work):
             ab, ba = alpha[i] * beta[j], beta[i] * alpha[j]
             for a in range(3):
                 for c in range(a if j == i else 0, 3):
-                    hess[3 * i + a, 3 * j + c] += (
-                        wi * Nn[j, a, c] + wj * Nn[i, c, a]
-                        + Cs[i, 0, a] * SC[j, 0, c] + Cs[i, 1, a] * SC[j, 1, c] + Cs[i, 2, a] * SC[j, 2, c]
-                        + ab * M[a, c] + ba * M[c, a])
+                    _add(hess, data, place, direct, 3 * i + a, 3 * j + c,
+                         wi * Nn[j, a, c] + wj * Nn[i, c, a]
+                         + Cs[i, 0, a] * SC[j, 0, c] + Cs[i, 1, a] * SC[j, 1, c] + Cs[i, 2, a] * SC[j, 2, c]
+                         + ab * M[a, c] + ba * M[c, a])
         for j in range(3, NP):
             wj = wk0 * B[0, j] + wk1 * B[1, j] + wk2 * B[2, j]
             for a in range(3):
                 for c in range(3):
-                    hess[3 * i + a, 3 * j + c] += wj * Nn[i, c, a]
+                    _add(hess, data, place, direct, 3 * i + a, 3 * j + c, wj * Nn[i, c, a])
     return energy
 
 
@@ -470,15 +480,18 @@ def bending_scratch(n_nodes):
 
 @njit(cache=True, fastmath=FASTMATH)
 def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, scatter_local, scatter_pos,
-             grad, data, want_hess, bending_only, mirror):
-    """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``:
-    triangle t adds its element matrix's flat entries ``scatter_local[k]`` at
-    ``data[scatter_pos[k]]`` for k in ``scatter_start[t]:scatter_start[t + 1]`` (``scatter_lists``;
-    ``mirror=True``: the kernels' p ≤ q entries copied to q > p, for the full pattern)."""
+             grad, data, want_hess, bending_only, mirror, places):
+    """Σ over triangles: energy, gradient into ``grad`` (3n), Hessian into the CSR ``data``.
+    With ``places`` (n_tri, m, m; ``RotationFreeShell.places``) every element entry p ≤ q is
+    added straight at ``data[places[t, p, q]]`` (the upper pattern); else triangle t adds its
+    element matrix's flat entries ``scatter_local[k]`` at ``data[scatter_pos[k]]`` for k in
+    ``scatter_start[t]:scatter_start[t + 1]`` (``scatter_lists``; ``mirror=True``: the
+    kernels' p ≤ q entries copied to q > p, for the full pattern)."""
     lam = E * nu / (1.0 - nu * nu)
     mu = 0.5 * E / (1.0 + nu)
     energy = 0.0
     NP = nodes.shape[1]
+    direct = want_hess and places.shape[0] == tri.shape[0]
     xe = np.zeros((NP, 3))
     gb = np.zeros(3 * NP)
     hb = np.zeros((3 * NP, 3 * NP))
@@ -489,21 +502,23 @@ def assemble(x, tri, nodes, B, b, K0, d, area, thickness, E, nu, scatter_start, 
         for i in range(NP):
             xe[i] = x[nodes[t, i]]
         gb[:] = 0.0
-        if want_hess:
+        if want_hess and not direct:
             hb[:, :] = 0.0
+        place = places[t] if direct else places[0]
         D = E * h ** 3 / (12.0 * (1.0 - nu * nu))
-        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work)
+        energy += bending_element(xe, B[t], b[t], K0[t], area[t], D, nu, gb, hb, want_hess, work, data, place,
+                                  direct)
         if not bending_only:
             energy += membrane_element(xe[:3], d[t], area[t], h, lam, mu, gb[:9], hb[:9, :9], want_hess,
-                                       a1, a2, dE)
-        if want_hess and mirror:  # the kernels wrote the p ≤ q entries
-            for p in range(3 * NP):
-                for q in range(p + 1, 3 * NP):
-                    hb[q, p] = hb[p, q]
+                                       a1, a2, dE, data, place[:9, :9], direct)
         for i in range(NP):
             for cc in range(3):
                 grad[3 * nodes[t, i] + cc] += gb[3 * i + cc]
-        if want_hess:
+        if want_hess and not direct:
+            if mirror:  # the kernels wrote the p ≤ q entries
+                for p in range(3 * NP):
+                    for q in range(p + 1, 3 * NP):
+                        hb[q, p] = hb[p, q]
             flat = hb.ravel()
             for k in range(scatter_start[t], scatter_start[t + 1]):
                 data[scatter_pos[k]] += flat[scatter_local[k]]
@@ -633,6 +648,12 @@ class RotationFreeShell:
                       "diagonal": renumber[self.diagonal], "mass": self.mass_data[keep]}
         self.scatter = {False: scatter_lists(self.nodes, self.positions, None),
                         True: scatter_lists(self.nodes, self.positions, (keep, renumber))}
+        # every element entry's place in the upper pattern (its own or its transpose's): the
+        # kernels add the p ≤ q entries there directly, without an element matrix. A padding slot
+        # repeats a node, so its (zero) entries land on that node's places
+        own = self.positions
+        self.places = np.where(keep[own], renumber[own], renumber[own.transpose(0, 2, 1)]).astype(np.int32)
+        self._no_places = np.zeros((1, m, m), dtype=np.int32)
 
     # -- assembly --------------------------------------------------------------------------
     def new_data(self) -> np.ndarray:
@@ -646,9 +667,11 @@ class RotationFreeShell:
         x = self.X + u.reshape(-1, 3)
         want = data is not None
         start, local, pos = self.scatter[upper]
+        places = self.places if upper else self._no_places
         return assemble(x, self.tri, self.nodes, self.B, self.b, self.K0, self.d, self.area, self.thickness,
                         float(self.material.youngs_modulus), float(self.material.poisson_ratio),
-                        start, local, pos, grad, data if want else np.zeros(1), want, bending_only, not upper)
+                        start, local, pos, grad, data if want else np.zeros(1), want, bending_only, not upper,
+                        places)
 
     def energy(self, u: np.ndarray, bending_only: bool = False) -> float:
         return self.evaluate(u, np.zeros(self.n_dofs), bending_only=bending_only)
