@@ -7,6 +7,7 @@ surface strain (``fast_injection.cell_surface_strain``), the P2 frames' fields."
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -41,25 +42,29 @@ class FrameWriter:
         self.series = ctx.pyvista_series(stem=stem)
         self.pictures = ctx.out if ctx.pictures and ctx.rank0 else None
         self.frames: list[Path] = []
+        self.seconds = 0.0  # wall time spent drawing and writing frames
 
     @property
     def active(self) -> bool:
         return self.series.out is not None or self.pictures is not None
 
-    def write(self, time: float, u: np.ndarray, title: str, obstacles: dict) -> None:
-        """One frame: the lens at displacement u, the rigid ``obstacles`` drawn as wireframes."""
+    def write(self, at: float, u: np.ndarray, title: str, obstacles: dict) -> None:
+        """The frame at simulated time ``at``: the lens at displacement u, the rigid ``obstacles``
+        drawn as wireframes."""
         if not self.active:
             return
         from eyemech.problems.lens.fast_injection import cell_surface_strain
 
+        begin = time.perf_counter()
         strain = cell_surface_strain(self.lens, u, np.arange(len(self.lens.shell.tri)))
         grid = lens_grid(self.lens, u, strain)
         with self.ctx.timings("output"):
-            self.series.write(time, grid)
+            self.series.write(at, grid)
             if self.pictures is not None:
                 path = self.pictures / f"{self.picture_stem}_{len(self.frames):03d}.png"
                 render_grid(grid.warp_by_vector("displacement"), path, title, obstacles)
                 self.frames.append(path)
+        self.seconds += time.perf_counter() - begin
 
     def finish(self, gif: str) -> None:
         """The series' index among the result's fields, the PNGs and their animation ``gif``
