@@ -1003,11 +1003,10 @@ class Dynamics:
             self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
             self.counts["jacobians"] += 1
         elif with_jacobian:
-            self.data[:] = 0.0
+            np.multiply(self.mass_data, coefficient, out=self.data)  # the kernels add the Hessian to it
             energy = self.shell.evaluate(u, self.grad, self.data, upper=self.upper)
             for term in self.extra:
                 energy += term(u, self.grad, self.data)
-            self.data += coefficient * self.mass_data
             if self.obstacles is not None:
                 self._obstacle_terms(u, True)
             self.clock["jacobian"] += time.process_time() - t0 - (self.clock["contact"] - contact0)
