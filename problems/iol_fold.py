@@ -25,7 +25,7 @@ class Parameters(FoldParameters):
 
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle of iol-speed: the same roll, chamber and ipctk self-contact on "
-                                    "its vertices and triangles; no pictures)")
+                                    "its vertices and triangles, the same pictures and .vtu frames)")
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -67,15 +67,18 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     """The fold on the P1 lens; its folded_state.npz (the vertices') starts
     ``iol-injection --set model=p1-rotation-free``."""
     from eyemech.problems.lens import fast_injection
+    from eyemech.problems.lens.fast_frames import FrameWriter
 
     lens = fast_injection.fast_lens(ctx, params)
+    frames = FrameWriter(ctx, lens, stem="fold", picture_stem="fold")
     with ctx.timings("time_stepping"):
-        folded, history = fast_injection.fold(params, lens, ctx.record_step)
+        folded, history = fast_injection.fold(params, lens, ctx.record_step, frames)
     ctx.result.quantities.update(model=params.model, **history.quantities(params),
                                  triangles=len(lens.shell.tri), nodes=len(lens.shell.X), dofs=lens.shell.n_dofs)
     if ctx.out is not None and ctx.rank0:
         fast_injection.save_state(ctx.out / "folded_state.npz", lens, folded)
         ctx.result.fields.append("folded_state.npz")
+        frames.finish("fold.gif")
 
 
 SCENE = Scene(name="iol-fold", kind="scene", parameters=Parameters, run=run,

@@ -36,7 +36,8 @@ step costs when the shared machine is busy with other jobs. Methods:
   on the same gmsh mesh (its vertices: 1,416 unknowns at the paper's resolution), numba
   kernels with the exact Hessian, CSR pattern and PETSc matrix built once (the values
   written in place), MUMPS LDLᵀ with one symbolic analysis per run (more only where
-  self-contact grows the pattern); ``method=newton`` from the best-residual predictor
+  self-contact grows the pattern); ``method=newton`` from the start of least incremental
+  potential among u_n and two extrapolations of the past positions
   (``Dynamics._predict``) with ``jacobian=fresh`` (a new Hessian and factorisation every
   iteration) or ``lagged`` (fresh factors at each step's start, kept within the step while
   an iteration reduces the residual by ``stall``). ``contact=true``: the same capsule, met

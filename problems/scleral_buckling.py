@@ -192,8 +192,9 @@ class Parameters(SceneParameters, SolverChoice):
         "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
         "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
         "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
-        "detached flap, not at its root, and the sutures keep the tear closed (docs/scleral_buckling.md, "
-        "\"The tear at the defaults\")", "mm")
+        "detached flap, not at its root. The tear closes on the coarse and default meshes; on the "
+        "paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
+        "\"Mesh convergence: at the defaults the tear stays open\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
@@ -1270,6 +1271,7 @@ class BucklingModel:
             rim = self.retina.gaps_of(self.pairing.slave_g[self.tear_rim])
             closed = bool(len(rim) and np.all(rim[np.isfinite(rim)] < self.params.tear_closure_tolerance)
                           and np.isfinite(rim).any())
+            widest = self._widest_rim_node(rim)
             gap_min = self.retina.min_gap()
             # nodes the penalty presses (g < ε: with the round-off a very soft retina can
             # rest at 0 < g < ε on a pressure ≤ αε/4 without ever crossing g = 0)
@@ -1285,10 +1287,31 @@ class BucklingModel:
                 # (those tear_closed_nts looks at): closed when below the tolerance
                 "tear_rim_gap_max_mm": float(rim[np.isfinite(rim)].max())
                 if np.isfinite(rim).any() else float("nan"),
+                # where that widest gap is: the node's polar angle from the anterior pole in
+                # the reference mesh (the tear's centre at tear_angle, 88°: a smaller angle
+                # is the rim's anterior edge, next to the detached flap's root)
+                "tear_rim_widest_polar_deg": widest,
                 "retina_contact_nodes": summary["active_nodes"],
                 "retina_pressed_nodes": self.ctx.comm.allreduce(int(pressed.sum()), op=MPI.SUM),
                 "retina_penalty_contact_area_mm2": 2.0 * pressed_area,
                 "retina_contact_force_N": 2.0 * summary["contact_normal_force"]}
+
+    def _widest_rim_node(self, rim: np.ndarray) -> float:
+        """Reference polar angle (degrees from the anterior pole) of the tear-rim node with
+        the widest node-to-surface gap ``rim`` (ordered as the pairing's rim nodes; nan
+        when none is paired). The same on every rank: the pairing is gathered. Gaps within
+        ``RIM_TIE`` (mm) of the widest count as tied (a closed rim's nodes all sit at the
+        penalty's penetration, and their order there is round-off, which differs between
+        partitions): of those, the anterior-most node is reported."""
+        paired = np.isfinite(rim)
+        if not paired.any():
+            return float("nan")
+        x = self.pairing.slave_x[self.tear_rim][paired]
+        polar = np.degrees(np.arccos(x[:, 2] / np.linalg.norm(x, axis=1)))
+        tied = rim[paired] >= rim[paired].max() - self.RIM_TIE
+        return float(polar[tied].min())
+
+    RIM_TIE = 1e-4
 
     def detached_area(self) -> float:
         if not self.detached:

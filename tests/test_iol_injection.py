@@ -302,3 +302,72 @@ def test_p1_injection_starts_from_a_p2_fold():
     assert np.abs(u).max() > 0.5  # folded (mm)
     contact = fast_injection.self_contact(lens, params)
     assert not contact.intersecting(lens.shell.X + u.reshape(-1, 3))
+
+
+def _read_frames(out: Path, stem: str) -> tuple[list[float], list]:
+    """The times and the ``.vtu`` files (pyvista) of ``<stem>.pvd``, in order."""
+    import re
+
+    pyvista = pytest.importorskip("pyvista")
+    entries = re.findall(r'timestep="([^"]+)" part="0" file="([^"]+)"', (out / f"{stem}.pvd").read_text())
+    return [float(t) for t, _ in entries], [pyvista.read(out / name) for _, name in entries]
+
+
+def test_p1_fold_writes_its_pictures_and_vtu_frames(tmp_path):
+    """``iol-fold --set model=p1-rotation-free`` (coarse lens, 3 frames) writes the P2 fold's
+    outputs: fold_NNN.png, fold.gif and fold.pvd with one .vtu per frame holding the vertex
+    displacement and, per triangle, thickness, part and surface strain; the last frame is the
+    saved folded state (the same numbers)."""
+    pytest.importorskip("ipctk")
+    from eyemech.problems import iol_fold
+
+    params = iol_fold.Parameters(model="p1-rotation-free", resolution="coarse", frames=3)
+    result = iol_fold.run(params, out=tmp_path, options=RunOptions(quiet=True))
+    pngs = sorted(tmp_path.glob("fold_*.png"))
+    # every 40 // 3 = 13 steps and the last: 4 frames (5 where step cuts add steps)
+    assert 4 <= len(pngs) <= 5
+    assert all(p.stat().st_size > 10_000 for p in pngs)  # a drawn picture, not an empty file
+    assert "fold.gif" in result.pictures and (tmp_path / "fold.gif").is_file()
+    assert "fold.pvd" in result.fields
+    times, frames = _read_frames(tmp_path, "fold")
+    assert len(frames) == len(pngs)
+    assert times[-1] == pytest.approx(params.fold_time)
+    last = frames[-1]
+    assert last.n_cells == result.quantities["triangles"] and last.n_points == result.quantities["nodes"]
+    for name in ("thickness (mm)", "optic", "surface strain"):
+        assert name in last.cell_data
+    saved = np.load(tmp_path / "folded_state.npz")
+    assert np.array_equal(np.asarray(last.point_data["displacement"]), saved["displacement"])
+    assert np.asarray(last.cell_data["surface strain"]).max() > 0.01  # the optic rolled to R = 1 mm
+
+
+def test_p1_injection_writes_its_pictures_and_vtu_frames(tmp_path, monkeypatch):
+    """``iol-injection --set model=p1-rotation-free`` from the P2 coarse fold, cut to its first
+    0.03 s: frame_NNN.png (the first step, then at least frame_interval = 0.01 s apart, and the
+    last), injection.gif and injection.pvd with one .vtu per PNG at those steps' times."""
+    pytest.importorskip("ipctk")
+    from eyemech.problems.lens import fast_injection
+
+    start = fast_injection.Injection.__init__
+
+    def first_steps(self, *args, **kwargs):
+        start(self, *args, **kwargs)
+        self.end = 3 * self.params.time_step
+
+    monkeypatch.setattr(fast_injection.Injection, "__init__", first_steps)
+    params = iol_injection.Parameters(model="p1-rotation-free", resolution="coarse", folded_state=str(FOLDED))
+    result = iol_injection.run(params, out=tmp_path, options=RunOptions(quiet=True))
+    steps = result.quantities["time"]  # the converged steps' times (the first is cut here)
+    assert steps[-1] == pytest.approx(0.03)
+    expected, last = [], -1.0
+    for t in steps:
+        if not expected or t >= last + params.frame_interval - 1e-9 or t >= 0.03 - 1e-9:
+            expected.append(t)
+            last = t
+    times, frames = _read_frames(tmp_path, "injection")
+    assert times == pytest.approx(expected) and len(expected) >= 3
+    assert [p.name for p in sorted(tmp_path.glob("frame_*.png"))] == [f"frame_{i:03d}.png" for i in range(len(times))]
+    assert "injection.gif" in result.pictures and "injection.pvd" in result.fields
+    assert all(f.n_points == result.quantities["nodes"] for f in frames)
+    # the operation's time leaves the frames out
+    assert 0.0 < result.quantities["frames_wall_seconds"] < result.quantities["wall_seconds"]

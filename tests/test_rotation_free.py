@@ -42,6 +42,10 @@ References and tolerances
 - Rigid obstacles (nodal penalty on the P1 vertices): gradient and Hessian blocks against
   central differences (1e-6; measured 5e-11, 6e-12), and a sheet pressed onto a floor: the
   reactions carry the load to 1e-6 (measured 2.4e-13).
+- Newton's extrapolated start: the Lagrange polynomial through the past positions, exact for
+  a quartic (degree 4) / quadratic (degree 2) motion with unequal steps (1e-12 relative:
+  round-off). The release's Newton count from the least-potential start (30 steps, fresh):
+  69 iterations, 71 factorisations (bounds + 3), one iteration a step from the 18th.
 - Lens release (``iol-speed``, paper resolution, Δt = 0.01 s): tip and optic-centre
   displacement histories within 0.05 mm of the P2 C0-IP run at every one of 20 steps
   (issue 23; measured ≤ 0.037 mm tip, ≤ 0.009 mm optic).
@@ -417,3 +421,41 @@ def test_sheet_sliding_on_a_wall_stops_where_coulomb_says():
     a = mu * q / (rho * h)
     assert slid == pytest.approx(v0 ** 2 / (2 * a) - 0.5 * v0 * dt, rel=1e-4)
     assert np.abs(dyn.v).max() < 1e-5  # stopped (the ε-viscous law leaves a creep of < ε/Δt)
+
+
+def test_extrapolated_start_is_exact_for_a_quartic_motion_with_unequal_steps():
+    """``Dynamics._extrapolation`` is the Lagrange polynomial through the past positions (rebuilt
+    from the backward-Euler velocities and their step lengths): a motion u(t) of degree 4 is
+    extrapolated exactly by degree 4 (round-off: 1e-12 relative asserted), and degree 2 is
+    exact for a quadratic one, whatever the step lengths (a cut step, then doubled ones)."""
+    params, lens = _coarse_lens_release()
+    dyn = rf.Dynamics(lens.shell, 0.01, params.damping)
+    rng = np.random.default_rng(1)
+    coefficients = rng.standard_normal((5, lens.shell.n_dofs))
+    for degree in (2, 4):
+        motion = lambda t: sum(c * t ** k for k, c in enumerate(coefficients[:degree + 1]))  # noqa: E731
+        times = [0.0, 0.01, 0.015, 0.02, 0.04]  # steps 0.01, 0.005, 0.005, 0.02
+        steps = np.diff(times)
+        velocities = [(motion(times[k + 1]) - motion(times[k])) / steps[k] for k in range(len(steps))]
+        dyn.v_step = steps[-1]
+        dyn.past = tuple((steps[k], velocities[k]) for k in range(len(steps) - 2, -1, -1))
+        dyn.dt = 0.02
+        predicted = dyn._extrapolation(motion(times[-1]), velocities[-1], degree)
+        exact = motion(times[-1] + dyn.dt)
+        assert np.abs(predicted - exact).max() < 1e-12 * np.abs(exact).max()
+
+
+def test_release_newton_iterations_from_the_least_potential_start():
+    """The paper-resolution release, 30 steps, fresh factors: Newton from the start of least
+    incremental potential (u_n, degree-2 and degree-4 extrapolations) takes 69 iterations and
+    71 factorisations (the first Hessian shifted once), one iteration a step from the 18th
+    (docs/iol.md §4b; the start by least residual among u_n, degree 1 and 2 took 91). Bounds:
+    the counts + 3 (round-off may move a step across the tolerance)."""
+    from eyemech.problems import iol_speed
+
+    params = iol_speed.Parameters(model="p1-rotation-free")
+    run = rf.release(params, 30, rf.FastLens.build(params))
+    iterations = run["history"]["iterations"]
+    assert sum(iterations) <= 69 + 3 and run["counts"]["factorisations"] <= 71 + 3
+    assert run["counts"]["iterations"] == sum(iterations)
+    assert max(iterations[20:]) == 1

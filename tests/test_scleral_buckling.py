@@ -106,7 +106,9 @@ def test_the_tear_closes_after_suturing(coarse):
     # tear_closure_tolerance (0.05 mm) of the choroid after suturing (measured rim gap
     # 0.046 mm here, 0.014 mm on the default mesh: docs/scleral_buckling.md, "The tear at
     # the defaults"), and none lies deeper than the penalty allows (p/α ≪ 1e-3 mm;
-    # measured 3e-5 mm)
+    # measured 3e-5 mm). Not mesh-converged: the paper mesh, whose tear's anterior rim sits
+    # at the nominal 80°, leaves that rim 0.093 mm open (docs/scleral_buckling.md, "Mesh
+    # convergence: at the defaults the tear stays open")
     q = coarse.quantities
     assert q["retina_contact_penalty"] > 0
     assert q["after_iop"]["max_penetration_mm"] == 0.0
@@ -116,6 +118,10 @@ def test_the_tear_closes_after_suturing(coarse):
     assert sutured["retina_contact_area_mm2"] > 0.0
     assert sutured["retina_pressed_nodes"] >= 1
     assert sutured["max_penetration_mm"] < 1e-3
+    # the widest gap is reported with its rim node's polar angle: the coarse tear's rim
+    # spans 78.75-90° (centre 88°) and its anterior edge, by the tire's corner, is the
+    # one left open (measured 78.96°: 0.046 mm there, the other rim nodes pressed)
+    assert 78.7 <= sutured["tear_rim_widest_polar_deg"] < 80.0
     # the sutures' loop (suture_model = loop) presses the tire in with less than the
     # sclera pushes it out (measured 0.30 N against 1.53 N, whole eye): the band holds
     # the tire at its travel, so the closure is the bites' pull, not a deeper tire

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eyemech.problems.lens.fast_frames import FrameWriter
 from eyemech.problems.lens.fold import EASY_ITERATIONS, blocked_dofs
 from eyemech.problems.lens.injector import Plunger, turn_about_x
 from eyemech.problems.lens.model import InjectorLayout, require_ipctk, rolled
@@ -73,13 +74,13 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
             if t + 1e-9 * time_step < stop < target - 1e-9 * time_step:
                 target = stop
         h = target - t
-        saved = (dyn.u.copy(), dyn.v.copy(), None if dyn.v_previous is None else dyn.v_previous.copy())
+        saved = dyn.save_state()
         apply(target, h)
         dyn.dt = h
         try:
             iterations = dyn.step()
         except RuntimeError as err:
-            dyn.u, dyn.v, dyn.v_previous = saved
+            dyn.restore_state(saved)
             cuts += 1
             dt = 0.5 * h
             if dt < min_fraction * time_step:
@@ -107,12 +108,17 @@ def fast_lens(ctx, params) -> FastLens:
 
 # -- measurements on the P1 lens -----------------------------------------------------------------
 def surface_strain(lens: FastLens, u: np.ndarray, triangles: np.ndarray) -> float:
-    """Largest surface strain over ``triangles``: max over both faces of |eig(E ± h/2 κ)|, E the
-    CST Green strain, κ = K(x) − K(X) the element's change of curvature (``StrainProbe``'s
+    """Largest surface strain over ``triangles`` (``cell_surface_strain``)."""
+    return float(cell_surface_strain(lens, u, triangles).max(initial=0.0))
+
+
+def cell_surface_strain(lens: FastLens, u: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Largest surface strain of each of ``triangles``: max over both faces of |eig(E ± h/2 κ)|,
+    E the CST Green strain, κ = K(x) − K(X) the element's change of curvature (``StrainProbe``'s
     measure on the P2 lens)."""
     shell = lens.shell
     if not len(triangles):
-        return 0.0
+        return np.zeros(0)
     x = shell.X + u.reshape(-1, 3)
     tri = shell.tri[triangles]
     a = np.einsum("tic,tia->tac", x[tri], shell.d[triangles])
@@ -122,8 +128,8 @@ def surface_strain(lens: FastLens, u: np.ndarray, triangles: np.ndarray) -> floa
     K = np.einsum("tkc,tc->tk", H, c / np.linalg.norm(c, axis=1)[:, None]) - shell.K0[triangles]
     kappa = np.stack([np.stack([K[:, 0], K[:, 2]], -1), np.stack([K[:, 2], K[:, 1]], -1)], -1)
     half = 0.5 * shell.thickness[triangles][:, None, None]
-    return float(max(np.abs(np.linalg.eigvalsh(E + half * kappa)).max(),
-                     np.abs(np.linalg.eigvalsh(E - half * kappa)).max()))
+    return np.maximum(np.abs(np.linalg.eigvalsh(E + half * kappa)).max(axis=1),
+                      np.abs(np.linalg.eigvalsh(E - half * kappa)).max(axis=1))
 
 
 def optic_measures(lens: FastLens, u: np.ndarray) -> dict:
@@ -232,8 +238,10 @@ def _dynamics(lens: FastLens, params, damping: float, fixed=None) -> Dynamics:
 
 
 # -- the fold -------------------------------------------------------------------------------------
-def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None) -> tuple[np.ndarray, History]:
-    """The fold of ``lens.fold`` on the P1 lens from the flat state: (displacement, history)."""
+def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None,
+         frames: FrameWriter | None = None) -> tuple[np.ndarray, History]:
+    """The fold of ``lens.fold`` on the P1 lens from the flat state: (displacement, history);
+    ``frames``: ``params.frames`` of them, evenly in steps and the last, as the P2 fold."""
     shell = lens.shell
     optic = lens.optic_nodes
     X_optic = shell.X[optic]
@@ -249,6 +257,7 @@ def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None)
         dyn.set_contact(contact)
     dyn.reset(np.zeros(shell.n_dofs))
     history = History()
+    every = max(1, int(round(params.fold_time / params.time_step)) // params.frames)
 
     def apply(t: float, _dt: float) -> None:
         fraction = t / params.fold_time
@@ -262,6 +271,8 @@ def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None)
         if record_step is not None:
             record_step(step=len(history.time), time=record.time, newton_iterations=record.iterations,
                         cuts=record.cuts, max_penetration_mm=history.penetration[-1])
+        if frames is not None and (len(history.time) % every == 0 or record.time >= params.fold_time - 1e-9):
+            frames.write(record.time, dyn.u, f"iol-fold (P1)  t = {record.time:.2f} s", {"chamber": chamber})
 
     try:
         _run(dyn, history, apply, params.fold_time, params.time_step, converged)
@@ -276,8 +287,11 @@ class Injection:
     """The injection of the folded P1 lens (``iol_injection.Injection`` on the vertices)."""
 
     def __init__(self, params, lens: FastLens, folded: np.ndarray,
-                 record_step: Callable[..., None] | None = None):
-        self.params, self.lens, self.record_step = params, lens, record_step
+                 record_step: Callable[..., None] | None = None, frames: FrameWriter | None = None):
+        """``frames``: as the P2 injection's, at least ``frames_every`` steps and ``frame_interval``
+        seconds apart, and the first and last steps."""
+        self.params, self.lens, self.record_step, self.frames = params, lens, record_step, frames
+        self.last_frame = (0.0, 0)  # time and step of the last frame
         shell = lens.shell
         layout = InjectorLayout()
         self.layout = layout
@@ -286,6 +300,8 @@ class Injection:
         self.start = float(x[:, 0].min()) - 0.05
         self.plunger = Plunger(self.start, axis, params.bore_radius + 0.5)
         self.capsule = layout.capsule(params)
+        self.drawn = {"cartridge": layout.cartridge(params, lip=layout.nozzle_lip), "plunger": self.plunger,
+                      "capsule": self.capsule}  # the walls in the pictures
         self.walls = None
         self.dyn = _dynamics(lens, params, params.damping)
         if params.contact:
@@ -337,10 +353,18 @@ class Injection:
 
     def converged(self, record: StepRecord) -> None:
         self.history.record(record, self.lens, self.dyn.u, self.walls, self.contact)
+        step = len(self.history.time)
         if self.record_step is not None:
-            self.record_step(step=len(self.history.time), time=record.time, newton_iterations=record.iterations,
+            self.record_step(step=step, time=record.time, newton_iterations=record.iterations,
                              cuts=record.cuts, plunger=self.plunger.position,
                              max_penetration_mm=self.history.penetration[-1])
+        last_time, last_step = self.last_frame
+        if self.frames is not None and (
+                (step - last_step >= self.params.frames_every
+                 and record.time >= last_time + self.params.frame_interval - 1e-9)
+                or step == 1 or record.time >= self.end - 1e-9):
+            self.last_frame = (record.time, step)
+            self.frames.write(record.time, self.dyn.u, f"iol-injection (P1)  t = {record.time:.2f} s", self.drawn)
 
     def run(self) -> History:
         steps = int(np.ceil(self.end / self.params.time_step - 1e-9))

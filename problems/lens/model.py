@@ -330,18 +330,25 @@ def optic_center(shell: LensShell) -> np.ndarray:
 def render_frame(shell: LensShell, path: Path, title: str, obstacles: dict,
                  bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
     """The deformed lens (coloured optic / haptic) with the rigid bodies as wireframes."""
-    import pyvista
-
-    from eyemech.problems.run.output import gather_grid, quiet_vtk
+    from eyemech.problems.run.output import gather_grid
 
     grid = gather_grid(shell.u)
     if grid is None:
         return
+    render_grid(grid.warp_by_vector(shell.u.name), path, title, obstacles, bounds)
+
+
+def render_grid(deformed, path: Path, title: str, obstacles: dict, bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
+    """``render_frame``'s picture of a deformed lens surface (a pyvista dataset in its deformed
+    position; the P1 scenes draw their triangles with it)."""
+    import pyvista
+
+    from eyemech.problems.run.output import quiet_vtk
+
     pyvista.OFF_SCREEN = True
     quiet_vtk()
     plotter = pyvista.Plotter(off_screen=True, window_size=(1100, 600))
-    plotter.add_mesh(grid.warp_by_vector(shell.u.name), color="#5b9bd5", show_edges=True,
-                     edge_color="#1f3f66", smooth_shading=False)
+    plotter.add_mesh(deformed, color="#5b9bd5", show_edges=True, edge_color="#1f3f66", smooth_shading=False)
     for obstacle in obstacles.values():
         mesh = _obstacle_mesh(obstacle, bounds)
         if mesh is not None:

@@ -37,10 +37,12 @@ class SurfaceSelfContact:
                  exclusion: float | None = None, margin: float | None = None,
                  friction: float = 0.0, slip: float = 1e-3):
         """``margin`` δ (default 4 d̂): the candidate pairs are those within d̂ + δ of each
-        other at the positions x_b of their build (ipctk BVH, boxes inflated by d̂ + δ), reused
-        for every x with max_v |x_v − x_b,v − t| ≤ δ/2 for the mean move t (``_covers``) — no
-        pair outside them can then come within d̂ — and rebuilt otherwise (``rebuilds`` counts
-        them)."""
+        other at the positions x_b of their build (ipctk's sweep and prune, boxes inflated by
+        d̂ + δ), reused for every x with max_v |x_v − x_b,v − t| ≤ δ/2 for the mean move t
+        (``_covers``) — no pair outside them can then come within d̂ — and rebuilt otherwise
+        (``rebuilds`` counts them). Every broad phase here is ipctk's sweep and prune: on the lens
+        it builds the candidates in 3.7 ms where its BVH takes 5.2 (the same 549 pairs) and
+        sweeps a CCD path in 1.3 ms against 1.9 (load 6–7, docs/iol.md §4b)."""
         import ipctk
         import scipy.sparse
         from scipy.sparse.csgraph import dijkstra
@@ -92,7 +94,7 @@ class SurfaceSelfContact:
         if not self._covers(x):
             self._candidates = self._ipctk.Candidates()
             self._candidates.build(self.mesh, np.asfortranarray(x), self.dhat + self.margin,
-                                   broad_phase=self._ipctk.BVH())
+                                   broad_phase=self._ipctk.SweepAndPrune())
             self._x_build = np.array(x)
             self.rebuilds += 1
         return self._candidates
@@ -154,7 +156,7 @@ class SurfaceSelfContact:
         pattern takes, so that the pairs coming within d̂ over the next iterations are in it."""
         x = np.asfortranarray(x)
         collisions = self._ipctk.NormalCollisions()
-        collisions.build(self.mesh, x, reach, broad_phase=self._ipctk.BVH())
+        collisions.build(self.mesh, x, reach, broad_phase=self._ipctk.SweepAndPrune())
         if not len(collisions):
             return np.zeros(0, dtype=np.int64)
         h = self._ipctk.BarrierPotential(reach).hessian(collisions, self.mesh, x,
@@ -165,21 +167,21 @@ class SurfaceSelfContact:
         """The largest fraction of the straight path x0 → x1 that is collision-free (CCD). With
         both ends within δ/2 of the candidates' build positions (up to translations t0, t1),
         every point of the path is too (up to the interpolated translation: a ball is convex), so
-        the kept candidates hold every pair that can meet on it; else a full BVH sweep."""
+        the kept candidates hold every pair that can meet on it; else a full broad-phase sweep."""
         candidates = self._candidates_for(x0)
         if self._covers(x1):
             fraction = float(candidates.compute_collision_free_stepsize(
                 self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), narrow_phase_ccd=self._ccd))
         else:
             fraction = float(self._ipctk.compute_collision_free_stepsize(
-                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), broad_phase=self._ipctk.BVH(),
+                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), broad_phase=self._ipctk.SweepAndPrune(),
                 narrow_phase_ccd=self._ccd))
         if fraction < 1.0:
             self.step_limits.append(fraction)
         return fraction
 
     def intersecting(self, x: np.ndarray) -> bool:
-        return bool(self._ipctk.has_intersections(self.mesh, np.asfortranarray(x), broad_phase=self._ipctk.BVH()))
+        return bool(self._ipctk.has_intersections(self.mesh, np.asfortranarray(x), broad_phase=self._ipctk.SweepAndPrune()))
 
     def min_distance(self, x: np.ndarray) -> float:
         """The smallest distance of the pairs within d̂ (``inf`` when none is)."""

@@ -139,11 +139,10 @@ class P1Stepper:
         self.iterations: list[int] = []
 
     def save(self) -> tuple:
-        d = self.dyn
-        return d.u.copy(), d.v.copy(), None if d.v_previous is None else d.v_previous.copy()
+        return self.dyn.save_state()
 
     def restore(self, state: tuple) -> None:
-        self.dyn.u, self.dyn.v, self.dyn.v_previous = (None if a is None else a.copy() for a in state)
+        self.dyn.restore_state(state)
 
     def solve_step(self, dt: float) -> int:
         self.dyn.dt = dt
