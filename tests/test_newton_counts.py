@@ -502,3 +502,27 @@ def test_the_step_relative_contraction_test_keeps_the_factorisation_while_backtr
     assert step_counts.newton_solves == 1
     assert step_counts.factorisations <= 0.5 * residual_counts.factorisations
     assert step_counts.factorisations == step_counts.jacobians < step_counts.newton_iterations_all
+
+
+def test_energy_line_search_in_the_suture_step_saves_factorisations():
+    """``suture_line_search = cp`` (the default) against bt in step 3 on the coarse eye with
+    the settling step: the same eye after suturing and after settling within 1 % with fewer
+    factorisations in step 3. bt rejects a step that raises ‖F‖ and creeps at its 0.1 floor;
+    cp takes the step where the energy's directional derivative vanishes. Measured: 102
+    factorisations in 23 load steps against 118 in 24, step 3's 12 against 25; after suturing
+    the axial-length change 1.5740 against 1.5751 mm (0.07 %), settled 0.36445 against
+    0.36444 mm; rim gap 0.0450 against 0.0464 mm after suturing."""
+    options = RunOptions(fields=False, pictures=False, quiet=True)
+    energy, backtracking = (scleral_buckling.run(
+        scleral_buckling.Parameters(resolution="coarse", suture_line_search=line_search),
+        options=options) for line_search in ("cp", "bt"))
+    for stage in ("after_suturing", "after_settling"):
+        expected, actual = backtracking.quantities[stage], energy.quantities[stage]
+        for key in ("axial_length_change_mm", "iop_mmHg", "refraction_change_D"):
+            assert actual[key] == pytest.approx(expected[key], rel=0.01), (stage, key)
+        # 1 % of the rim's 1.03 mm gap after step 1
+        assert actual["tear_rim_gap_max_mm"] == pytest.approx(expected["tear_rim_gap_max_mm"],
+                                                              abs=0.01), stage
+    assert _stage_factorisations(energy, 3) < _stage_factorisations(backtracking, 3)
+    assert energy.as_json()["solver_counts"]["factorisations"] < \
+        backtracking.as_json()["solver_counts"]["factorisations"]
