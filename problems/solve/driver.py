@@ -24,7 +24,8 @@ Design notes
   docs/scleral_buckling.md, "Newton's budget"): a secant predictor per load step
   (:class:`SecantPredictor`) whose solve keeps the unpredicted start's tolerance; modified
   Newton (``NewtonOptions.reuse_contraction``: the Jacobian callback leaves the matrix as it
-  is, so PCSetUp keeps the factorisation); load steps sized by the step's factorisations
+  is, so PCSetUp keeps the factorisation; ``reuse_step_relative`` measures the contraction
+  against the line search's step length); load steps sized by the step's factorisations
   (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``); a
   failed solve repeated with another line search (``NewtonOptions.fallback_line_search``:
   full steps settle a contact's kink where backtracking on ‖F‖ creeps, docs/scleral_buckling.md,
