@@ -248,7 +248,7 @@ class Parameters(SceneParameters, SolverChoice):
                                           "mm")
     # Newton's budget (docs/bench/scleral-buckling.md); the reference method: predictor=none,
     # jacobian_reuse=0, buckle_step=0.25, step_effort=iterations, hard_step_effort=0,
-    # line_search=bt
+    # line_search=bt, suture_line_search=bt, settle_line_search=bt (settle_retry=none)
     predictor: Literal["secant", "none"] = field(
         "secant", "start each load step from the secant through the stage's last two converged "
         "states (none: from the last converged state)")
@@ -256,26 +256,43 @@ class Parameters(SceneParameters, SolverChoice):
         0.5, "modified Newton: keep the Jacobian and its factorisation while each iteration "
         "reduces the residual by this factor or more, once it is below 1 % of the solve's "
         "first (0: full Newton, a fresh factorisation every iteration)")
+    jacobian_reuse_test: Literal["residual", "step"] = field(
+        "residual", "modified Newton's contraction test: residual = the residual's reduction "
+        "against jacobian_reuse; step = against what the step the line search took predicts, "
+        "1 - lambda (1 - jacobian_reuse), so that backtracking's short steps keep the "
+        "factorisation (docs/scleral_buckling.md, Newton's budget)")
     buckle_step: float = field(
         0.125, "largest buckle travel per load step of step 2, as a fraction of the buckle's "
         "radial thickness (the other steps keep a quarter)")
     step_effort: Literal["iterations", "factorisations"] = field(
         "factorisations", "what sizes the next load step: grown after <= 6, halved after > "
         "hard_step_effort of the step's Newton iterations or its factorisations")
-    line_search: Literal["basic", "bt"] = field(
+    line_search: Literal["basic", "bt", "cp"] = field(
         "basic", "Newton's line search while the buckle moves in (step 2): basic = the full step "
         "(a failed solve repeated once with bt before the load step is cut); bt = backtracking "
         "on the residual's norm, which creeps at its 0.1 floor where a step crosses the "
-        "contact's kink. Step 3, where retina pairs change triangles, backtracks (bt); step 4 "
-        "as settle_line_search says (docs/scleral_buckling.md, Which contact chatters)")
+        "contact's kink. Step 3 as suture_line_search says, step 4 as settle_line_search "
+        "(docs/scleral_buckling.md, Which contact chatters); cp: as in suture_line_search")
+    suture_line_search: Literal["cp", "bt", "basic"] = field(
+        "cp", "Newton's line search in step 3 (the sutures' pull): cp = the step length where "
+        "the energy's directional derivative F(u + a du).du vanishes (no rejection of a step "
+        "that raises the residual's norm where retina pairs switch; a failed solve repeated "
+        "once with bt); bt = backtracking on the residual's norm, which creeps at its 0.1 "
+        "floor there; basic = full steps (docs/scleral_buckling.md, Newton's budget)")
     settle_ramp: Literal["linear", "log"] = field(
         "linear", "step 4's pressure ramp from the acute IOP to the pre-operative one: linear in "
         "P, or log (linear in ln P: equal pressure ratios per unit of load)")
-    settle_line_search: Literal["bt", "basic"] = field(
+    settle_line_search: Literal["bt", "basic", "cp"] = field(
         "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
         "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
-        "at its 0.1 floor in the first settling load step, more at the paper's resolution "
-        "(docs/scleral_buckling.md, Newton's budget)")
+        "at its 0.1 floor in the first settling load step, more at the paper's resolution; "
+        "cp as in suture_line_search (docs/scleral_buckling.md, Newton's budget)")
+    settle_retry: Literal["none", "basic"] = field(
+        "none", "step 4 with settle_line_search=bt: basic = a solve that fails (bt's step "
+        "below its floor) is repeated once from its start with full steps before the load "
+        "step is cut: fewer factorisations, but a settled eye 2 % from the reference method's "
+        "at the paper's resolution; none = cut at once (docs/scleral_buckling.md, Newton's "
+        "budget)")
     hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
 
@@ -505,7 +522,7 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
     if abs(record.load - 1.0) < 1e-12:
         model.couple_liquid()
     if abs(record.load - 2.0) < 1e-12:
-        model.backtrack()
+        model.use_suture_line_search()
     if abs(record.load - 2.0) < 1e-12 and model.tire_loop:
         model.free_tire()
     if abs(record.load - 3.0) < 1e-12 and model.last_stage > 3:
@@ -615,8 +632,10 @@ class BucklingModel:
         self.bcs = self._boundary_conditions()
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
         newton = dataclasses.replace(ctx.options.newton, reuse_contraction=params.jacobian_reuse,
-                                     fallback_line_search="bt" if "basic" in (
-                                         params.line_search, params.settle_line_search)
+                                     reuse_step_relative=params.jacobian_reuse_test == "step",
+                                     fallback_line_search="bt" if {
+                                         params.line_search, params.suture_line_search,
+                                         params.settle_line_search} != {"bt"}
                                      else ctx.options.newton.fallback_line_search)
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings,
@@ -1038,23 +1057,26 @@ class BucklingModel:
         self.preoperative = self._optics() | {"volume_mm3": 2.0 * self.volume(),
                                               "iop_mmHg": self.cavity_pressure() / MMHG}
 
-    def backtrack(self) -> None:
-        """End of step 2: backtracking (bt) in step 3. The retina's node-to-surface pairs
-        change triangles there (a jump in their gap, not a kink): full steps in steps 3-4 cost
-        more at the paper's resolution (docs/scleral_buckling.md, Which contact chatters);
-        step 4's line search is ``settle_line_search`` (:meth:`release_liquid`)."""
+    def use_suture_line_search(self) -> None:
+        """End of step 2: step 3's line search, ``suture_line_search`` (cp by default: bt
+        creeps at its 0.1 floor there, full steps cost more at the paper's resolution;
+        docs/scleral_buckling.md, Newton's budget); step 4's line search is
+        ``settle_line_search`` (:meth:`release_liquid`)."""
         if "snes_linesearch_type" not in self.ctx.options.newton.petsc:
-            self.solver.snes.getLineSearch().setType("bt")
+            self.solver.snes.getLineSearch().setType(self.params.suture_line_search)
 
     def release_liquid(self) -> None:
         """End of step 3 (the acute state): from here the liquid's volume is free and its
         pressure is driven back to the pre-operative IOP, as aqueous outflow does within
         hours of surgery; P's row is pinned to the ramp again. Newton's line search from here:
-        ``settle_line_search`` (docs/scleral_buckling.md, Newton's budget)."""
+        ``settle_line_search``, a failed bt solve repeated with full steps as ``settle_retry``
+        says (docs/scleral_buckling.md, Newton's budget)."""
         self.acute_pressure.value = self.cavity_pressure()
         self.coupled.value = 0.0
         if "snes_linesearch_type" not in self.ctx.options.newton.petsc:
             self.solver.snes.getLineSearch().setType(self.params.settle_line_search)
+        if self.params.settle_retry == "basic" and self.params.settle_line_search == "bt":
+            self.solver.options.fallback_line_search = "basic"
 
     def _sclera_radius_under_buckle(self) -> float:
         """Largest distance from the buckle's axis (the optic axis; x for a radial tire)
@@ -1112,7 +1134,7 @@ class BucklingModel:
     def register_checkpoint(self, checkpoints) -> None:
         """Everything a restart needs besides the load (docs/restart.md): the unknowns,
         the liquid's P_ini/V_ini and switch, the buckle, the sutures' directions, the
-        line search chosen in step 2, the contact's sticky memory, the stage results."""
+        stage's line search and its retry's, the contact's sticky memory, the stage results."""
         for name, f in zip(("u", "p", "P", "tire_travel"), self.fields):
             checkpoints.function(name, f)
         checkpoints.function("u_tied", self.u_tied)
@@ -1135,6 +1157,9 @@ class BucklingModel:
                                                 {int(k): v for k, v in saved.items()}))
         line_search = self.solver.snes.getLineSearch()
         checkpoints.value("line_search", line_search.getType, line_search.setType)
+        options = self.solver.options
+        checkpoints.value("fallback_line_search", lambda: options.fallback_line_search,
+                          lambda saved: setattr(options, "fallback_line_search", str(saved)))
         if self.retina is not None:
             checkpoints.value("retina_sticky", self.retina.sticky_state,
                               self.retina.restore_sticky_state)
