@@ -32,6 +32,7 @@ from eyemech.problems.lens.fold import (
     fold,
     self_contact_kind,
 )
+from eyemech.problems.lens.history import InjectionHistory
 from eyemech.problems.lens.injector import Plunger, turn_about_x
 from eyemech.problems.lens.model import (
     InjectorLayout,
@@ -50,9 +51,8 @@ from eyemech.problems.lens.model import (
 )
 from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
-from eyemech.problems.lens.time_error import TimeErrorTally, step_error
+from eyemech.problems.lens.time_error import step_error
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.output import PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
@@ -292,26 +292,6 @@ class FluidDrag:
         F.axpy(1.0, self.drag)
 
 
-@dataclasses.dataclass
-class InjectionHistory:
-    """Per converged step of the injection, and its totals."""
-
-    time: list[float] = dataclasses.field(default_factory=list)
-    newton: list[int] = dataclasses.field(default_factory=list)
-    cuts: list[int] = dataclasses.field(default_factory=list)
-    dt: list[float] = dataclasses.field(default_factory=list)
-    penetration: list[float] = dataclasses.field(default_factory=list)
-    strain: list[float] = dataclasses.field(default_factory=list)
-    self_distance: list[float] = dataclasses.field(default_factory=list)
-    intersecting: list[bool] = dataclasses.field(default_factory=list)
-    frames: list[Path] = dataclasses.field(default_factory=list)
-    series: PyvistaSeries | None = None
-    wall: float = 0.0  # seconds of time stepping
-    end: float = 0.0  # simulated time at the end, s
-    solver_seconds: float = 0.0  # assembly + factorisation + solves, contact hooks included
-    contact_seconds: float = 0.0  # the nodal wall and plunger contact hooks
-
-
 class Injection:
     """The injection of a folded lens, built once: the plunger pushing the optic through
     the tapered cartridge into the capsule, the walls' nodal contact with friction, the
@@ -344,7 +324,6 @@ class Injection:
         self.fluid = FluidDrag(self.dynamics, shell, layout.cartridge(params), params.jet_length) \
             if params.fluid_carried else None
         self.solver = self._solver()
-        self.time_error = TimeErrorTally()  # the steps' estimated time error (problems/lens/time_error.py)
         # contact=false is the deformation-only benchmark: no self-contact either
         self.self_contact = lens_self_contact(shell, params) if params.contact else None
         if self.self_contact is not None:
@@ -408,19 +387,15 @@ class Injection:
     def converged(self, record) -> None:
         """Advance the dynamics and record, measure and draw the converged step."""
         ctx, h = self.ctx, self.history
-        self.time_error.add(step_error(self.dynamics, self.solver.snes.getKSP()))
+        self.history.time_error.add(step_error(self.dynamics, self.solver.snes.getKSP()))
         self.dynamics.advance()
-        h.time.append(record.load)
-        h.newton.append(record.iterations)
-        h.cuts.append(record.cuts)
-        h.dt.append(record.increment)
         depth = {**self.contact.max_penetration(), **self.pushing.max_penetration()}
-        h.penetration.append(max(depth.values(), default=0.0))
         frame = self._is_frame(record)
         if frame:
             self.last_frame = (record.load, record.step)
         with ctx.timings("measurements"):
-            h.strain.append(self.strain.haptic_max())
+            h.add(record.load, record.increment, record.iterations, record.cuts,
+                  max(depth.values(), default=0.0), self.strain.haptic_max())
             if self.self_contact is not None:  # C++, cheap: every step
                 h.self_distance.append(self.self_contact.min_distance())
                 h.intersecting.append(self.self_contact.intersecting())
@@ -471,19 +446,11 @@ def report(params: Parameters, ctx: RunContext, injection: Injection) -> None:
     center = optic_center(shell)
     normal = optic_normal(shell)
     flatness = optic_flatness(shell)
-    steps = len(h.time)
     deformation = h.solver_seconds - h.contact_seconds
-    distances = [d for d in h.self_distance if np.isfinite(d)]
     q = ctx.result.quantities
-    q.update(injection.time_error.quantities())
+    q.update(h.quantities())
     q.update(
-        steps=steps, newton_iterations_total=int(sum(h.newton)),
-        steps_per_second=steps / h.wall,
-        steps_per_second_deformation=steps / max(deformation, 1e-12),
-        max_penetration_mm=float(max(h.penetration, default=0.0)),
-        haptic_max_strain=float(max(h.strain, default=0.0)),
-        min_self_distance_mm=float(min(distances)) if distances else None,
-        self_intersecting=bool(any(h.intersecting)),
+        steps_per_second_deformation=len(h.time) / max(deformation, 1e-12),
         self_contact_forces=(self_contact_kind(params) if params.contact
                              else "not applied (contact=false)"),
         self_contact_seconds=getattr(self_contact, "seconds", 0.0),
@@ -492,13 +459,10 @@ def report(params: Parameters, ctx: RunContext, injection: Injection) -> None:
         optic_normal_z=float(normal[2]),
         optic_flipped=bool(normal[2] < 0.0),
         optic_flatness=flatness, optic_unrolled=bool(flatness > 0.9),
-        end_time_s=h.end, newton_iterations_per_step=float(np.mean(h.newton)) if steps else 0.0,
-        step_cuts=int(sum(h.cuts)), min_time_step_s=float(min(h.dt, default=0.0)),
-        wall_seconds=h.wall,
+        end_time_s=h.end,
         final_decentration_mm=float(np.hypot(*(center - capsule.center)[:2])),
         final_optic_center=center.tolist(),
         contact_seconds=h.contact_seconds,
-        time=h.time, penetration_mm=h.penetration, self_distance_mm=h.self_distance,
         triangles=shell.mesh.topology.index_map(2).size_global,
         nodes=shell.mesh.geometry.index_map().size_global, dofs=shell.dofs())
     ctx.result.fields.extend(h.series.files)

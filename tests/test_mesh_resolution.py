@@ -199,3 +199,43 @@ def test_unstructured_contact_meshes_are_estimated_before_meshing():
     with pytest.raises(ParameterError) as info:
         build(retina_reattachment.Parameters, {"mesh_size": "0.005"})
     assert info.value.key == "mesh_size"
+
+
+# -- the intra-ocular lens ----------------------------------------------------------------
+@pytest.mark.parametrize("resolution, bound", [
+    ("paper", 0.02),  # 760 estimated, 752 built (1.1 %)
+    ("coarse", 0.2),  # 214 estimated, 250 built (14 %: at 2× the sizes the bands are ~1 cell wide)
+])
+def test_lens_triangles_are_estimated_before_meshing(resolution, bound):
+    """The size field's ∫ dA / (√3/4 h²) plus half a triangle per boundary edge
+    (``LensGeometry.estimated_triangles``) against gmsh's lens (the paper's 743 triangles)."""
+    from eyemech.meshes.iol import intraocular_lens
+    from eyemech.problems.lens.model import LensParameters
+
+    params = LensParameters(resolution=resolution)
+    built = intraocular_lens(params.geometry(), MPI.COMM_SELF).mesh.topology.index_map(2).size_global
+    assert built == {"paper": 752, "coarse": 250}[resolution]  # the lens' docs state these counts
+    assert params.estimated_cells == pytest.approx(built, rel=bound)
+
+
+@pytest.mark.parametrize("scene", ["iol-fold", "iol-injection", "iol-speed"])
+def test_lens_scenes_refuse_a_too_fine_mesh_size_before_meshing(scene, monkeypatch, tmp_path):
+    """mesh_size=0.002 mm (0.6 meant) is ~1.3e7 triangles: refused naming mesh_size, exit 2 from
+    the command line; a lower EYEMECH_MAX_CELLS refuses the default lens (760 estimated)."""
+    from conftest import run_cli
+
+    from eyemech.problems import iol_fold, iol_injection, iol_speed
+
+    module = {"iol-fold": iol_fold, "iol-injection": iol_injection, "iol-speed": iol_speed}[scene]
+    with pytest.raises(ParameterError, match="EYEMECH_MAX_CELLS") as info:
+        build(module.Parameters, {"mesh_size": "0.002"})
+    assert info.value.key == "mesh_size" and "estimated before meshing" in str(info.value)
+    build(module.Parameters, {})
+    monkeypatch.setenv("EYEMECH_MAX_CELLS", "500")
+    with pytest.raises(ParameterError, match="mesh_size"):
+        build(module.Parameters, {})
+    monkeypatch.delenv("EYEMECH_MAX_CELLS")
+    out = tmp_path / "never"
+    code, _, stderr = run_cli("run", scene, "--set", "mesh_size=0.002", "--out", str(out))
+    assert code == 2 and "mesh_size" in stderr and "Traceback" not in stderr
+    assert not out.exists()

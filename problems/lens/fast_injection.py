@@ -38,6 +38,7 @@ import numpy as np
 
 from eyemech.problems.lens.fast_frames import FrameWriter
 from eyemech.problems.lens.fold import EASY_ITERATIONS, blocked_dofs
+from eyemech.problems.lens.history import InjectionHistory
 from eyemech.problems.lens.injector import Plunger, turn_about_x
 from eyemech.problems.lens.model import InjectorLayout, require_ipctk, rolled
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
@@ -172,60 +173,32 @@ def load_state(path: Path, lens: FastLens) -> np.ndarray:
     return np.asarray(data["displacement"])[index].ravel()
 
 
-@dataclasses.dataclass
-class History:
-    """Per converged step, and the run's totals."""
-
-    time: list[float] = dataclasses.field(default_factory=list)
-    newton: list[int] = dataclasses.field(default_factory=list)
-    cuts: list[int] = dataclasses.field(default_factory=list)
-    dt: list[float] = dataclasses.field(default_factory=list)
-    penetration: list[float] = dataclasses.field(default_factory=list)
-    strain: list[float] = dataclasses.field(default_factory=list)
-    self_distance: list[float] = dataclasses.field(default_factory=list)
-    intersecting: list[bool] = dataclasses.field(default_factory=list)
-    wall: float = 0.0
-    cpu: float = 0.0
-    counts: dict = dataclasses.field(default_factory=dict)
-    time_error: TimeErrorTally = dataclasses.field(default_factory=TimeErrorTally)
-
-    def record(self, record: StepRecord, lens: FastLens, u: np.ndarray, walls: NodalObstacles | None,
-               contact: SurfaceSelfContact | None) -> None:
-        x = lens.shell.X + u.reshape(-1, 3)
-        self.time.append(record.time)
-        self.newton.append(record.iterations)
-        self.cuts.append(record.cuts)
-        self.dt.append(record.dt)
-        self.penetration.append(walls.max_penetration(x) if walls is not None else 0.0)
-        self.strain.append(surface_strain(lens, u, lens.haptic_triangles))
-        if contact is not None:
-            self.self_distance.append(contact.min_distance(x))
-            self.intersecting.append(contact.intersecting(x))
-
-    def quantities(self, params) -> dict:
-        distances = [d for d in self.self_distance if np.isfinite(d)]
-        steps = len(self.time)
-        return dict(
-            steps=steps, newton_iterations_total=int(sum(self.newton)),
-            newton_iterations_per_step=float(np.mean(self.newton)) if steps else 0.0,
-            step_cuts=int(sum(self.cuts)), min_time_step_s=float(min(self.dt, default=0.0)),
-            steps_per_second=steps / max(self.wall, 1e-12), steps_per_second_cpu=steps / max(self.cpu, 1e-12),
-            wall_seconds=self.wall, cpu_seconds=self.cpu,
-            max_penetration_mm=float(max(self.penetration, default=0.0)),
-            haptic_max_strain=float(max(self.strain, default=0.0)),
-            min_self_distance_mm=float(min(distances)) if distances else None,
-            self_intersecting=bool(any(self.intersecting)),
-            self_contact_forces=(f"ipctk barrier on the P1 triangles (d̂ = {params.self_contact_distance} mm), "
-                                 f"CCD-limited updates, friction μ = {params.friction}" if params.self_contact
-                                 else "not applied"),
-            factorisations=self.counts.get("factorisations", 0),
-            pattern_growths=self.counts.get("pattern_growths", 0),
-            ccd_limited_updates=self.counts.get("step_limits", 0),
-            time=self.time, penetration_mm=self.penetration, self_distance_mm=self.self_distance,
-            **self.time_error.quantities())
+def record_converged(history: InjectionHistory, step: StepRecord, lens: FastLens, u: np.ndarray,
+           walls: NodalObstacles | None, contact: SurfaceSelfContact | None) -> None:
+    """The converged ``step`` of the P1 lens into ``history``."""
+    x = lens.shell.X + u.reshape(-1, 3)
+    history.add(step.time, step.dt, step.iterations, step.cuts,
+                walls.max_penetration(x) if walls is not None else 0.0,
+                surface_strain(lens, u, lens.haptic_triangles))
+    if contact is not None:
+        history.self_distance.append(contact.min_distance(x))
+        history.intersecting.append(contact.intersecting(x))
 
 
-def _run(dyn: Dynamics, history: History, *args, **kwargs) -> None:
+def quantities(history: InjectionHistory, params) -> dict:
+    """``InjectionHistory.quantities`` and the P1 solver's: CPU time, factorisations, CCD limits."""
+    steps = len(history.time)
+    return dict(
+        history.quantities(), steps_per_second_cpu=steps / max(history.cpu, 1e-12), cpu_seconds=history.cpu,
+        self_contact_forces=(f"ipctk barrier on the P1 triangles (d̂ = {params.self_contact_distance} mm), "
+                             f"CCD-limited updates, friction μ = {params.friction}" if params.self_contact
+                             else "not applied"),
+        factorisations=history.counts.get("factorisations", 0),
+        pattern_growths=history.counts.get("pattern_growths", 0),
+        ccd_limited_updates=history.counts.get("step_limits", 0))
+
+
+def _run(dyn: Dynamics, history: InjectionHistory, *args, **kwargs) -> None:
     wall, cpu = time.perf_counter(), time.process_time()
     march(dyn, *args, **kwargs, time_error=history.time_error)
     history.wall, history.cpu = time.perf_counter() - wall, time.process_time() - cpu
@@ -239,7 +212,7 @@ def _dynamics(lens: FastLens, params, damping: float, fixed=None) -> Dynamics:
 
 # -- the fold -------------------------------------------------------------------------------------
 def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None,
-         frames: FrameWriter | None = None) -> tuple[np.ndarray, History]:
+         frames: FrameWriter | None = None) -> tuple[np.ndarray, InjectionHistory]:
     """The fold of ``lens.fold`` on the P1 lens from the flat state: (displacement, history);
     ``frames``: ``params.frames`` of them, evenly in steps and the last, as the P2 fold."""
     shell = lens.shell
@@ -256,7 +229,7 @@ def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None,
     if contact is not None:
         dyn.set_contact(contact)
     dyn.reset(np.zeros(shell.n_dofs))
-    history = History()
+    history = InjectionHistory()
     every = max(1, int(round(params.fold_time / params.time_step)) // params.frames)
 
     def apply(t: float, _dt: float) -> None:
@@ -267,7 +240,7 @@ def fold(params, lens: FastLens, record_step: Callable[..., None] | None = None,
             contact.begin_step(shell.X + dyn.u.reshape(-1, 3))
 
     def converged(record: StepRecord) -> None:
-        history.record(record, lens, dyn.u, walls, contact)
+        record_converged(history, record, lens, dyn.u, walls, contact)
         if record_step is not None:
             record_step(step=len(history.time), time=record.time, newton_iterations=record.iterations,
                         cuts=record.cuts, max_penetration_mm=history.penetration[-1])
@@ -329,7 +302,7 @@ class Injection:
         self.twist = np.radians(params.injector_twist) / self.motion.travel(self.motion.push_time)  # rad/mm
         self.push_time = self.motion.push_time
         self.end = self.push_time + params.settle_time
-        self.history = History()
+        self.history = InjectionHistory()
 
     def apply(self, t: float, dt: float) -> None:
         """The step ending at t: the plunger's position, the fluid's drag force c M v_f at u_n,
@@ -352,7 +325,7 @@ class Injection:
             self.dyn.force = self.params.damping * (self.dyn.M @ v_fluid.ravel())
 
     def converged(self, record: StepRecord) -> None:
-        self.history.record(record, self.lens, self.dyn.u, self.walls, self.contact)
+        record_converged(self.history, record, self.lens, self.dyn.u, self.walls, self.contact)
         step = len(self.history.time)
         if self.record_step is not None:
             self.record_step(step=step, time=record.time, newton_iterations=record.iterations,
@@ -366,7 +339,7 @@ class Injection:
             self.last_frame = (record.time, step)
             self.frames.write(record.time, self.dyn.u, f"iol-injection (P1)  t = {record.time:.2f} s", self.drawn)
 
-    def run(self) -> History:
+    def run(self) -> InjectionHistory:
         steps = int(np.ceil(self.end / self.params.time_step - 1e-9))
         try:
             _run(self.dyn, self.history, self.apply, steps * self.params.time_step, self.params.time_step,
@@ -382,7 +355,7 @@ class Injection:
         x = self.lens.shell.X + u.reshape(-1, 3)
         optic = optic_measures(self.lens, u)
         center = optic["center"]
-        q = self.history.quantities(self.params)
+        q = quantities(self.history, self.params)
         q.update(lens_exited=bool(x[:, 0].min() > self.layout.tip),
                  optic_normal_z=float(optic["normal"][2]), optic_flipped=bool(optic["normal"][2] < 0.0),
                  optic_flatness=optic["flatness"], optic_unrolled=bool(optic["flatness"] > 0.9),

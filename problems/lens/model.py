@@ -88,6 +88,15 @@ class LensParameters(SceneParameters):
                             mesh_size=scale * self.mesh_size, haptic_size=scale * reference.haptic_size,
                             junction_size=scale * reference.junction_size)
 
+    @property
+    def estimated_cells(self) -> int | None:
+        """The lens' triangles before meshing (``LensGeometry.estimated_triangles``); None for
+        a size that is not positive (refused by ``validate``)."""
+        geometry = self.geometry()
+        if not min(geometry.mesh_size, geometry.haptic_size, geometry.junction_size) > 0:
+            return None
+        return geometry.estimated_triangles
+
     def axis_point(self) -> np.ndarray:
         """The injector axis runs along x through (0, 0, fold_radius): the optic's roll axis."""
         return np.array([0.0, 0.0, self.fold_radius])
