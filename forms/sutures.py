@@ -9,6 +9,13 @@ over a flat patch, b the bite radius. A point on the symmetry plane has half its
 in the model and so receives half the force, which is half a suture: what a half
 model should carry. Directions are set per step (from the last converged state), so
 within a Newton solve the loads are dead.
+
+w has unit integral on a sphere through its centre too (the cap within chord b has
+area π b², and dA = π d(c²) in the chord c), but a mesh that does not resolve the bite
+integrates it to something else (1.16-1.18 on the coarse eye), and a bite that
+overhangs the surface's edge loses what overhangs. Each bite's weight is therefore
+scaled by s = (its exact share)/(its integral on the mesh), assembled once per mesh,
+so the pull the mesh delivers is the one asked for (tests/test_sutures.py).
 """
 
 from __future__ import annotations
@@ -24,13 +31,26 @@ def bite_weight(X, centre, bite_radius):
     return ufl.max_value(1.0 - distance2 / bite_radius**2, 0.0) / (0.5 * math.pi * bite_radius**2)
 
 
-def suture_residual(forces, centres, bite_radius, v, measure):
-    """−Σ_s ∫ F_s·v w_s dA: the external work of the suture forces (residual sign).
+def half_space_share(offset: float, bite_radius: float) -> float:
+    """∫ w dA over the half plane x ≥ 0 for a bite centred at x = ``offset`` (flat
+    patch): ½ on the symmetry plane, 1 at a bite radius or more inside it, 0 outside.
+    With t = offset/b, ½ + (8/3π) ∫₀ᵗ (1 − x²)^{3/2} dx."""
+    t = min(max(offset / bite_radius, -1.0), 1.0)
+    root = math.sqrt(max(1.0 - t * t, 0.0))
+    integral = t * (5.0 - 2.0 * t * t) * root / 8.0 + 3.0 * math.asin(t) / 8.0
+    return 0.5 + 8.0 / (3.0 * math.pi) * integral
+
+
+def suture_residual(forces, centres, bite_radius, v, measure, scales=None):
+    """−Σ_s s_s ∫ F_s·v w_s dA: the external work of the suture forces (residual sign).
 
     ``forces`` and ``centres`` are sequences of 3-vectors (dolfinx Constants for the
     forces so a scene can turn and scale them between steps; Constants or tuples for the
-    centres), ``bite_radius`` a number or a Constant."""
+    centres), ``bite_radius`` a number or a Constant, ``scales`` one number or Constant
+    per bite (the normalisation of its weight on the mesh; 1 if omitted)."""
     X = ufl.SpatialCoordinate(measure.ufl_domain())
-    work = sum(ufl.dot(F, v) * bite_weight(X, ufl.as_vector(c), bite_radius)
-               for F, c in zip(forces, centres))
+    if scales is None:
+        scales = [1.0] * len(forces)
+    work = sum(s * ufl.dot(F, v) * bite_weight(X, ufl.as_vector(c), bite_radius)
+               for F, c, s in zip(forces, centres, scales))
     return -work * measure

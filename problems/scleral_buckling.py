@@ -78,7 +78,6 @@ from eyemech.forms.buckle import (
     tire_travel_residual,
 )
 from eyemech.forms.contact import default_penalty, smoothed_penalty_energy
-from eyemech.forms.sutures import bite_weight
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry, half_eye, zonule_pairs
 from eyemech.problems import buckling_output
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
@@ -753,10 +752,10 @@ class BucklingModel:
         """Constants of the tire's row, from the reference configuration: the sclera's
         outer area (the row's constant terms are spread over it), the stiffness of the
         band's push and of the pinned row (the buckle's penalty over the tire's
-        footprint: as stiff as the sclera's contact with it), and ∫ w_s dA of each
-        suture's bite (the share of its pull the half model carries: ½ on the
-        symmetry plane), which makes the reaction on the tire the exact opposite of the
-        bite loads."""
+        footprint: as stiff as the sclera's contact with it), and the normalised
+        ∫ s_s w_s dA of each suture's bite (the share of its pull the half model
+        carries: ½ on the symmetry plane), which makes the reaction on the tire the
+        exact opposite of the bite loads."""
         # Constants, not literals: the mesh and the penalty set them, and a literal would
         # compile the eye's residual anew for every mesh size and penalty factor
         mesh = self.eye.mesh
@@ -765,14 +764,9 @@ class BucklingModel:
         self.sclera_area = dolfinx.fem.Constant(mesh, _assemble(one * measure, self.ctx.comm))
         footprint = _assemble(self.buckle.footprint_weight(X) * measure, self.ctx.comm)
         self.tire_stiffness = dolfinx.fem.Constant(mesh, self.penalty * max(footprint, 1.0))
-        # one form for every bite: its centre and radius are Constants
-        centre = dolfinx.fem.Constant(mesh, np.zeros(3))
-        share = dolfinx.fem.form(bite_weight(X, centre, self.sutures.bite_radius) * measure)
-        shares = []
-        for point in self.sutures.points:
-            centre.value[:] = point.centre
-            shares.append(_assemble(share, self.ctx.comm))
-        self.bite_shares = np.array(shares)
+        # each bite normalised on this mesh: the half model carries exactly its share
+        self.sutures.normalise(measure, self.ctx.comm)
+        self.bite_shares = self.sutures.shares
         shape = self.params.buckle_shape()
         self.on_tire = np.array([shape.on_tire(p.azimuth_deg) for p in self.sutures.points])
 
@@ -789,7 +783,7 @@ class BucklingModel:
     def update_suture_pull(self) -> None:
         """The sutures' inward radial resultant on the tire (half model, N): each tire
         suture's loop turns over the tire, which takes the opposite of its bite loads,
-        −F_s ∫w_s dA, whose inward (−e_ρ) component is |F| ∫w_s dA d_s·e_ρ at its
+        −F_s ∫s_s w_s dA, whose inward (−e_ρ) component is |F| ∫s_s w_s dA d_s·e_ρ at its
         meridian (d_s from the bite to the tire's corner: lagged, as the bite loads)."""
         pull = 0.0
         for point, direction, share, on_tire in zip(self.sutures.points, self.sutures.directions,
