@@ -1135,18 +1135,19 @@ class Dynamics:
         ‖R‖, 82 by Φ, 69 by Φ with the degree-4 candidate, which makes the steps from the 18th on
         one iteration each (docs/iol.md §4b).
 
-        Where the highest-degree extrapolation was chosen in the last step, it is evaluated
-        first with the Jacobian (the Hessian pass gives the gradient and Π too) and taken when
-        its Φ is below Φ(u_n): the smooth motion then costs no candidate pass beyond the first
-        Newton iteration's (on the release from the 11th step on, where it is always the one
-        chosen); else the full choice follows."""
+        Where the highest-degree extrapolation was chosen in the last step (and no motion is
+        prescribed, which replaces part of the start), it is evaluated first with the Jacobian
+        (the Hessian pass gives the gradient and Π too) and taken when its Φ is below Φ(u_n):
+        the smooth motion then costs no candidate pass beyond the first Newton iteration's (on
+        the release from the 11th step on, where it is always the one chosen); else the full
+        choice follows."""
         if self.predictor == "previous" or not np.any(v_n):
             self._chosen_degree = None
             return u_n.copy(), r_n, False
         available = 1 + len(self.past)
         top = min(self.predictor_order, available)
         phi_n = self._potential(u_n, u_n, v_n, energy_n)
-        if top > 2 and self._chosen_degree == top:
+        if top > 2 and self._chosen_degree == top and self.prescribed is None:
             u = self._extrapolation(u_n, v_n, top)
             if self.contact is None or self._collision_free_fraction(u_n, u - u_n) == 1.0:
                 r = self._system(u, u_n, v_n, True)
