@@ -208,12 +208,15 @@ def test_p1_wall_force_is_the_gradient_of_its_energy_in_the_taper():
 def test_p1_refuses_the_options_it_does_not_model():
     from eyemech.problems.run.parameters import ParameterError
 
-    for change in ({"linearised": True}, {"jacobian_lag": 3}, {"scheme": "newmark"}):
+    for change in ({"linearised": True}, {"jacobian_lag": 3}, {"scheme": "newmark"}, {"fold_seed": "p1"}):
         name = next(iter(change))
         with pytest.raises(ParameterError, match=name):
             iol_injection.Parameters(model="p1-rotation-free", **change).validate()
     with pytest.raises(ParameterError, match="haptic_thickness"):
         iol_injection.Parameters(model="p1-rotation-free", haptic_thickness=0.0).validate()
+    # the P2 run seeded by the P1 fold, and a saved fold as well: which start is meant?
+    with pytest.raises(ParameterError, match="fold_seed"):
+        iol_injection.Parameters(fold_seed="p1", folded_state=__file__).validate()
 
 
 @pytest.fixture(scope="module")
