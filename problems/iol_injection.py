@@ -55,7 +55,7 @@ from eyemech.problems.lens.time_error import step_error
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import ParameterError, field
 from eyemech.problems.run.scene import Scene
-from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
 
 
@@ -66,6 +66,10 @@ class Parameters(FoldParameters):
                                     "ipctk self-contact on its vertices and triangles, the same pictures and "
                                     ".vtu frames)")
     folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)")
+    fold_seed: Literal["p2", "p1"] = field("p2", "model=p2-c0ip with folded_state='': the model that folds the "
+                                                 "lens (p1: the rotation-free P1 fold, seconds instead of "
+                                                 "minutes, its vertices and the patch quadratics at the edge "
+                                                 "midpoints as the P2 lens' folded state; docs/iol.md §4b)")
     plunger_speed: float = field(40.0, "plunger speed", "mm/s")
     plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
     settle_time: float = field(0.2, "time after the plunger stops", "s")
@@ -113,7 +117,10 @@ class Parameters(FoldParameters):
         if self.folded_state and not Path(self.folded_state).is_file():
             raise ParameterError("folded_state", f"no such file: {self.folded_state}")
         if self.model == "p1-rotation-free":
-            refuse_on_p1(self, {"linearised": False, "jacobian_lag": 1, "scheme": "backward-euler"})
+            refuse_on_p1(self, {"linearised": False, "jacobian_lag": 1, "scheme": "backward-euler",
+                                "fold_seed": "p2"})
+        if self.fold_seed == "p1" and self.folded_state:
+            raise ParameterError("fold_seed", "fold_seed=p1 folds the lens; folded_state gives the fold: set one")
         if self.plunger_speed * self.time_step > 0.5 * self.nozzle_radius:
             raise ParameterError("plunger_speed", f"{self.plunger_speed} mm/s moves the plunger "
                                  f"{self.plunger_speed * self.time_step:.3g} mm per step, more than half "
@@ -143,6 +150,12 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         if params.folded_state:
             load_state(Path(params.folded_state), shell)
             _refuse_intersecting(params, shell)
+        elif params.fold_seed == "p1":
+            with ctx.timings("folding"):
+                seed_from_p1_fold(ctx, params, shell)
+            if ctx.out is not None:
+                save_state(ctx.out / "folded_state.npz", shell, ctx.comm)
+                ctx.result.fields.append("folded_state.npz")
         else:
             cached = fold_cache_path(params) if params.fold_cache else None
             if cached is not None and cached.is_file():
@@ -160,6 +173,52 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         injection.run()
         report(params, ctx, injection)
     return ctx.result
+
+
+def seed_from_p1_fold(ctx: RunContext, params: Parameters, shell: LensShell) -> tuple:
+    """The fold on the rotation-free P1 lens of the same mesh (``fast_injection.fold``, on
+    every rank alike), carried to the P2 nodes (``fast_injection.p2_displacement``: the
+    vertices exactly, the edge midpoints on the patch quadratics), then the edge midpoints
+    relaxed to the P2 shell's equilibrium with the vertices held (Newton, ``lens_newton``, with
+    the lens' self-contact): the interpolated midpoints strain the P2 membrane (coarse lens: P2
+    energy 2.7× the P1 fold's before, 1.08× after; tests/test_iol_injection.py). Returns the P1
+    lens and its fold."""
+    import dolfinx.fem
+    from scipy.spatial import cKDTree
+
+    from eyemech.problems.lens import fast_injection
+    from eyemech.problems.lens.rotation_free import FastLens, MeshInputError
+
+    try:
+        lens = FastLens.build(params)
+    except (MeshInputError, ValueError) as err:
+        raise ParameterError("fold_seed", f"the rotation-free lens cannot use this mesh: {err}") from err
+    folded, history = fast_injection.fold(params, lens)
+    nodes = shell.node_coordinates()
+    shell.u.x.array[:] = fast_injection.p2_displacement(lens, folded, nodes).ravel()
+    shell.u.x.scatter_forward()
+    held = dolfinx.fem.Function(shell.V)
+    held.x.array[:] = shell.u.x.array
+    vertices = np.flatnonzero(cKDTree(lens.shell.X).query(nodes)[0] < 1e-9).astype(np.int32)
+    relax = NonlinearSolver(shell.residual(), shell.u, [dolfinx.fem.dirichletbc(held, vertices)],
+                            jacobian=shell.jacobian(), options=lens_newton(ctx), timings=ctx.timings)
+    # the fold's layers are ≈ 0.03 mm apart and the midpoints move up to 0.07 mm: without the
+    # barrier (and its CCD-limited updates) they relax through the other layer; the held
+    # vertices' rows stay Dirichlet rows
+    self_contact = lens_self_contact(shell, params, excluded_dofs=(3 * vertices[:, None] + np.arange(3)).ravel())
+    if self_contact is not None:
+        self_contact.check(what="the P2 lens on the P1 fold")
+        self_contact.attach(relax)
+    converged, iterations = relax.solve()
+    if not converged:
+        raise SolveFailure(f"fold_seed=p1: the P2 edge midpoints on the P1 fold did not relax in {iterations} "
+                           "Newton iterations")
+    ctx.result.quantities.update(fold_seed="p1", fold_steps=len(history.time), fold_wall_seconds=history.wall,
+                                 fold_newton_iterations=int(sum(history.newton)),
+                                 fold_self_intersecting=bool(any(history.intersecting)),
+                                 seed_relax_iterations=iterations,
+                                 seed_p1_strain_energy=lens.shell.energy(folded))
+    return lens, folded
 
 
 def refuse_on_p1(params, defaults: dict) -> None:

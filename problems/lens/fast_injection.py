@@ -173,6 +173,56 @@ def load_state(path: Path, lens: FastLens) -> np.ndarray:
     return np.asarray(data["displacement"])[index].ravel()
 
 
+def p2_displacement(lens: FastLens, u: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """The P1 lens' displacement ``u`` (3 per vertex) at the P2 lens' nodes ``nodes`` (n, 3
+    reference coordinates, the same gmsh mesh: its vertices and its edge midpoints), (n, 3).
+    A vertex takes its own value. An edge midpoint m takes the mean, over the edge's triangles T
+    with a full patch (no boundary edge), of the bending model's quadratic patch fit
+    (``patch_operators``: the quadratic through T's vertices and the three across its edges),
+    q_T(m) = [1 ξ η ξ² ξη η²](m) · F_T⁻¹ u_patch, exact for a quadratic displacement; an edge
+    of no such triangle takes the chord's midpoint. So the P2 lens starts on a curved midsurface
+    through the P1 fold's vertices rather than on its chords (a chord on a fold of radius R lies
+    ℓ²/(8R) inside it: 0.05 mm for ℓ = 0.6 mm on R = 1 mm). Nodes that are neither raise
+    ParameterError."""
+    from scipy.spatial import cKDTree
+
+    from eyemech.problems.lens.rotation_free import patch_operators
+
+    shell = lens.shell
+    U = np.asarray(u, dtype=float).reshape(-1, 3)
+    patch_nodes, _, _, _, _, _, fits = patch_operators(shell.X, shell.tri, shell.opposite, shell.boundary_kind,
+                                                       shell.material.poisson_ratio)
+    n_tri = len(shell.tri)
+    patch = U[patch_nodes]  # (triangles, 6, 3); a boundary slot's row is a condition with 0 right side
+    patch[:, 3:][shell.opposite < 0] = 0.0
+    coefficients = np.einsum("tij,tjc->tic", fits["inverse"], patch)
+    # edge k of triangle t joins vertices k+1 and k+2 (the slot 3 + k is across it)
+    first, second = (np.arange(3) + 1) % 3, (np.arange(3) + 2) % 3
+    xi = fits["xi"]
+    midpoint_xi = 0.5 * (xi[:, first] + xi[:, second])  # (triangles, 3, 2)
+    basis = np.stack([np.ones((n_tri, 3)), midpoint_xi[..., 0], midpoint_xi[..., 1], midpoint_xi[..., 0] ** 2,
+                      midpoint_xi[..., 0] * midpoint_xi[..., 1], midpoint_xi[..., 1] ** 2], axis=-1)
+    value = np.einsum("tkj,tjc->tkc", basis, coefficients).reshape(-1, 3)
+    ends = np.sort(np.stack([shell.tri[:, first], shell.tri[:, second]], axis=-1).reshape(-1, 2), axis=1)
+    edges, inverse = np.unique(ends, axis=0, return_inverse=True)
+    # only full patches: a boundary slot's M_νν = 0 bends the fit away from a fold that curves
+    # across the free edge (rolled lens, R = 1 mm: 0.19 mm off at a boundary midpoint)
+    full = np.repeat(np.all(shell.opposite >= 0, axis=1), 3).astype(float)
+    total = 0.5 * (U[edges[:, 0]] + U[edges[:, 1]])  # the chord where no full patch holds the edge
+    count = np.zeros(len(edges))
+    np.add.at(count, inverse.ravel(), full)
+    fitted = np.zeros((len(edges), 3))
+    np.add.at(fitted, inverse.ravel(), full[:, None] * value)
+    total[count > 0] = fitted[count > 0] / count[count > 0, None]
+    points = np.vstack([shell.X, 0.5 * (shell.X[edges[:, 0]] + shell.X[edges[:, 1]])])
+    values = np.vstack([U, total])
+    distance, index = cKDTree(points).query(np.asarray(nodes, dtype=float))
+    if np.max(distance, initial=0.0) > 1e-8:
+        raise ParameterError("fold_seed", f"the P2 lens' nodes are not the P1 lens' vertices and edge midpoints "
+                             f"({np.max(distance):.3g} mm apart)")
+    return values[index]
+
+
 def record_converged(history: InjectionHistory, step: StepRecord, lens: FastLens, u: np.ndarray,
            walls: NodalObstacles | None, contact: SurfaceSelfContact | None) -> None:
     """The converged ``step`` of the P1 lens into ``history``."""

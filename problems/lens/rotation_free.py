@@ -842,6 +842,8 @@ class Dynamics:
         # "previous" takes u_n (statics)
         self.predictor = "select"
         self.predictor_order = 4  # the higher extrapolation's degree (`_predict`)
+        # the degree of the last step's chosen start (0: u_n; None: no choice was made)
+        self._chosen_degree: int | None = None
         # (u, ∇Π(u), Π(u)) of the last gradient pass: the next step starts where this one
         # ended, so R(u_n) needs no new pass when nothing but the shell enters the gradient
         self._last_pass: tuple[np.ndarray, np.ndarray, float] | None = None
@@ -982,6 +984,7 @@ class Dynamics:
         self.v = np.zeros_like(self.u) if v0 is None else np.array(v0, dtype=float)
         self.past, self.v_step = (), None
         self._last_pass = None
+        self._chosen_degree = None
         self.clock = dict.fromkeys(self.clock, 0.0)
         self.counts = dict.fromkeys(self.counts, 0)
 
@@ -1118,32 +1121,48 @@ class Dynamics:
             out += weight * p_i
         return out
 
-    def _predict(self, u_n, v_n, r_n, energy_n: float) -> tuple[np.ndarray, np.ndarray]:
-        """Newton's start and its residual. ``select``: of u_n (residual r_n, Π(u_n) =
-        ``energy_n``) and the extrapolations of the past positions of degree 2 (u_n + Δt (2v_n −
-        v_{n−1}) for equal steps; degree 1, u_n + Δt v_n, while there is one past step only) and
-        of the highest degree the history gives up to ``predictor_order``, the one with the
-        smallest incremental potential Φ (one gradient pass each, which also gives Π: a fraction
-        of a Newton iteration). The step minimises Φ, so a lower Φ is a start nearer the solution
-        in the energy norm; the residual's norm, dominated by the stiff membrane forces, is not:
-        chosen by ‖R‖ among u_n and the degree-1 and 2 extrapolations, the released lens started
-        from u_n in steps 2–17 and its first update raised ‖R‖ 3–45×. Released lens, 30 steps:
-        91 Newton iterations by ‖R‖, 82 by Φ, 69 by Φ with the degree-4 candidate, which makes
-        the steps from the 18th on one iteration each (docs/iol.md §4b)."""
+    def _predict(self, u_n, v_n, r_n, energy_n: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Newton's start, its residual, and whether the Jacobian there is assembled already.
+        ``select``: of u_n (residual r_n, Π(u_n) = ``energy_n``) and the extrapolations of the
+        past positions of degree 2 (u_n + Δt (2v_n − v_{n−1}) for equal steps; degree 1,
+        u_n + Δt v_n, while there is one past step only) and of the highest degree the history
+        gives up to ``predictor_order``, the one with the smallest incremental potential Φ (one
+        gradient pass each, which also gives Π: a fraction of a Newton iteration). The step
+        minimises Φ, so a lower Φ is a start nearer the solution in the energy norm; the
+        residual's norm, dominated by the stiff membrane forces, is not: chosen by ‖R‖ among u_n
+        and the degree-1 and 2 extrapolations, the released lens started from u_n in steps 2–17
+        and its first update raised ‖R‖ 3–45×. Released lens, 30 steps: 91 Newton iterations by
+        ‖R‖, 82 by Φ, 69 by Φ with the degree-4 candidate, which makes the steps from the 18th on
+        one iteration each (docs/iol.md §4b).
+
+        Where the highest-degree extrapolation was chosen in the last step (and no motion is
+        prescribed, which replaces part of the start), it is evaluated first with the Jacobian
+        (the Hessian pass gives the gradient and Π too) and taken when its Φ is below Φ(u_n):
+        the smooth motion then costs no candidate pass beyond the first Newton iteration's (on
+        the release from the 11th step on, where it is always the one chosen); else the full
+        choice follows."""
         if self.predictor == "previous" or not np.any(v_n):
-            return u_n.copy(), r_n
+            self._chosen_degree = None
+            return u_n.copy(), r_n, False
         available = 1 + len(self.past)
-        degrees = sorted({min(2, available), min(self.predictor_order, available)})
-        best, best_r, best_phi = u_n.copy(), r_n, self._potential(u_n, u_n, v_n, energy_n)
-        for degree in degrees:
+        top = min(self.predictor_order, available)
+        phi_n = self._potential(u_n, u_n, v_n, energy_n)
+        if top > 2 and self._chosen_degree == top and self.prescribed is None:
+            u = self._extrapolation(u_n, v_n, top)
+            if self.contact is None or self._collision_free_fraction(u_n, u - u_n) == 1.0:
+                r = self._system(u, u_n, v_n, True)
+                if self._potential(u, u_n, v_n, self._strain_energy) < phi_n:
+                    return u, r, True
+        best, best_r, best_phi, self._chosen_degree = u_n.copy(), r_n, phi_n, 0
+        for degree in sorted({min(2, available), top}):
             u = self._extrapolation(u_n, v_n, degree)
             if self.contact is not None and self._collision_free_fraction(u_n, u - u_n) < 1.0:
                 continue  # the barrier is not defined past a crossing
             r = self._system(u, u_n, v_n, False)
             phi = self._potential(u, u_n, v_n, self._strain_energy)
             if phi < best_phi:
-                best, best_r, best_phi = u, r, phi
-        return best, best_r
+                best, best_r, best_phi, self._chosen_degree = u, r, phi, degree
+        return best, best_r, False
 
     def _prescribe(self, u_n: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The start iterate u with the fixed dofs at ``prescribed``. With self-contact the
@@ -1165,10 +1184,10 @@ class Dynamics:
         u_n, v_n = self.u.copy(), self.v.copy()
         r_n = self._start_residual(u_n, v_n)
         norm0 = np.linalg.norm(r_n)
-        u, r = self._predict(u_n, v_n, r_n, self._strain_energy)
+        u, r, assembled = self._predict(u_n, v_n, r_n, self._strain_energy)
         if self.prescribed is not None:
             u = self._prescribe(u_n, u)
-            r = self._system(u, u_n, v_n, False)
+            r, assembled = self._system(u, u_n, v_n, False), False
             # the free dofs' reaction to the prescribed move is what Newton reduces
             norm0 = np.linalg.norm(r)
         tolerance = max(self.rtol * norm0, self.atol)
@@ -1180,7 +1199,9 @@ class Dynamics:
                 raise RuntimeError(f"rotation-free Newton: no convergence in {iterations} iterations "
                                    f"(residual {norm:.3e} of {norm0:.3e}) at Δt = {self.dt:g} s")
             if fresh:
-                self._system(u, u_n, v_n, True)  # the Jacobian (and the same residual again)
+                if not assembled:  # the Jacobian (and the same residual again)
+                    self._system(u, u_n, v_n, True)
+                assembled = False
                 t0 = time.process_time()
                 if self.inertia_correction:
                     made = self.solver.factor_positive(self.data)
