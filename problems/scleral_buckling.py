@@ -294,6 +294,16 @@ class Parameters(SceneParameters, SolverChoice):
         "budget)")
     hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
+    settle_predictor: Literal["secant", "none"] = field(
+        "secant", "step 4's load steps start from the secant (with predictor = secant) or "
+        "from the last converged state (none; docs/scleral_buckling.md, Newton's budget)")
+    settle_step: float = field(
+        0.0, "largest load step of step 4 (settling) as a fraction of the step (0: as the "
+        "other steps, three quarters of a step or the buckle_step = 0.25 travel's share)")
+    stagnation_window: int = field(
+        3, "a Newton solve whose residual fell by less than 10 % over this many iterations "
+        "is stopped as failed and its load step cut (0: only the iteration limit or a failed "
+        "line search stops it; docs/scleral_buckling.md, Newton's budget)")
 
     def validate(self) -> None:
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
@@ -312,6 +322,11 @@ class Parameters(SceneParameters, SolverChoice):
                                  "the buckle's thickness (deeper jumps throw the sclera through it)")
         if self.hard_step_effort < 0:
             raise ParameterError("hard_step_effort", f"{self.hard_step_effort}: must be >= 0")
+        if self.stagnation_window < 0:
+            raise ParameterError("stagnation_window", f"{self.stagnation_window}: must be >= 0")
+        if not 0 <= self.settle_step <= 0.75:
+            raise ParameterError("settle_step", f"{self.settle_step}: a fraction in [0, 0.75] "
+                                 "of step 4 (0: the other steps' largest)")
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
                                  "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
@@ -471,8 +486,12 @@ def _stepping(params: Parameters) -> Stepping:
     largest = _max_step(params)
     stages = [largest] * int(_span(params))
     stages[1] = _max_step(params, params.buckle_step)
+    if params.settle and params.settle_step > 0:
+        stages[3] = min(largest, params.settle_step / _span(params))
+    predicts = (True, True, True, params.settle_predictor == "secant")
     return Stepping(0.0, _span(params), initial_step=min(0.25 / _span(params), largest),
                     max_step=largest, stops=(1.0, 2.0, 3.0), stage_max_steps=tuple(stages),
+                    stage_predicts=predicts[:int(_span(params))],
                     predictor=params.predictor, effort=params.step_effort,
                     hard_iterations=params.hard_step_effort or None)
 
@@ -632,6 +651,7 @@ class BucklingModel:
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
         newton = dataclasses.replace(ctx.options.newton, reuse_contraction=params.jacobian_reuse,
                                      reuse_step_relative=params.jacobian_reuse_test == "step",
+                                     stagnation_window=params.stagnation_window,
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,
                                          params.settle_line_search} != {"bt"}
@@ -878,6 +898,9 @@ class BucklingModel:
         contact.refuse_initial_penetration("detachment_height")
         self.solver.residual_hooks.append(contact.residual_hook)
         self.solver.jacobian_hooks.append(contact.jacobian_hook)
+        # a cut load step or a retried solve starts from the sticky triangles of its start,
+        # not from those of the failed attempt's last iterate
+        self.solver.memory_hooks.append((contact.memory, contact.restore_memory))
         contact.allow_new_nonzeros(self.solver.problem.A)
         return contact
 
