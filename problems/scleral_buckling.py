@@ -294,6 +294,23 @@ class Parameters(SceneParameters, SolverChoice):
         "budget)")
     hard_step_effort: int = field(10, "effort above which the next load step is halved "
                                   "(0: only a failed solve cuts it)")
+    settle_predictor: Literal["secant", "none"] = field(
+        "secant", "step 4's load steps start from the secant (with predictor = secant) or "
+        "from the last converged state (none; docs/scleral_buckling.md, Newton's budget)")
+    settle_step: float = field(
+        0.0, "largest load step of step 4 (settling) as a fraction of the step (0: as the "
+        "other steps, three quarters of a step or the buckle_step = 0.25 travel's share)")
+    restore_contact_memory: bool = field(
+        False, "a cut load step or a retried Newton solve starts from the retina contact's "
+        "sticky triangles of its start (off: from those of the failed attempt's last iterate). "
+        "On: the result no longer depends on where a failed attempt stopped, but at the "
+        "paper's resolution the path moved and cost 154 factorisations instead of 116 "
+        "(docs/scleral_buckling.md, Stalled backtracking)")
+    stagnation_window: int = field(
+        3, "step 4: a Newton solve with bt whose residual fell by less than 10 % over this "
+        "many iterations is stopped as failed and its load step cut (0: only the iteration "
+        "limit or a failed line search stops it; docs/scleral_buckling.md, Stalled "
+        "backtracking)")
 
     def validate(self) -> None:
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",
@@ -312,6 +329,11 @@ class Parameters(SceneParameters, SolverChoice):
                                  "the buckle's thickness (deeper jumps throw the sclera through it)")
         if self.hard_step_effort < 0:
             raise ParameterError("hard_step_effort", f"{self.hard_step_effort}: must be >= 0")
+        if self.stagnation_window < 0:
+            raise ParameterError("stagnation_window", f"{self.stagnation_window}: must be >= 0")
+        if not 0 <= self.settle_step <= 0.75:
+            raise ParameterError("settle_step", f"{self.settle_step}: a fraction in [0, 0.75] "
+                                 "of step 4 (0: the other steps' largest)")
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
                                  "contact_smoothing", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
@@ -471,8 +493,12 @@ def _stepping(params: Parameters) -> Stepping:
     largest = _max_step(params)
     stages = [largest] * int(_span(params))
     stages[1] = _max_step(params, params.buckle_step)
+    if params.settle and params.settle_step > 0:
+        stages[3] = min(largest, params.settle_step / _span(params))
+    predicts = (True, True, True, params.settle_predictor == "secant")
     return Stepping(0.0, _span(params), initial_step=min(0.25 / _span(params), largest),
                     max_step=largest, stops=(1.0, 2.0, 3.0), stage_max_steps=tuple(stages),
+                    stage_predicts=predicts[:int(_span(params))],
                     predictor=params.predictor, effort=params.step_effort,
                     hard_iterations=params.hard_step_effort or None)
 
@@ -878,6 +904,8 @@ class BucklingModel:
         contact.refuse_initial_penetration("detachment_height")
         self.solver.residual_hooks.append(contact.residual_hook)
         self.solver.jacobian_hooks.append(contact.jacobian_hook)
+        if self.params.restore_contact_memory:
+            self.solver.memory_hooks.append((contact.memory, contact.restore_memory))
         contact.allow_new_nonzeros(self.solver.problem.A)
         return contact
 
@@ -1071,6 +1099,11 @@ class BucklingModel:
             self.solver.snes.getLineSearch().setType(self.params.settle_line_search)
         if self.params.settle_retry == "basic" and self.params.settle_line_search == "bt":
             self.solver.options.fallback_line_search = "basic"
+        # stalled bt solves are stopped in step 4 only: there its converged bt solves fall by
+        # 0.78 or less over any 3 iterations (default, coarse and paper meshes), while step 2's
+        # with line_search = bt plateau at 0.997 before they converge (docs/scleral_buckling.md,
+        # Stalled backtracking)
+        self.solver.options.stagnation_window = self.params.stagnation_window
 
     def _sclera_radius_under_buckle(self) -> float:
         """Largest distance from the buckle's axis (the optic axis; x for a radial tire)
@@ -1154,6 +1187,8 @@ class BucklingModel:
         options = self.solver.options
         checkpoints.value("fallback_line_search", lambda: options.fallback_line_search,
                           lambda saved: setattr(options, "fallback_line_search", str(saved)))
+        checkpoints.value("stagnation_window", lambda: options.stagnation_window,
+                          lambda saved: setattr(options, "stagnation_window", int(saved)))
         if self.retina is not None:
             checkpoints.value("retina_sticky", self.retina.sticky_state,
                               self.retina.restore_sticky_state)

@@ -353,6 +353,15 @@ class NodeToSurfaceContact:
         nodes = self.slave_blocks[state.active[touching]]
         return self.reference[nodes], pressure[touching]
 
+    # -- a failed solve's retry (NonlinearSolver.memory_hooks) ----------------------------
+    def memory(self) -> np.ndarray | None:
+        """This rank's sticky memory as it is (each slave node's previous triangle)."""
+        previous = getattr(self, "_previous", None)
+        return None if previous is None else previous.copy()
+
+    def restore_memory(self, saved: np.ndarray | None) -> None:
+        self._previous = None if saved is None else saved.copy()
+
     # -- checkpoints (docs/restart.md) ------------------------------------------------------
     def sticky_state(self) -> np.ndarray:
         """The sticky memory -- each slave node's previous master triangle -- as reference

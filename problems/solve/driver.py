@@ -121,11 +121,26 @@ class NewtonOptions:
     # ‖F‖ creeps at its 0.1 floor, and the retry keeps a cycling active set from cutting
     # the step; "": no retry; docs/scleral_buckling.md, "Which contact chatters")
     fallback_line_search: str = ""
+    # a solve with backtracking (``bt``, whose residual falls at every accepted step) whose
+    # residual fell by less than 1 − ``stagnation_factor`` over the last
+    # ``stagnation_window`` iterations is stopped as failed before the next Jacobian
+    # (0: never): backtracking that has stalled at λ ≪ 1 (e.g. a direction that inverts
+    # elements at λ = 1) would otherwise spend a factorisation per iteration up to the
+    # iteration limit before the load step is cut. Full steps and cp are not monotone in
+    # ‖F‖ (semismooth Newton across a contact's kink rises before it settles), so the test
+    # does not apply to them (docs/scleral_buckling.md, "Newton's budget")
+    stagnation_window: int = 0
+    stagnation_factor: float = 0.9
 
     def __post_init__(self) -> None:
         if self.factorisation not in FACTORISATIONS:
             raise ParameterError("factorisation", f"{self.factorisation!r} is not one of "
                                  + ", ".join(FACTORISATIONS))
+        if self.stagnation_window < 0:
+            raise ParameterError("stagnation_window", f"{self.stagnation_window}: must be >= 0")
+        if not 0 < self.stagnation_factor < 1:
+            raise ParameterError("stagnation_factor", f"{self.stagnation_factor}: a reduction "
+                                 "factor in (0, 1)")
 
     def as_petsc(self, linear: dict | None = None, auto: str = "lu") -> dict[str, str]:
         """SNES options, then the KSP/PC options: MUMPS LU or LDLᵀ (``factorisation``;
@@ -227,6 +242,9 @@ class NonlinearSolver:
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
+        # (save, restore) pairs of the hooks' memory between iterates (:meth:`save_memory`)
+        self.memory_hooks: list[tuple[Callable[[], object], Callable[[object], None]]] = []
+        self._start_memory: list = []
         self._jacobians = 0  # Jacobian assemblies so far
         self._jacobian_valid = False  # the matrix holds a Jacobian a next solve may keep
         self._kept_iterations = 0  # Newton iterations on a kept Jacobian, this solve
@@ -246,7 +264,21 @@ class NonlinearSolver:
         self.counts = SolverCounts()       # work of all solves of this solver
         self.last_counts = SolverCounts()  # work of the last solve
         self._factorisations = FactorisationCounter()
-        self.snes.setMonitor(lambda _snes, _it, norm: self.residual_history.append(float(norm)))
+        self.stagnated = False  # the last solve was stopped by the stagnation test
+        self.snes.setMonitor(self._monitor)
+
+    def _monitor(self, snes: PETSc.SNES, _iteration: int, norm: float) -> None:
+        """Records ‖F_k‖; stops a stagnating backtracking solve (``options.stagnation_window``). SNES
+        calls the monitor after its convergence test and breaks out when a reason is set,
+        so the stop costs no further Jacobian."""
+        self.residual_history.append(float(norm))
+        window = self.options.stagnation_window
+        history = self.residual_history
+        if (window > 0 and len(history) > window and snes.getConvergedReason() == 0
+                and history[-1] > self.options.stagnation_factor * history[-1 - window]
+                and snes.getLineSearch().getType() == "bt"):
+            self.stagnated = True
+            snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
 
     # -- set-up -----------------------------------------------------------------
     @property
@@ -341,6 +373,17 @@ class NonlinearSolver:
     def save_state(self) -> list[np.ndarray]:
         return [u.x.array.copy() for u in self.unknowns]
 
+    def save_memory(self) -> list:
+        """What the hooks remember between iterates (``memory_hooks``: e.g. a contact
+        search's sticky triangles), to be put back with the unknowns when a failed solve is
+        repeated or its load step cut: the retry then starts where the failed attempt
+        started, not where it stopped."""
+        return [save() for save, _restore in self.memory_hooks]
+
+    def restore_memory(self, saved: list) -> None:
+        for (_save, restore), value in zip(self.memory_hooks, saved):
+            restore(value)
+
     def restore_state(self, state: list[np.ndarray]) -> None:
         for u, values in zip(self.unknowns, state):
             u.x.array[:] = values
@@ -413,12 +456,14 @@ class NonlinearSolver:
         ``options.fallback_line_search`` if given (counted too)."""
         retries = self.options.reuse_contraction > 0 or self.options.fallback_line_search
         start_state = self.save_state() if retries else None
+        self._start_memory = self.save_memory() if retries else []
         converged, iterations = self._solve_once(reference_norm)
         if not converged and self._kept_iterations and start_state is not None:
             log.info("modified Newton failed (%s) after %d kept Jacobians, residuals %s: "
                      "fresh Jacobians", self.reason(), self._kept_iterations,
                      " ".join(f"{r:.2e}" for r in self.residual_history))
             self.restore_state(start_state)
+            self.restore_memory(self._start_memory)
             self._jacobian_valid = False
             self._reuse_enabled = False
             try:
@@ -442,6 +487,7 @@ class NonlinearSolver:
         log.info("Newton with line search %s failed (%s), residuals %s: again with %s", current,
                  self.reason(), " ".join(f"{r:.2e}" for r in self.residual_history), fallback)
         self.restore_state(start_state)
+        self.restore_memory(self._start_memory)
         self._jacobian_valid = False
         line_search.setType(fallback)
         try:
@@ -453,6 +499,7 @@ class NonlinearSolver:
         """One SNES solve; its work, converged or not, is added to ``counts`` and to the
         process's ``SOLVER_COUNTS``."""
         self.residual_history = []
+        self.stagnated = False
         self._kept_iterations = 0
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
@@ -501,6 +548,8 @@ class NonlinearSolver:
         SOLVER_COUNTS.add(work)
 
     def reason(self) -> str:
+        if self.stagnated:
+            return "STAGNATED (stagnation_window)"
         code = self.snes.getConvergedReason()
         names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
         return names.get(code, str(code))
@@ -533,6 +582,10 @@ class Stepping:
     # the largest step of each stage (the intervals between the stops, in order), as a
     # fraction of the span like max_step; () = max_step everywhere
     stage_max_steps: tuple[float, ...] = ()
+    # whether each stage's load steps start from the predictor (in order; () = all of them):
+    # a stage whose secant was measured to start farther from the solution than no
+    # prediction opts out
+    stage_predicts: tuple[bool, ...] = ()
     # what the path value is, for the failure message: "load factor", "time" (unit "s"),
     # "depth" ("mm"); None: "load factor" on the default path 0 -> 1, else "path value"
     quantity: str | None = None
@@ -552,9 +605,18 @@ class Stepping:
         """max_step, or the stage's own, for the step that starts at ``value``."""
         if not self.stage_max_steps:
             return self.max_step
+        return self.stage_max_steps[min(self._stage(value), len(self.stage_max_steps) - 1)]
+
+    def _stage(self, value: float) -> int:
+        """Index of the stage (interval between the stops) a step starting at ``value`` is in."""
         span = self.end - self.start
-        stage = sum(1 for s in sorted(self.stops) if s <= value + 1e-12 * span)
-        return self.stage_max_steps[min(stage, len(self.stage_max_steps) - 1)]
+        return sum(1 for s in sorted(self.stops) if s <= value + 1e-12 * span)
+
+    def predicts(self, value: float) -> bool:
+        """Whether the step that starts at ``value`` starts from the predictor."""
+        if not self.stage_predicts:
+            return True
+        return self.stage_predicts[min(self._stage(value), len(self.stage_predicts) - 1)]
 
     def first_step(self, value: float) -> float:
         """A stage's first step: ``initial_step``, within the stage's own largest step
@@ -658,7 +720,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         predictor.restart(value)
     while value < stepping.end - 1e-12 * span:
         step += 1
-        state = solver.save_state()
+        state, memory = solver.save_state(), solver.save_memory()
         counts_before = solver.counts.copy()
         if checkpoints is not None:
             checkpoints.watch_step(solver)
@@ -670,7 +732,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 target = next_stop
             apply(target, target - value)
             reference = None
-            if predictor is not None and predictor.ready:
+            if predictor is not None and predictor.ready and stepping.predicts(value):
                 # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
                 reference = solver.residual_norm()
                 predictor.predict(target, state)
@@ -681,6 +743,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             history = list(solver.residual_history)
             log.info("step %d: no convergence at %.6g (%s), cutting", step, target, solver.reason())
             solver.restore_state(state)
+            solver.restore_memory(memory)
             cuts += 1
             increment *= 0.5
             if cuts > stepping.max_cuts or increment < stepping.min_step * span:
