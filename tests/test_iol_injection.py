@@ -429,3 +429,26 @@ def test_p1_fold_seeds_the_p2_injection():
                               on_converged=injection.converged, quiet=True)
         assert records[-1].load == pytest.approx(params.time_step)
         assert not any(injection.history.intersecting)
+
+
+def test_p1_injection_is_reproducible_bitwise():
+    """Two identical coarse P1 injections from the P2 fold, cut to 0.25 s (46 steps, 13 cuts),
+    end in the same state bit for bit, by the same step path. ipctk runs on one thread in the
+    lens scenes (``surface_contact.serial_ipctk``): on its default two threads here the same
+    pair of runs ended with different states (3 of 4 pairs; 1e-9 apart) — its parallel sums
+    add in a varying order."""
+    pytest.importorskip("ipctk")
+    from eyemech.problems.lens import fast_injection
+    from eyemech.problems.lens.rotation_free import FastLens
+
+    params = iol_injection.Parameters(model="p1-rotation-free", resolution="coarse")
+    lens = FastLens.build(params)
+    runs = []
+    for _ in range(2):
+        injection = fast_injection.Injection(params, lens, fast_injection.load_state(FOLDED, lens))
+        injection.end = 0.25
+        history = injection.run()
+        runs.append((injection.dyn.u.copy(), list(history.time), list(history.newton)))
+    (u_a, time_a, newton_a), (u_b, time_b, newton_b) = runs
+    assert time_a == time_b and newton_a == newton_b
+    assert u_a.tobytes() == u_b.tobytes()

@@ -26,6 +26,18 @@ import numpy as np
 from eyemech.forms.contact import tangential_slips
 
 
+def serial_ipctk() -> None:
+    """ipctk on one thread: with its default (one per core) the barrier's and friction's sums
+    and the CCD's reductions run in parallel and their order varies from run to run: two
+    identical coarse P1 injections ended 1e-9 apart and could take different step paths;
+    on one thread they are bitwise equal and no slower in CPU time (docs/iol.md §4b
+    "Reproducibility"; tests/test_iol_injection.py)."""
+    import ipctk
+
+    if ipctk.get_num_threads() != 1:
+        ipctk.set_num_threads(1)
+
+
 class SelfContactError(RuntimeError):
     """A state the barrier cannot start from (intersecting, or pairs within d̂ at rest)."""
 
@@ -49,6 +61,7 @@ class SurfaceSelfContact:
 
         if not dhat > 0 or not stiffness > 0:
             raise ValueError(f"self-contact needs d̂ > 0 and a stiffness > 0, got {dhat!r}, {stiffness!r}")
+        serial_ipctk()
         self._ipctk = ipctk
         self.dhat, self.stiffness = float(dhat), float(stiffness)
         self.X = np.asfortranarray(X, dtype=float)
