@@ -462,3 +462,28 @@ def test_release_newton_iterations_from_the_least_potential_start():
     assert run["counts"]["iterations"] == sum(iterations)
     assert max(iterations[20:]) == 1
     assert run["counts"]["residuals"] <= 158 + 6
+
+
+def test_self_contact_skips_its_narrow_phase_only_where_no_pair_can_be_within_dhat():
+    # the U-folded strip's top layer lowered onto the bottom one in 0.005 mm moves (layers
+    # 0.2 mm apart down to 0.005): at every state the pairs within d̂ (their number and the
+    # smallest distance) are ipctk's own full build's; the narrow phase is skipped while the
+    # kept candidates' clearance less twice the drift since their build exceeds d̂ (measured:
+    # skipped at the first states, built once the layers come near)
+    ipctk = pytest.importorskip("ipctk")
+    from eyemech.problems.lens.surface_contact import SurfaceSelfContact
+
+    points, tris, _ = _folded_strip()
+    contact = SurfaceSelfContact(points, tris, dhat=0.02, stiffness=1.0)
+    top = points[:, 2] > 0.2 - 1e-9
+    for drop in np.arange(0.0, 0.196, 0.005):
+        x = points.copy()
+        x[top, 2] -= drop
+        kept = contact.collisions(x)
+        full = ipctk.NormalCollisions()
+        full.build(contact.mesh, np.asfortranarray(x), contact.dhat, broad_phase=ipctk.SweepAndPrune())
+        assert len(kept) == len(full)
+        if len(full):
+            assert kept.compute_minimum_distance(contact.mesh, x) == pytest.approx(
+                full.compute_minimum_distance(contact.mesh, x), rel=1e-12)
+    assert contact.narrow_phases_skipped >= 1 and len(full) > 0

@@ -21,6 +21,7 @@ from eyemech.meshes.iol import LensGeometry, intraocular_lens
 from eyemech.meshes.surface import orientation
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.lens.injector import Capsule, Plunger, TaperedBore
+from eyemech.problems.lens.surface_contact import serial_ipctk
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.solve.driver import NewtonOptions
@@ -226,6 +227,7 @@ def require_ipctk() -> None:
     except ImportError as err:
         raise ParameterError("self_contact", "needs ipctk (pip install -e '.[iol]'); "
                              "or set self_contact=false") from err
+    serial_ipctk()  # reproducible runs
 
 
 def lens_self_contact(shell: LensShell, params: LensParameters, excluded_dofs=None):

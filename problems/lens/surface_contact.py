@@ -26,6 +26,18 @@ import numpy as np
 from eyemech.forms.contact import tangential_slips
 
 
+def serial_ipctk() -> None:
+    """ipctk on one thread: with its default (one per core) the barrier's and friction's sums
+    and the CCD's reductions run in parallel and their order varies from run to run: two
+    identical coarse P1 injections ended 1e-9 apart and could take different step paths;
+    on one thread they are bitwise equal and no slower in CPU time (docs/iol.md §4b
+    "Reproducibility"; tests/test_iol_injection.py)."""
+    import ipctk
+
+    if ipctk.get_num_threads() != 1:
+        ipctk.set_num_threads(1)
+
+
 class SelfContactError(RuntimeError):
     """A state the barrier cannot start from (intersecting, or pairs within d̂ at rest)."""
 
@@ -49,6 +61,7 @@ class SurfaceSelfContact:
 
         if not dhat > 0 or not stiffness > 0:
             raise ValueError(f"self-contact needs d̂ > 0 and a stiffness > 0, got {dhat!r}, {stiffness!r}")
+        serial_ipctk()
         self._ipctk = ipctk
         self.dhat, self.stiffness = float(dhat), float(stiffness)
         self.X = np.asfortranarray(X, dtype=float)
@@ -72,29 +85,43 @@ class SurfaceSelfContact:
         self._cache: tuple[np.ndarray, object] | None = None
         self.margin = 4.0 * self.dhat if margin is None else float(margin)
         self._candidates, self._x_build = None, None
+        self.clearance = 0.0
         self.rebuilds = 0
+        self.narrow_phases_skipped = 0
         self.step_limits: list[float] = []
         if self.intersecting(self.X) or len(self.collisions(self.X)):
             raise SelfContactError("the reference surface intersects itself or has non-excluded pairs "
                                    f"closer than d̂ = {self.dhat} mm")
 
-    def _covers(self, x: np.ndarray) -> bool:
-        """Whether x is within δ/2 of the build positions up to a common translation t (the mean
-        move): a pair's distance is translation invariant, so it changes by at most
-        2 max_v |x_v − x_b,v − t| — the lens pushed through the injector moves ≈ 0.4 mm per step
-        as a whole, which without t would rebuild the candidates at every iterate."""
+    def _drift(self, x: np.ndarray) -> float:
+        """max_v |x_v − x_b,v − t| for the mean move t from the build positions x_b (∞ before a
+        build): a pair's distance is translation invariant and 1-Lipschitz in each of its
+        vertices, so it differs from its value at x_b by at most twice this."""
         if self._x_build is None:
-            return False
+            return float("inf")
         move = x - self._x_build
         move -= move.mean(axis=0)
-        return float(np.max(np.sum(move ** 2, axis=1))) <= (0.5 * self.margin) ** 2
+        return float(np.sqrt(np.max(np.sum(move ** 2, axis=1))))
+
+    def _covers(self, x: np.ndarray) -> bool:
+        """Whether x is within δ/2 of the build positions up to a common translation t (the mean
+        move): a pair's distance then changes by at most δ — the lens pushed through the
+        injector moves ≈ 0.4 mm per step as a whole, which without t would rebuild the
+        candidates at every iterate."""
+        return self._drift(x) <= 0.5 * self.margin
 
     def _candidates_for(self, x: np.ndarray):
-        """Candidates valid at x: the kept ones, or new ones built at x."""
+        """Candidates valid at x: the kept ones, or new ones built at x (with ``clearance``, the
+        smallest distance of their pairs at x, at most d̂ + δ)."""
         if not self._covers(x):
+            x = np.asfortranarray(x)
             self._candidates = self._ipctk.Candidates()
-            self._candidates.build(self.mesh, np.asfortranarray(x), self.dhat + self.margin,
+            self._candidates.build(self.mesh, x, self.dhat + self.margin,
                                    broad_phase=self._ipctk.SweepAndPrune())
+            near = self._ipctk.NormalCollisions()
+            near.build(self._candidates, self.mesh, x, self.dhat + self.margin)
+            self.clearance = min(float(np.sqrt(near.compute_minimum_distance(self.mesh, x))),
+                                 self.dhat + self.margin) if len(near) else self.dhat + self.margin
             self._x_build = np.array(x)
             self.rebuilds += 1
         return self._candidates
@@ -106,7 +133,12 @@ class SurfaceSelfContact:
             return self._cache[1]
         candidates = self._candidates_for(x)
         collisions = self._ipctk.NormalCollisions()
-        collisions.build(candidates, self.mesh, np.asfortranarray(x), self.dhat)
+        # every kept pair is at least clearance − 2 drift apart: none within d̂ is certain
+        # without ipctk's narrow phase (the released lens: no pair near, every iterate)
+        if self.clearance - 2.0 * self._drift(x) > self.dhat * (1.0 + 1e-9):
+            self.narrow_phases_skipped += 1
+        else:
+            collisions.build(candidates, self.mesh, np.asfortranarray(x), self.dhat)
         self._cache = (np.array(x), collisions)
         return collisions
 
