@@ -143,7 +143,7 @@ class Parameters(SceneParameters, SolverChoice):
                                   "cube-edge count; 0 = from cells_per_bending_length or resolution",
                              "mm")
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
-                                   "meshing; the paper resolution has 8,152)")
+                                   "meshing; the paper resolution has 8,150)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
