@@ -191,9 +191,9 @@ class Parameters(SceneParameters, SolverChoice):
         "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
         "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
         "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
-        "detached flap, not at its root. The tear closes on the coarse and default meshes; on the "
-        "paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
-        "\"Mesh convergence: at the defaults the tear stays open\")", "mm")
+        "detached flap, not at its root. The tear closes after suturing on the default mesh; on "
+        "the paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
+        "\"Mesh convergence\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
