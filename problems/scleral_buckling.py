@@ -143,7 +143,7 @@ class Parameters(SceneParameters, SolverChoice):
                                   "cube-edge count; 0 = from cells_per_bending_length or resolution",
                              "mm")
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
-                                   "meshing; the paper resolution has 8,152)")
+                                   "meshing; the paper resolution has 8,150)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
@@ -191,9 +191,9 @@ class Parameters(SceneParameters, SolverChoice):
         "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
         "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
         "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
-        "detached flap, not at its root. The tear closes on the coarse and default meshes; on the "
-        "paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
-        "\"Mesh convergence: at the defaults the tear stays open\")", "mm")
+        "detached flap, not at its root. The tear closes after suturing on the default mesh; on "
+        "the paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
+        "\"Mesh convergence\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
