@@ -665,6 +665,8 @@ class BucklingModel:
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings,
                                       iterative=params.linear_solver(2 * self.stiffness, dx))
+        # a load step may not carry the sclera through the rigid buckle (Stepping.depth_limit)
+        self.solver.depth_hooks.append(self.depth_through_buckle)
         self.element_size = element_size
         self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries
         self.zonules = self._zonules() if params.lens else None
@@ -1119,6 +1121,16 @@ class BucklingModel:
             near = np.abs(x[:, 2] - self.axial_position) <= 0.5 * self.params.buckle_shape().footprint
         local = float(self.buckle.axis_distance(x[near]).max()) if near.any() else 0.0
         return self.ctx.comm.allreduce(local, op=MPI.MAX)
+
+    def depth_through_buckle(self) -> float:
+        """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
+        fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
+        V = self.u.function_space
+        owned = V.dofmap.index_map.size_local
+        blocks = self.sclera_nodes[self.sclera_nodes < owned]
+        x = V.tabulate_dof_coordinates()[blocks] + self.u.x.array.reshape(-1, 3)[blocks]
+        depth = self.buckle.depth_through(x, self.tire_travel_value())
+        return self.ctx.comm.allreduce(float(depth.max()) if len(depth) else -np.inf, op=MPI.MAX)
 
     def suture_anchors(self) -> np.ndarray:
         """Where each suture leaves the buckle: the tire's outer corner on its side,
