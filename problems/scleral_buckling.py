@@ -666,6 +666,7 @@ class BucklingModel:
                                       options=newton, timings=ctx.timings,
                                       iterative=params.linear_solver(2 * self.stiffness, dx))
         # a load step may not carry the sclera through the rigid buckle (Stepping.depth_limit)
+        self._outer_owned: tuple[np.ndarray, np.ndarray] | None = None
         self.solver.depth_hooks.append(self.depth_through_buckle)
         self.element_size = element_size
         self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries
@@ -1125,10 +1126,12 @@ class BucklingModel:
     def depth_through_buckle(self) -> float:
         """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
         fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
-        V = self.u.function_space
-        owned = V.dofmap.index_map.size_local
-        blocks = self.sclera_nodes[self.sclera_nodes < owned]
-        x = V.tabulate_dof_coordinates()[blocks] + self.u.x.array.reshape(-1, 3)[blocks]
+        if self._outer_owned is None:  # a load step's few calls share the nodes' coordinates
+            V = self.u.function_space
+            blocks = self.sclera_nodes[self.sclera_nodes < V.dofmap.index_map.size_local]
+            self._outer_owned = (blocks, V.tabulate_dof_coordinates()[blocks])
+        blocks, X = self._outer_owned
+        x = X + self.u.x.array.reshape(-1, 3)[blocks]
         depth = self.buckle.depth_through(x, self.tire_travel_value())
         return self.ctx.comm.allreduce(float(depth.max()) if len(depth) else -np.inf, op=MPI.MAX)
 
