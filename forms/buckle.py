@@ -274,6 +274,50 @@ class Buckle:
             mask |= z <= 0.5 * float(sizes.band_width)
         return mask
 
+    def depth_through(self, x: np.ndarray, tire_travel: float) -> np.ndarray:
+        """How far each point (n, 3) lies beyond the inner (contact) face of the element
+        over it, into or past its body, as a fraction of that element's radial thickness
+        (the tire's height, the band's thickness): ρ − ρ_face over the element's span
+        (across its width, within the tire's arc), ρ the distance from the element's axis,
+        ρ_face the inner face's (raised by the rounded corners near the edges); −inf
+        outside every span. A point that crossed the contact face and the body's far side
+        has a fraction above 1, where the penalty's signed distance is positive again and
+        pushes it no more; a sclera point in contact sits beyond the face only by the
+        penalty's penetration. The band travels with ``indentation``, the tire by
+        ``tire_travel`` (the value of a Real unknown in a scene)."""
+        sizes, shape = self.dimensions, self.shape
+        base = float(np.asarray(getattr(self.base_radius, "value", self.base_radius)))
+        band_travel = float(np.asarray(getattr(self.indentation, "value", self.indentation)))
+        value = lambda c: float(np.asarray(getattr(c, "value", c)))  # noqa: E731
+        corner = value(sizes.corner_radius)
+        depth = np.full(len(x), -np.inf)
+
+        def element(across, rho, width, thickness, travel, within):
+            r = min(corner, 0.5 * thickness, 0.5 * width)
+            edge = np.clip(np.abs(across) - (0.5 * width - r), 0.0, r)
+            face = base - travel + r - np.sqrt(r * r - edge**2)
+            inside = within & (np.abs(across) <= 0.5 * width)
+            return np.where(inside, (rho - face) / thickness, -np.inf)
+
+        if shape.has_tire:
+            if shape.radial:
+                across = x[:, 0]
+                within = np.abs(np.arctan2(x[:, 1], x[:, 2]) - value(self.polar_angle)) \
+                    <= value(sizes.tire_half_arc)
+            else:
+                across = x[:, 2] - value(self.axial_position)
+                within = np.arctan2(np.abs(x[:, 0]), x[:, 1]) <= value(sizes.tire_half_arc) \
+                    if self.arc_limited else np.ones(len(x), bool)
+            depth = np.maximum(depth, element(across, self.axis_distance(x), value(sizes.tire_width),
+                                              max(value(sizes.tire_height), 1e-6), tire_travel,
+                                              within))
+        if shape.has_band:
+            depth = np.maximum(depth, element(x[:, 2] - value(self.axial_position),
+                                              np.hypot(x[:, 0], x[:, 1]), value(sizes.band_width),
+                                              value(sizes.band_thickness), band_travel,
+                                              np.ones(len(x), bool)))
+        return depth
+
 
 def tangential_components(x, w, axis: int = 2):
     """(w·e_a, w·e_φ) of a vector w at position x: the directions along which the

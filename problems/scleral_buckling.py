@@ -143,7 +143,7 @@ class Parameters(SceneParameters, SolverChoice):
                                   "cube-edge count; 0 = from cells_per_bending_length or resolution",
                              "mm")
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
-                                   "meshing; the paper resolution has 8,152)")
+                                   "meshing; the paper resolution has 8,150)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
@@ -191,9 +191,9 @@ class Parameters(SceneParameters, SolverChoice):
         "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
         "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
         "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
-        "detached flap, not at its root. The tear closes on the coarse and default meshes; on the "
-        "paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
-        "\"Mesh convergence: at the defaults the tear stays open\")", "mm")
+        "detached flap, not at its root. The tear closes after suturing on the default mesh; on "
+        "the paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
+        "\"Mesh convergence\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
@@ -665,6 +665,9 @@ class BucklingModel:
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings,
                                       iterative=params.linear_solver(2 * self.stiffness, dx))
+        # a load step may not carry the sclera through the rigid buckle (Stepping.depth_limit)
+        self._outer_owned: tuple[np.ndarray, np.ndarray] | None = None
+        self.solver.depth_hooks.append(self.depth_through_buckle)
         self.element_size = element_size
         self._fe_nonzeros = self.solver.jacobian_nonzeros()  # before any hook inserts entries
         self.zonules = self._zonules() if params.lens else None
@@ -1119,6 +1122,18 @@ class BucklingModel:
             near = np.abs(x[:, 2] - self.axial_position) <= 0.5 * self.params.buckle_shape().footprint
         local = float(self.buckle.axis_distance(x[near]).max()) if near.any() else 0.0
         return self.ctx.comm.allreduce(local, op=MPI.MAX)
+
+    def depth_through_buckle(self) -> float:
+        """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
+        fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
+        if self._outer_owned is None:  # a load step's few calls share the nodes' coordinates
+            V = self.u.function_space
+            blocks = self.sclera_nodes[self.sclera_nodes < V.dofmap.index_map.size_local]
+            self._outer_owned = (blocks, V.tabulate_dof_coordinates()[blocks])
+        blocks, X = self._outer_owned
+        x = X + self.u.x.array.reshape(-1, 3)[blocks]
+        depth = self.buckle.depth_through(x, self.tire_travel_value())
+        return self.ctx.comm.allreduce(float(depth.max()) if len(depth) else -np.inf, op=MPI.MAX)
 
     def suture_anchors(self) -> np.ndarray:
         """Where each suture leaves the buckle: the tire's outer corner on its side,

@@ -5,9 +5,13 @@ refused before any solve (docs/scleral_buckling.md, Radial tire)."""
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import pytest
 from conftest import run_cli
 
+from eyemech.forms.buckle import Buckle, BuckleShape
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
@@ -33,9 +37,11 @@ def radial():
 
 def test_radial_tire_indents_the_tears_meridian_by_its_travel(radial):
     # the probe on the tear's meridian under the tire's centre moves towards the tire's
-    # axis by the travel less the 0.05 mm clearance (measured 0.897 mm after buckling,
-    # 0.942 mm after suturing, of 1.0; 1.40 of 1.5 mm at the default travel); deeper
-    # than the travel only by the penalty's penetration, hundredths of a mm
+    # axis by the travel less the 0.05 mm clearance (measured 0.903 mm after buckling,
+    # 0.974 mm after suturing, of 1.0; 1.40 of 1.5 mm at the default travel); deeper
+    # than the travel only by the penalty's penetration, hundredths of a mm. A step that
+    # carries the sclera through the tire read 1.095 (Stepping.depth_limit refuses it:
+    # test_depth_through_the_radial_tire_reads_past_its_far_face)
     for stage in ("after_buckling", "after_suturing"):
         q = radial[stage]
         assert q["buckle_travel_mm"] == q["tire_travel_mm"] == 1.0
@@ -62,8 +68,8 @@ def test_radial_tires_sutured_footprint_does_not_slide(radial):
     # 1.139 mm max at 1 mm of travel; ≈ 9 s). Tied, it slips only by the tie penalty's
     # compliance, as under the circumferential tire (tests/test_buckle_types.py: bound
     # 0.05 mm); the slip is measured about the tire's own axis (x), across and along the
-    # meridian (measured 0.018 / 0.027 mm max after buckling / suturing, mean forward
-    # slip along the meridian −0.001 / −0.002 mm)
+    # meridian (measured 0.021 / 0.018 mm max after buckling / suturing, mean forward
+    # slip along the meridian −0.0005 / −0.0013 mm; +0.0104 through the tire)
     loose = _run(**{**RADIAL, "buckle_attachment": "frictionless", "suture_force": "0"})
     assert loose.status == "ok", loose.message
     slid = loose.quantities["after_buckling"]
@@ -126,3 +132,22 @@ def test_radial_tire_of_new_sizes_compiles_nothing_after_its_first_case(compilat
     first = len(compilations)
     sb.run(case(), options=QUIET)
     assert compilations[first:] == []
+
+
+def test_depth_through_the_radial_tire_reads_past_its_far_face():
+    """Buckle.depth_through, the measure by which a load step that carries the sclera
+    through the tire is refused (problems/solve/driver.py, Stepping.depth_limit): beyond
+    the contact face over the tire's span as a fraction of its height, also past its far
+    face, where the penalty's signed distance is positive again (the coarse eye's node at
+    80° converged 1.3 mm beyond the 1 mm tire's far face with the secant's start)."""
+    shape = BuckleShape(kind="segmental", orientation="radial", tire_arc_deg=360.0)
+    buckle = Buckle(shape, axial_position=0.0, base_radius=12.0, indentation=1.0,
+                    polar_angle=math.radians(90.0))
+    # the face at 12 − 1 = 11 mm from the x axis; the corners (0.3 mm) raise it at the edges
+    points = np.array([[0.0, 11.0, 0.0], [0.0, 11.5, 0.0], [0.0, 13.3, 0.0],
+                       [3.5, 11.5, 0.0], [4.0, 11.5, 0.0], [0.0, 10.0, 0.0],
+                       [0.0, 0.0, 11.5]])  # the last: 90° from the tire's centre, off its arc
+    depth = buckle.depth_through(points, tire_travel=1.0)
+    assert depth[:4] == pytest.approx([0.0, 0.5, 2.3, 0.2])
+    assert depth[5] == pytest.approx(-1.0)
+    assert np.isneginf(depth[[4, 6]]).all()

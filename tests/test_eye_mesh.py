@@ -3,6 +3,7 @@ the detachment and the tear, and clear errors for unusable settings. No solves."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import dolfinx
@@ -12,7 +13,17 @@ import ufl
 from mpi4py import MPI
 
 from eyemech.meshes import MeshError
-from eyemech.meshes.eye import EyeGeometry, build_grid, half_eye
+from eyemech.meshes.eye import (
+    RESOLUTIONS,
+    TISSUES,
+    EyeGeometry,
+    _conform_tear,
+    _half_cubed_sphere,
+    _rim_path,
+    _tear_quads,
+    build_grid,
+    half_eye,
+)
 
 GEOMETRY = EyeGeometry(cells_per_edge=8)
 
@@ -76,15 +87,101 @@ def test_tear_is_a_hole_on_the_symmetry_plane():
     assert centre[0] < GEOMETRY.tear_radius
 
 
-def test_hexahedra_are_valid():
-    grid = build_grid(EyeGeometry(cells_per_edge=12))
+CORNERS = [(0, 1, 3, 4), (1, 2, 0, 5), (2, 3, 1, 6), (3, 0, 2, 7),
+           (4, 7, 5, 0), (5, 4, 6, 1), (6, 5, 7, 2), (7, 6, 4, 3)]
+
+
+def _corner_jacobians(grid) -> np.ndarray:
+    """(cells, 8) Jacobian determinants at every corner of every hexahedron."""
     p = grid.points[grid.hexes]
-    # Jacobian at every corner of every hexahedron must be positive
-    corners = [(0, 1, 3, 4), (1, 2, 0, 5), (2, 3, 1, 6), (3, 0, 2, 7),
-               (4, 7, 5, 0), (5, 4, 6, 1), (6, 5, 7, 2), (7, 6, 4, 3)]
-    for c, a, b, d in corners:
-        det = np.einsum("ij,ij->i", np.cross(p[:, a] - p[:, c], p[:, b] - p[:, c]), p[:, d] - p[:, c])
-        assert det.min() > 0
+    return np.stack([np.einsum("ij,ij->i", np.cross(p[:, a] - p[:, c], p[:, b] - p[:, c]),
+                               p[:, d] - p[:, c]) for c, a, b, d in CORNERS], axis=1)
+
+
+def _tear_distance(geo: EyeGeometry, x: np.ndarray) -> np.ndarray:
+    """Geodesic distance on the sclera's sphere from the tear's centre to x's direction."""
+    centre = np.array([0.0, math.sin(math.radians(geo.tear_angle)),
+                       math.cos(math.radians(geo.tear_angle))])
+    unit = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    return geo.sclera_radius * np.arccos(np.clip(unit @ centre, -1, 1))
+
+
+MESHES = [pytest.param(n, id=name) for name, n in RESOLUTIONS.items()]
+
+
+@pytest.mark.parametrize("n, tear_radius, near_tear_ratio", [
+    # the worst corner-Jacobian ratio (min/max over a cell's corners) of the cells within
+    # 3 r + 2 h of the tear's centre, measured 0.355 / 0.387 / 0.229 (the block's corner
+    # cells on the paper mesh); the grid-line rim had 0.364 / 0.387 / 0.454
+    (RESOLUTIONS["coarse"], 1.6, 0.3), (RESOLUTIONS["default"], 1.6, 0.3),
+    (RESOLUTIONS["paper"], 1.6, 0.2),
+    # a large tear on the paper mesh (3.4 elements of radius: a 3 × 7 block): 0.0109 mm³ min
+    (RESOLUTIONS["paper"], 2.4, 0.05), (RESOLUTIONS["default"], 3.0, 0.05),
+])
+def test_hexahedra_are_valid(n, tear_radius, near_tear_ratio):
+    geo = EyeGeometry(cells_per_edge=n, tear_radius=tear_radius)
+    grid = build_grid(geo)
+    jacobian = _corner_jacobians(grid)
+    assert jacobian.min() > 0
+    ratio = jacobian.min(axis=1) / jacobian.max(axis=1)
+    # elsewhere the worst is 0.042 on every mesh, with or without the tear
+    assert ratio.min() > 0.04
+    near = _tear_distance(geo, grid.points[grid.hexes].mean(axis=1)) \
+        < 3 * tear_radius + 2 * geo.element_size
+    assert ratio[near].min() > near_tear_ratio
+
+
+@pytest.mark.parametrize("n", MESHES)
+def test_tear_rim_is_on_its_circle(n):
+    geo = EyeGeometry(cells_per_edge=n)
+    grid = build_grid(geo)
+    rim = grid.points[np.unique(grid.faces["tear_edge"])]
+    # every node of the hole's edge faces (all retina levels share the rim's directions)
+    # at tear_radius: 1.6000 mm to round-off on all three meshes; the grid-line rim was
+    # 1.1 mm from the centre in front on the default mesh
+    assert _tear_distance(geo, rim) == pytest.approx(geo.tear_radius, rel=1e-9)
+    polar = np.degrees(np.arccos(rim[:, 2] / np.linalg.norm(rim, axis=1)))
+    nominal = math.degrees(geo.tear_radius / geo.sclera_radius)
+    assert polar.min() == pytest.approx(geo.tear_angle - nominal, abs=1e-6)  # 80.03°
+    assert polar.max() == pytest.approx(geo.tear_angle + nominal, abs=1e-6)  # 95.97°
+    # the scene finds the choroid under the hole by its cells' midpoints within tear_radius
+    # (ScleralBuckling._dried): those are the cells under the removed retina cells
+    midpoints = grid.points[grid.hexes].mean(axis=1)
+    inside = _tear_distance(geo, midpoints) < geo.tear_radius
+    choroid, retina = TISSUES.index("choroid"), TISSUES.index("retina")
+    assert not np.any(inside & (grid.tissue == retina))
+    no_tear = build_grid(dataclasses.replace(geo, tear_radius=0.0))
+    removed = (no_tear.tissue == retina).sum() - (grid.tissue == retina).sum()
+    assert np.sum(inside & (grid.tissue == choroid)) == removed > 0
+    # the move keeps every other cell's tissue: the counts differ by the hole only
+    difference = np.bincount(no_tear.tissue, minlength=len(TISSUES)) \
+        - np.bincount(grid.tissue, minlength=len(TISSUES))
+    assert difference.tolist() == [removed if t == retina else 0 for t in range(len(TISSUES))]
+
+
+@pytest.mark.parametrize("n, segments, share", [
+    # the rim is a polygon of chords between nodes on the circle, k segments over the half
+    # circle: area (k/2) sin(π/k) r², 0.900 of the half disc for k = 4 (the 1 × 2 block of
+    # the coarse and default meshes: 0.897 measured, the chords lie on the sphere), 0.980
+    # for k = 9 (paper: 2 × 5, 0.978 measured)
+    (RESOLUTIONS["coarse"], 4, 0.85), (RESOLUTIONS["default"], 4, 0.85),
+    (RESOLUTIONS["paper"], 9, 0.95),
+])
+def test_tear_area_is_its_rim_polygons(n, segments, share):
+    geo = EyeGeometry(cells_per_edge=n)
+    directions, quads = _half_cubed_sphere(n)
+    hole = _tear_quads(geo, directions, quads)
+    moved = _conform_tear(geo, directions, quads, hole)
+    # nodes on the symmetry plane stay on it, and no other node reaches it
+    assert np.array_equal(moved[:, 0] == 0.0, np.abs(directions[:, 0]) < 1e-12)
+    assert moved[:, 0].min() == 0.0
+    assert len(_rim_path(quads, hole, moved[:, 0] == 0.0)) == segments + 1
+    p = geo.sclera_radius * moved[quads[hole]]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1]), axis=1).sum()
+    polygon = segments / 2 * math.sin(math.pi / segments) * geo.tear_radius ** 2
+    half_disc = 0.5 * math.pi * geo.tear_radius ** 2
+    assert area == pytest.approx(polygon, rel=0.01)
+    assert area > share * half_disc
 
 
 @pytest.mark.parametrize("change, words", [

@@ -79,7 +79,7 @@ def test_bad_solver_choice_is_refused(overrides, key):
     assert info.value.key == key
 
 
-# scleral buckling: the coarse eye (803 Q1P0 cells, 4,248 dofs) keeps this under a
+# scleral buckling: the coarse eye (802 Q1P0 cells, 4,242 dofs) keeps this under a
 # minute; the issue's default resolution takes ~3 min iterative on 2 ranks here.
 # The frictionless buckle: with the sutured one (the default since issue 21) the direct
 # solver converges a step of the buckling stage in 10 Newton iterations where the

@@ -626,3 +626,50 @@ def test_stopping_stalled_backtracking_saves_the_default_eyes_factorisations():
     assert counts <= 110  # measured 107
     assert counts <= plain.as_json()["solver_counts"]["factorisations"] - 15  # measured 128
     assert _stage_factorisations(stopped, 4) < _stage_factorisations(plain, 4)
+
+
+def _through_obstacle(predictor: str) -> tuple[NonlinearSolver, list]:
+    """u = s on one dof, stepped from 0 to 1; a depth hook stands for a rigid obstacle
+    0.3 thick whose contact face is at the last accepted state: a state that moved more
+    than 0.15 (half its thickness) beyond it is reported as a point through it."""
+    mesh = dolfinx.mesh.create_unit_interval(MPI.COMM_SELF, 1)
+    V = dolfinx.fem.functionspace(mesh, ("DG", 0))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    load = dolfinx.fem.Constant(mesh, 0.0)
+    solver = driver.NonlinearSolver((u - load) * v * ufl.dx, u, options=NewtonOptions())
+    face = {"value": 0.0}
+    solver.depth_hooks.append(lambda: (float(u.x.array[0]) - face["value"]) / 0.3)
+    records = follow_path(solver, lambda value, _increment: setattr(load, "value", value),
+                          Stepping(0.0, 1.0, initial_step=0.5, max_step=0.5, predictor=predictor),
+                          on_converged=lambda _record: face.update(value=float(u.x.array[0])),
+                          quiet=True)
+    return solver, records
+
+
+def test_a_step_through_an_obstacle_is_cut_and_counted():
+    """``depth_hooks``: a converged state with a point deeper through an obstacle than
+    ``Stepping.depth_limit`` (half its thickness) of it is refused and the step cut (the
+    radial tire's tunnelling step, tests/test_buckle_radial.py): 0.5 (depth 1.67) and 0.25
+    (0.83) are refused, 0.125 (0.42) accepted; the refused solves count as failed, their
+    iterations in ``newton_iterations_all`` only."""
+    solver, records = _through_obstacle("none")
+    assert records[-1].load == pytest.approx(1.0)
+    assert records[0].cuts == 2 and records[0].increment == pytest.approx(0.125)
+    assert all(r.increment <= 0.15 + 1e-12 for r in records)
+    work = solver.counts
+    assert work.failed_newton_solves == sum(r.cuts for r in records) >= 3
+    assert work.newton_iterations == sum(r.iterations for r in records)
+    assert work.newton_iterations_all == sum(r.iterations_all for r in records) \
+        == work.newton_iterations + work.failed_newton_solves  # one iteration each (linear)
+    assert solver.rejected_predictions == 0
+
+
+def test_a_predicted_start_through_an_obstacle_is_refused():
+    """The secant's start (exact for u = s) at a grown step of 0.1875 lies 0.625 of the
+    obstacle's thickness through it: refused (counted), the step starts unpredicted,
+    converges there, and is cut as above; steps of 0.125 keep their predicted start."""
+    solver, records = _through_obstacle("secant")
+    assert records[-1].load == pytest.approx(1.0)
+    assert solver.rejected_predictions >= 1
+    assert all(r.increment <= 0.15 + 1e-12 for r in records)
+    assert any(r.iterations == 0 for r in records)  # a predicted start kept (exact: no iteration)

@@ -245,6 +245,13 @@ class NonlinearSolver:
         # (save, restore) pairs of the hooks' memory between iterates (:meth:`save_memory`)
         self.memory_hooks: list[tuple[Callable[[], object], Callable[[object], None]]] = []
         self._start_memory: list = []
+        # each returns the largest depth of a point through a rigid obstacle at the current
+        # unknowns, as a fraction of the obstacle's thickness (collective; e.g.
+        # forms/buckle.py's Buckle.depth_through): :func:`follow_path` refuses a predicted
+        # start and a converged state that went through an obstacle (``Stepping.depth_limit``)
+        self.depth_hooks: list[Callable[[], float]] = []
+        self.rejected_predictions = 0  # predicted starts refused for their depth
+        self.through_obstacle = False  # the last converged solve was refused for its depth
         self._jacobians = 0  # Jacobian assemblies so far
         self._jacobian_valid = False  # the matrix holds a Jacobian a next solve may keep
         self._kept_iterations = 0  # Newton iterations on a kept Jacobian, this solve
@@ -443,6 +450,22 @@ class NonlinearSolver:
         self.snes.computeFunction(x, b)
         return float(b.norm())
 
+    def depth_through_obstacles(self) -> float:
+        """The largest of ``depth_hooks``' depths at the current unknowns (−inf: none)."""
+        return max((float(hook()) for hook in self.depth_hooks), default=-np.inf)
+
+    def reject_last_solve(self) -> None:
+        """Counts the last solve, which converged, as failed (its state went through an
+        obstacle): its iterations move from ``newton_iterations`` to the failed attempts'
+        (``newton_iterations_all`` keeps them), and its Jacobian is not kept."""
+        work = SolverCounts(failed_newton_solves=1,
+                            newton_iterations=-self.last_counts.newton_iterations)
+        self.last_counts = self.last_counts + work
+        self.counts.add(work)
+        SOLVER_COUNTS.add(work)
+        self.through_obstacle = True
+        self._jacobian_valid = False
+
     # -- solve ------------------------------------------------------------------
     def solve(self, reference_norm: float | None = None) -> tuple[bool, int]:
         """One Newton solve from the current unknowns; (converged, iterations).
@@ -500,6 +523,7 @@ class NonlinearSolver:
         process's ``SOLVER_COUNTS``."""
         self.residual_history = []
         self.stagnated = False
+        self.through_obstacle = False
         self._kept_iterations = 0
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
@@ -550,6 +574,8 @@ class NonlinearSolver:
     def reason(self) -> str:
         if self.stagnated:
             return "STAGNATED (stagnation_window)"
+        if self.through_obstacle:
+            return "THROUGH_OBSTACLE (depth_limit)"
         code = self.snes.getConvergedReason()
         names = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
         return names.get(code, str(code))
@@ -590,6 +616,13 @@ class Stepping:
     # "depth" ("mm"); None: "load factor" on the default path 0 -> 1, else "path value"
     quantity: str | None = None
     unit: str = ""
+    # a point deeper through a rigid obstacle than this fraction of its thickness
+    # (NonlinearSolver.depth_hooks): a predicted start is refused (the step starts
+    # unpredicted), a converged state is refused (the step is cut). Half: a point in
+    # contact is beyond the contact face only by the penalty's penetration, hundredths of
+    # a mm; one beyond the far face (fraction > 1) is pushed by the penalty no more
+    # (docs/scleral_buckling.md, "Newton's budget")
+    depth_limit: float = 0.5
 
     def describe(self) -> tuple[str, str]:
         if self.quantity is not None:
@@ -735,9 +768,17 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             if predictor is not None and predictor.ready and stepping.predicts(value):
                 # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
                 reference = solver.residual_norm()
-                predictor.predict(target, state)
+                reference = _predict(solver, predictor, target, state, stepping.depth_limit,
+                                     reference)
             converged, iterations = solver.solve(reference) if reference is not None \
                 else solver.solve()
+            if converged and solver.depth_hooks:
+                depth = solver.depth_through_obstacles()
+                if depth > stepping.depth_limit:
+                    log.info("step %d: converged at %.6g with a point %.2f of an obstacle's "
+                             "thickness through it, cutting", step, target, depth)
+                    solver.reject_last_solve()
+                    converged = False
             if converged:
                 break
             history = list(solver.residual_history)
@@ -782,6 +823,26 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     if checkpoints is not None:
         checkpoints.leave_path([dataclasses.asdict(r) for r in records])
     return records
+
+
+def _predict(solver: NonlinearSolver, predictor: "SecantPredictor", target: float,
+             state: list[np.ndarray], depth_limit: float, reference: float) -> float | None:
+    """Moves the unknowns to the predictor's start; one whose point lies deeper through an
+    obstacle than ``depth_limit`` of its thickness is refused (counted in
+    ``solver.rejected_predictions``) and the unknowns put back: Newton from there may
+    converge on the obstacle's far side. The reference residual, None when refused."""
+    unpredicted = solver.save_state() if solver.depth_hooks else None
+    predictor.predict(target, state)
+    if unpredicted is None:
+        return reference
+    depth = solver.depth_through_obstacles()
+    if depth <= depth_limit:
+        return reference
+    log.info("the predicted start at %.6g puts a point %.2f of an obstacle's thickness "
+             "through it: starting unpredicted", target, depth)
+    solver.restore_state(unpredicted)
+    solver.rejected_predictions += 1
+    return None
 
 
 class SecantPredictor:
