@@ -601,14 +601,14 @@ def test_a_cut_step_restores_the_hooks_memory_of_its_start():
 
 @pytest.mark.skipif(not os.environ.get("EYEMECH_BUDGET_DEFAULT"),
                     reason="two runs of make run's eye, ~70 s idle: EYEMECH_BUDGET_DEFAULT=1")
-def test_stopping_stalled_backtracking_saves_the_default_eyes_factorisations():
-    """``stagnation_window = 3`` (the default) against 0 on ``make run``'s eye: step 4's two
-    failed bt attempts of its second load step are stopped after 7 iterations instead of
-    15 and 24 (each a fresh factorisation), the load path and so the quantities after every
-    step stay the same (measured: equal to the printed digits, the settled rim gap 0.0232822
-    against 0.0232835 mm: the failed attempts end at other iterates and leave the retina's
-    search other sticky triangles, ``restore_contact_memory``), and the run takes 107
-    factorisations instead of 128 (step 4: 47 instead of 68)."""
+def test_stopping_stalled_backtracking_costs_the_default_eye_nothing():
+    """``stagnation_window = 3`` (the default) against 0 on ``make run``'s eye: the load path
+    and the quantities after every step stay the same, and the run takes no more
+    factorisations. With the tear's rim on grid lines it stopped step 4's two failed bt
+    attempts after 7 iterations instead of 15 and 24 (107 factorisations instead of 128);
+    with the rim on its circle no bt solve stalls there and both take 141 (measured;
+    docs/scleral_buckling.md, "Stalled backtracking"). The unit tests above show the stop
+    itself."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     stopped, plain = (scleral_buckling.run(scleral_buckling.Parameters(stagnation_window=window),
                                            options=options) for window in (3, 0))
@@ -620,10 +620,8 @@ def test_stopping_stalled_backtracking_saves_the_default_eyes_factorisations():
                                                               abs=1e-5), stage
     assert [s["load"] for s in stopped.as_json()["steps"]] == \
         [s["load"] for s in plain.as_json()["steps"]]
-    counts = stopped.as_json()["solver_counts"]["factorisations"]
-    assert counts <= 110  # measured 107
-    assert counts <= plain.as_json()["solver_counts"]["factorisations"] - 15  # measured 128
-    assert _stage_factorisations(stopped, 4) < _stage_factorisations(plain, 4)
+    assert stopped.as_json()["solver_counts"]["factorisations"] <= \
+        plain.as_json()["solver_counts"]["factorisations"]
 
 
 def _through_obstacle(predictor: str) -> tuple[NonlinearSolver, list]:
