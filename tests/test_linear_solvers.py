@@ -88,8 +88,10 @@ def test_bad_solver_choice_is_refused(overrides, key):
 # docs/scleral_buckling.md). This test is about the linear solvers. The buckle centred on
 # the tear (11.5 mm): 12.5 mm behind the limbus (the default) the frictionless buckle stalls
 # at 97 % of the buckling stage (residual flat at 4.8e-5)
-BUCKLING = ["--set", "resolution=coarse", "--set", "buckle_attachment=frictionless",
-            "--set", "indentation=1.0", "--set", "settle=false", "--set", "buckle_position=11.5"]
+# the sutured buckle at its default place, 1 mm of travel, steps 1–3 (the frictionless
+# buckle at 11.5 mm fails in step 3 on the coarse eye with the tear's rim on its circle:
+# docs/scleral_buckling.md, "Not done")
+BUCKLING = ["--set", "resolution=coarse", "--set", "indentation=1.0", "--set", "settle=false"]
 QUANTITIES = ("axial_length_change_mm", "buckle_indentation_mm", "iop_mmHg", "cavity_volume_mm3",
               "retina_choroid_gap_min_mm", "retina_choroid_gap_mean_mm", "von_mises_max_MPa",
               "zonule_force_total_N")
