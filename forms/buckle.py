@@ -286,9 +286,8 @@ class Buckle:
         penalty's penetration. The band travels with ``indentation``, the tire by
         ``tire_travel`` (the value of a Real unknown in a scene)."""
         sizes, shape = self.dimensions, self.shape
-        base = float(np.asarray(getattr(self.base_radius, "value", self.base_radius)))
-        band_travel = float(np.asarray(getattr(self.indentation, "value", self.indentation)))
-        value = lambda c: float(np.asarray(getattr(c, "value", c)))  # noqa: E731
+        base, band_travel = _number(self.base_radius), _number(self.indentation)
+        value = _number
         corner = value(sizes.corner_radius)
         depth = np.full(len(x), -np.inf)
 
@@ -317,6 +316,11 @@ class Buckle:
                                               value(sizes.band_thickness), band_travel,
                                               np.ones(len(x), bool)))
         return depth
+
+
+def _number(c) -> float:
+    """The float of a Constant (its ``value``) or of a plain number."""
+    return float(np.asarray(getattr(c, "value", c)))
 
 
 def tangential_components(x, w, axis: int = 2):

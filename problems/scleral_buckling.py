@@ -1112,10 +1112,7 @@ class BucklingModel:
         """Largest distance from the buckle's axis (the optic axis; x for a radial tire)
         of the deformed sclera within the buckle's span: the buckle's flat inner face
         must clear all of it."""
-        V = self.u.function_space
-        owned = V.dofmap.index_map.size_local
-        blocks = self.sclera_nodes[self.sclera_nodes < owned]
-        x = V.tabulate_dof_coordinates()[blocks] + self.u.x.array.reshape(-1, 3)[blocks]
+        x = self._sclera_outer_positions()
         if self.buckle.shape.radial:  # the tire's flat inner face clears its whole footprint
             near = self.buckle.footprint_mask(x)
         else:
@@ -1123,16 +1120,20 @@ class BucklingModel:
         local = float(self.buckle.axis_distance(x[near]).max()) if near.any() else 0.0
         return self.ctx.comm.allreduce(local, op=MPI.MAX)
 
-    def depth_through_buckle(self) -> float:
-        """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
-        fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
-        if self._outer_owned is None:  # a load step's few calls share the nodes' coordinates
+    def _sclera_outer_positions(self) -> np.ndarray:
+        """Deformed positions of this rank's owned nodes on the sclera's outer surface (their
+        reference coordinates tabulated once: the mesh does not change)."""
+        if self._outer_owned is None:
             V = self.u.function_space
             blocks = self.sclera_nodes[self.sclera_nodes < V.dofmap.index_map.size_local]
             self._outer_owned = (blocks, V.tabulate_dof_coordinates()[blocks])
         blocks, X = self._outer_owned
-        x = X + self.u.x.array.reshape(-1, 3)[blocks]
-        depth = self.buckle.depth_through(x, self.tire_travel_value())
+        return X + self.u.x.array.reshape(-1, 3)[blocks]
+
+    def depth_through_buckle(self) -> float:
+        """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
+        fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
+        depth = self.buckle.depth_through(self._sclera_outer_positions(), self.tire_travel_value())
         return self.ctx.comm.allreduce(float(depth.max()) if len(depth) else -np.inf, op=MPI.MAX)
 
     def suture_anchors(self) -> np.ndarray:
