@@ -281,6 +281,11 @@ class Parameters(SceneParameters, SolverChoice):
     settle_ramp: Literal["linear", "log"] = field(
         "linear", "step 4's pressure ramp from the acute IOP to the pre-operative one: linear in "
         "P, or log (linear in ln P: equal pressure ratios per unit of load)")
+    settle_start: Literal["target", "converged"] = field(
+        "target", "step 4's load steps start with P at its pinned target (the pressure drop "
+        "then loads the wall at the start, and bt accepts Newton's full first step) or at "
+        "the last converged (or predicted) P, where bt sees only P's row and creeps "
+        "(converged; docs/scleral_buckling.md, The settling step)")
     settle_line_search: Literal["bt", "basic", "cp"] = field(
         "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
         "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
@@ -993,6 +998,8 @@ class BucklingModel:
             f = min(load - 3.0, 1.0)
             self.pressure_target.value = settle_pressure(float(self.acute_pressure.value),
                                                          self.iop, f, self.params.settle_ramp)
+            if self.params.settle_start == "target":
+                self._start_at_pressure_target()
         self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
         self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
         self.update_suture_pull()
@@ -1003,6 +1010,19 @@ class BucklingModel:
         self.drained.value = float(np.clip(load - 3.0, 0.0, 1.0)) \
             if self.params.drainage != "none" else 0.0
         self.retina_drag.value = self.drag_coefficient() if self.drained.value > 0 else 0.0
+
+    def _start_at_pressure_target(self) -> None:
+        """Step 4: P starts a load step at its pinned value, as the prescribed tire travel
+        does. Newton's full first step is the same as from the last P (P's pinned row is
+        linear in P), but the start's residual is then the pressure drop's load on the wall,
+        not P's row alone, so backtracking on ‖F‖ accepts that step instead of creeping at
+        its 0.1 floor (docs/scleral_buckling.md, The settling step). A P already at its
+        target (a converged or restored state: relative difference below 1e-6) is left
+        bitwise as it is, so a resumed run repeats the uninterrupted one."""
+        target = float(self.pressure_target.value)
+        if abs(self.cavity_pressure() - target) > 1e-6 * abs(target):
+            self.P.x.array[:] = target
+            self.P.x.scatter_forward()
 
     def drag_coefficient(self) -> float:
         """η (MPa/mm) such that the full IOP moves a free retina by ``drainage_drag_step``
