@@ -371,7 +371,8 @@ def _stage_factorisations(result, stage: int) -> int:
 def test_full_steps_in_the_settling_step_save_factorisations():
     """``settle_line_search``: full Newton steps in step 4 (``basic``) against backtracking
     (bt, the default) on the coarse eye with the settling step, both from the last converged P
-    (``settle_start = converged``; tests/test_settle.py for the start at P's target). The first
+    with the other steps' load steps (``settle_start = converged``, ``settle_step = 0``;
+    tests/test_settle.py for the default settling). The first
     settling load step starts from P's pinned row alone (‖F_0‖ ≈ 1.6e-3 on the default mesh): the full step's second-order
     remainder in the displacement rows is larger, bt clamps its step at 0.1 and the residual
     creeps × 0.9 per iteration (there 22 iterations, 21 factorisations) where full steps
@@ -382,7 +383,8 @@ def test_full_steps_in_the_settling_step_save_factorisations():
     options = RunOptions(fields=False, pictures=False, quiet=True)
     full, backtracking = (scleral_buckling.run(
         scleral_buckling.Parameters(resolution="coarse", settle_line_search=line_search,
-                                    settle_start="converged"),
+                                    settle_start="converged", settle_step=0.0,
+                                    stagnation_window=3),
         options=options) for line_search in ("basic", "bt"))
     expected, actual = backtracking.quantities["after_settling"], full.quantities["after_settling"]
     for key in ("axial_length_change_mm", "iop_mmHg", "refraction_change_D"):
