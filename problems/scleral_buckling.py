@@ -284,8 +284,8 @@ class Parameters(SceneParameters, SolverChoice):
     settle_start: Literal["target", "converged"] = field(
         "target", "step 4's load steps start with P at its pinned target (the pressure drop "
         "then loads the wall at the start, and bt accepts Newton's full first step) or at "
-        "the last converged (or predicted) P, where bt sees only P's row and creeps "
-        "(converged; docs/scleral_buckling.md, The settling step)")
+        "the last converged (or predicted) P (converged), where bt sees only P's row and "
+        "creeps at its 0.1 floor (docs/scleral_buckling.md, The settling step)")
     settle_line_search: Literal["bt", "basic", "cp"] = field(
         "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
         "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
@@ -304,11 +304,10 @@ class Parameters(SceneParameters, SolverChoice):
         "from the last converged state (none; docs/scleral_buckling.md, Newton's budget)")
     settle_step: float = field(
         0.125, "largest load step of step 4 (settling) as a fraction of the step: 1/8 keeps "
-        "the settled eye within 0.6 % of 20 equal load steps' on the coarse and default "
-        "meshes, where larger steps moved it up to 1.4 % (0: as the other steps, three "
-        "quarters of a step or the buckle_step = 0.25 travel's share, as with drainage, whose "
-        "retina settling after 80 drag solves had moved 0.014 mm in the last with 1/8 steps "
-        "against 0.0008 mm; docs/scleral_buckling.md, The settling step)")
+        "the settled eye within 0.6 % of 20 equal load steps' (coarse and default meshes), "
+        "larger steps moved it up to 1.4 %. 0, and always with drainage: as the other steps, "
+        "three quarters of a step or the buckle_step = 0.25 travel's share "
+        "(docs/scleral_buckling.md, The settling step)")
     restore_contact_memory: bool = field(
         False, "a cut load step or a retried Newton solve starts from the retina contact's "
         "sticky triangles of its start (off: from those of the failed attempt's last iterate). "

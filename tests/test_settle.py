@@ -8,9 +8,13 @@ which the default's larger steps are measured.
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import subprocess
 
 import pytest
+from conftest import BIN, run_cli
 
 from eyemech.problems import scleral_buckling
 from eyemech.problems.run.context import RunOptions
@@ -84,3 +88,31 @@ def test_the_default_settling_reaches_the_reference_settling_with_fewer_factoris
     for stage in ("after_buckling", "after_suturing"):
         assert default.quantities[stage]["axial_length_change_mm"] == \
             former.quantities[stage]["axial_length_change_mm"], stage
+
+
+def test_a_run_killed_in_the_settling_step_resumes_to_the_same_numbers(tmp_path):
+    """The start at P's target leaves a converged or restored P as it is: killed in Newton
+    of step 19 (the third settling load step of the coarse eye, 12.5/1.5) and resumed from
+    the checkpoint of step 18 (in step 4), the run ends on the uninterrupted run's numbers
+    bitwise (measured: 0 difference), the same Newton iterations per load step."""
+    quiet = ("--no-fields", "--no-pictures", "--quiet")
+    settings = [a for k, v in EYE.items() for a in ("--set", f"{k}={v}")]
+    env = dict(os.environ, EYEMECH_TEST_KILL="step:19")
+    killed = subprocess.run([str(BIN / "eyemech"), "run", "scleral-buckling", *settings,
+                             "--out", str(tmp_path / "killed"), "--checkpoint-every", "1",
+                             *quiet], capture_output=True, text=True, timeout=600, env=env)
+    assert killed.returncode != 0
+    assert (tmp_path / "killed" / "checkpoints" / "ckpt_000018").is_dir()
+    code, _, err = run_cli("run", "scleral-buckling", "--resume", str(tmp_path / "killed"),
+                           *quiet)
+    assert code == 0, err
+    code, _, err = run_cli("run", "scleral-buckling", *settings, "--out",
+                           str(tmp_path / "whole"), *quiet)
+    assert code == 0, err
+    resumed, whole = (json.loads((tmp_path / name / "results.json").read_text())
+                      for name in ("killed", "whole"))
+    assert resumed["checkpoints"]["resumed_from"].endswith("ckpt_000018")
+    assert resumed["steps"][17]["stage"] == 4  # the checkpoint is inside step 4
+    assert resumed["quantities"]["after_settling"] == whole["quantities"]["after_settling"]
+    assert [s["newton_iterations"] for s in resumed["steps"]] == \
+        [s["newton_iterations"] for s in whole["steps"]]
