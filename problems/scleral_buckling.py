@@ -286,6 +286,11 @@ class Parameters(SceneParameters, SolverChoice):
         "then loads the wall at the start, and bt accepts Newton's full first step) or at "
         "the last converged (or predicted) P (converged), where bt sees only P's row and "
         "creeps at its 0.1 floor (docs/scleral_buckling.md, The settling step)")
+    settle_reuse_test: Literal["step", "residual"] = field(
+        "step", "modified Newton's contraction test in step 4 (settling): step = against what "
+        "the step the line search took predicts, 1 - lambda (1 - jacobian_reuse), so that bt's "
+        "creep at its 0.1 floor keeps the factorisation; residual = as in the other steps, "
+        "jacobian_reuse_test (docs/scleral_buckling.md, The settling step)")
     settle_line_search: Literal["bt", "basic", "cp"] = field(
         "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
         "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
@@ -1006,6 +1011,10 @@ class BucklingModel:
                                                          self.iop, f, self.params.settle_ramp)
             if self.params.settle_start == "target":
                 self._start_at_pressure_target()
+        # step 4's contraction test; set here, not when step 4 begins, so that a run resumed
+        # inside step 4 (apply is called again with the checkpoint's load) has it too
+        self.solver.options.reuse_step_relative = self.params.jacobian_reuse_test == "step" \
+            or (load > 3.0 + 1e-12 and self.params.settle_reuse_test == "step")
         self.indentation.value = float(np.clip(load - 1.0, 0.0, 1.0)) * self.params.indentation
         self.sutures.set_magnitude(float(np.clip(load - 2.0, 0.0, 1.0)) * self.params.suture_force)
         self.update_suture_pull()
