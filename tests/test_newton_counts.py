@@ -384,7 +384,7 @@ def test_full_steps_in_the_settling_step_save_factorisations():
     full, backtracking = (scleral_buckling.run(
         scleral_buckling.Parameters(resolution="coarse", settle_line_search=line_search,
                                     settle_start="converged", settle_step=0.0,
-                                    stagnation_window=3),
+                                    stagnation_window=3, settle_reuse_test="residual"),
         options=options) for line_search in ("basic", "bt"))
     expected, actual = backtracking.quantities["after_settling"], full.quantities["after_settling"]
     for key in ("axial_length_change_mm", "iop_mmHg", "refraction_change_D"):
@@ -617,7 +617,7 @@ def test_stopping_stalled_backtracking_costs_the_default_eye_nothing():
     # the settling this was measured with: from the converged P, the other steps' load steps
     # (tests/test_settle.py for the default settling, which stops no solve)
     former = {"buckle_position": 12.5, "indentation": 1.5, "settle_start": "converged",
-              "settle_step": 0.0}
+              "settle_step": 0.0, "settle_reuse_test": "residual"}
     stopped, plain = (scleral_buckling.run(scleral_buckling.Parameters(
         stagnation_window=window, **former), options=options) for window in (3, 0))
     for stage in ("after_buckling", "after_suturing", "after_settling"):

@@ -52,14 +52,16 @@ def _stage_factorisations(result, stage: int) -> int:
 
 
 # the settling of the former defaults: from the last converged P, load steps as the other
-# steps' (up to 3/4 of the step), stalled bt solves stopped after 3 iterations
-CONVERGED_START = {"settle_start": "converged", "settle_step": 0.0, "stagnation_window": 3}
+# steps' (up to 3/4 of the step), stalled bt solves stopped after 3 iterations, modified
+# Newton's contraction test on the residual
+CONVERGED_START = {"settle_start": "converged", "settle_step": 0.0, "stagnation_window": 3,
+                   "settle_reuse_test": "residual"}
 REFERENCE = {"settle_step": 0.05, "stagnation_window": 0}
 
 
 def test_the_default_settling_reaches_the_reference_settling_with_fewer_factorisations():
     """The default settling (P starts each load step at its target, load steps of at most
-    1/8 of the step) against the former defaults' (``CONVERGED_START``) and the reference
+    1/8 of the step, no stagnation stop, the step-relative contraction test) against the former defaults' (``CONVERGED_START``) and the reference
     settling (20 equal load steps), on the coarse eye. From the converged P the first
     settling load step's residual is P's pinned row alone, bt rejects the full Newton step
     and creeps at its 0.1 floor (20 factorisations in that load step); from the target it
