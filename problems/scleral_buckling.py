@@ -268,6 +268,9 @@ class Parameters(SceneParameters, SolverChoice):
         "Jacobian (docs/scleral_buckling.md, Newton's budget)")
     krylov_max_it: int = field(20, "linear_reuse=krylov: FGMRES iterations on the kept "
                                "factorisation before it is refreshed and the solve repeated")
+    krylov_refresh_above: int = field(
+        0, "linear_reuse=krylov: a Newton iteration whose FGMRES needed more iterations than "
+        "this refactorises before the next one (0: only a failed FGMRES solve does)")
     krylov_ew: bool = field(False, "linear_reuse=krylov: Eisenstat-Walker's FGMRES tolerance "
                             "per Newton iteration instead of a relative 1e-8")
     buckle_step: float = field(
@@ -678,6 +681,7 @@ class BucklingModel:
                                      linear_reuse=params.linear_reuse,
                                      krylov_max_it=params.krylov_max_it,
                                      krylov_ew=params.krylov_ew,
+                                     krylov_refresh_above=params.krylov_refresh_above,
                                      reuse_step_relative=params.jacobian_reuse_test == "step",
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,

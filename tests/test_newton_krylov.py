@@ -22,6 +22,7 @@ import pytest
 from krylov_problem import solve
 
 from eyemech.problems import scleral_buckling
+from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.solve.driver import NewtonOptions
 

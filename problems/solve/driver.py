@@ -29,7 +29,10 @@ Design notes
   (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``); a
   failed solve repeated with another line search (``NewtonOptions.fallback_line_search``:
   full steps settle a contact's kink where backtracking on ‖F‖ creeps, docs/scleral_buckling.md,
-  "Which contact chatters").
+  "Which contact chatters"); the exact Jacobian every iteration solved by FGMRES on the last
+  LU factorisation, refactorised only when FGMRES needs more than ``krylov_max_it``
+  iterations (``NewtonOptions.linear_reuse = "krylov"``, :mod:`~eyemech.problems.solve.
+  stale_factorisation`; docs/scleral_buckling.md, "Krylov on a kept factorisation").
 """
 
 from __future__ import annotations
@@ -139,6 +142,9 @@ class NewtonOptions:
     # Jacobian (or per kept Jacobian with ``reuse_contraction``)
     linear_reuse: Literal["none", "krylov"] = "none"
     krylov_max_it: int = 20
+    # a solve that converged in more FGMRES iterations than this refactorises before the next
+    # Newton iteration's (0: only a failed one does)
+    krylov_refresh_above: int = 0
     # FGMRES's relative tolerance on ‖J δ + F‖ / ‖F‖: far below the Newton tolerance's share
     # per iteration, so that the convergence stays quadratic (tests/test_newton_krylov.py)
     krylov_rtol: float = 1e-8
@@ -296,7 +302,8 @@ class NonlinearSolver:
             if iterative is not None:
                 raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
                                      "not with an iterative linear solver")
-            self.stale = StaleFactorisation(self.snes.getKSP(), prefix)
+            self.stale = StaleFactorisation(self.snes.getKSP(), prefix,
+                                            self.options.krylov_refresh_above)
         self._forget_options()
         rtol, atol, stol, _max_it = self.snes.getTolerances()
         record_stopping_criterion("SNES Newton", rtol, atol, "l2 norm of the assembled residual", stol)

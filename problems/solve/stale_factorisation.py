@@ -41,7 +41,7 @@ log = logging.getLogger("eyemech")
 class StaleFactorisation:
     """Python context of the outer KSP; see the module docstring."""
 
-    def __init__(self, ksp: PETSc.KSP, prefix: str) -> None:
+    def __init__(self, ksp: PETSc.KSP, prefix: str, refresh_above: int = 0) -> None:
         self.inner = PETSc.KSP().create(ksp.comm)
         self.inner.setOptionsPrefix(prefix)
         self.inner.setFromOptions()  # fgmres, its tolerances, LU with the factor package
@@ -50,6 +50,10 @@ class StaleFactorisation:
         self._pattern = -1  # nonzeros of J when P was copied
         self.refreshes = 0  # P ← J copies (each costs one numeric factorisation)
         self.refreshes_after_failure = 0  # of which after FGMRES did not converge
+        # a solve that converged in more iterations than this refreshes P before the next
+        # (0: never): the next Jacobian is rarely nearer the kept one
+        self.refresh_above = refresh_above
+        self._refresh_due = False
         ksp.setType(PETSc.KSP.Type.PYTHON)
         ksp.setPythonContext(self)
         ksp.getPC().setType(PETSc.PC.Type.NONE)
@@ -85,7 +89,7 @@ class StaleFactorisation:
     def solve(self, ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec) -> None:
         jacobian, _ = ksp.getOperators()
         nonzeros = int(jacobian.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
-        fresh = self.pmat is None or nonzeros != self._pattern
+        fresh = self.pmat is None or nonzeros != self._pattern or self._refresh_due
         if fresh:
             self._refresh(jacobian, nonzeros)
         else:
@@ -99,5 +103,6 @@ class StaleFactorisation:
             self._refresh(jacobian, nonzeros)
             more, reason = self._solve_inner(rtol, b, x)
             iterations += more
+        self._refresh_due = 0 < self.refresh_above < iterations and reason > 0
         ksp.setIterationNumber(iterations)
         ksp.setConvergedReason(reason if reason != 0 else PETSc.KSP.ConvergedReason.DIVERGED_ITS)
