@@ -127,8 +127,10 @@ QUANTITIES = ("axial_length_change_mm", "iop_mmHg", "refraction_change_D", "corn
 def test_coarse_eye_with_krylov_reuse_matches_the_reference_method_with_fewer_factorisations():
     """Steps 1-3 on the coarse eye with linear_reuse=krylov (the scene's other defaults)
     against the reference method: the quantities of interest after buckling and after
-    suturing within 1 % (measured: ...), the tear rim's gap within 0.005 mm (measured ...),
-    with a fifth of the reference's factorisations or fewer (measured ...)."""
+    suturing within 1 % (measured: 3e-10 relative), the tear rim's gap within 0.005 mm
+    (measured 1e-12 mm), with a fifth of the reference's factorisations or fewer (measured
+    14 against 190), a Jacobian assembled at every Newton iteration (measured 62 for 61:
+    one solve with step 3's cp line search assembled one more than it iterated)."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     krylov = scleral_buckling.run(scleral_buckling.Parameters(**COARSE_EYE, linear_reuse="krylov"),
                                   options=options)
@@ -142,7 +144,7 @@ def test_coarse_eye_with_krylov_reuse_matches_the_reference_method_with_fewer_fa
         assert actual["tear_rim_gap_max_mm"] == pytest.approx(expected["tear_rim_gap_max_mm"],
                                                               abs=0.005), stage
     counts, reference_counts = krylov.counts(), reference.counts()
-    print(counts, reference_counts)
     assert counts["krylov_iterations"] > 0 == reference_counts["krylov_iterations"]
     assert 5 * counts["factorisations"] <= reference_counts["factorisations"]
-    assert counts["jacobians"] == counts["newton_iterations_all"]
+    assert (counts["newton_iterations_all"] <= counts["jacobians"]
+            <= counts["newton_iterations_all"] + counts["newton_solves"])
