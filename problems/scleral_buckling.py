@@ -265,7 +265,8 @@ class Parameters(SceneParameters, SolverChoice):
         "preconditioned with the last LU factorisation, refactorised only when FGMRES needs "
         "more than krylov_max_it iterations or contact grows the Jacobian's pattern (Newton's "
         "convergence kept; jacobian_reuse is then ignored): 4-5x fewer factorisations on "
-        "every mesh, but slower at the paper's resolution on 2 ranks, hence not the default; "
+        "every mesh, but not faster at the paper's resolution on 2 ranks (slower, or a tie "
+        "with krylov_refresh_above=10), hence not the default; "
         "none = a factorisation per Jacobian (docs/scleral_buckling.md, Krylov on a kept "
         "factorisation)")
     krylov_max_it: int = field(20, "linear_reuse=krylov: FGMRES iterations on the kept "
