@@ -24,12 +24,14 @@ from eyemech.problems.run.results import versions, write_text_atomic
 COLUMNS = ("date", "machine", "ranks", "dofs", "cells", "mesh", "form_compilation", "assembly",
            "solve", "contact_search", "output", "total", "peak_memory_mb", "newton_iterations",
            "newton_iterations_all", "failed_newton_solves", "factorisations",
-           "symbolic_factorisations", "status")
+           "symbolic_factorisations", "krylov_iterations", "status")
 # what the counts mean (the table's notes)
 COUNTS = ("newton_iterations: of the converged solves (the steps' own); newton_iterations_all: "
           "of all solves, the failed attempts of cut steps included (failed_newton_solves of "
           "them); factorisations: numeric LU factorisations PETSc performed (its log events), "
-          "symbolic_factorisations: its symbolic analyses (one per new matrix pattern)")
+          "symbolic_factorisations: its symbolic analyses (one per new matrix pattern); "
+          "krylov_iterations: Krylov iterations of all solves (0 with LU alone; linear_reuse="
+          "krylov: FGMRES on the kept factorisation, its failed attempts included)")
 
 
 def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: RunOptions | None = None):
@@ -52,7 +54,8 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
            "status": result.status}
     counts = result.counts()
     row.update({k: counts[k] for k in ("newton_iterations_all", "failed_newton_solves",
-                                       "factorisations", "symbolic_factorisations")})
+                                       "factorisations", "symbolic_factorisations",
+                                       "krylov_iterations")})
     table = Path(out) / f"{scene.name}.csv"
     rows = list(csv.DictReader(table.open())) if table.exists() else []
     rows.append({k: row[k] for k in COLUMNS})

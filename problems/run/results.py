@@ -89,6 +89,7 @@ class SolverCounts:
     jacobians: int = 0                 # Jacobian assemblies
     factorisations: int = 0            # numeric factorisations
     symbolic_factorisations: int = 0   # symbolic analyses (a new matrix pattern needs one)
+    krylov_iterations: int = 0         # Krylov iterations (0 for a direct solve's preonly)
 
     def copy(self) -> "SolverCounts":
         return dataclasses.replace(self)

@@ -29,7 +29,10 @@ Design notes
   (``Stepping.effort``) and a largest step per stage (``Stepping.stage_max_steps``); a
   failed solve repeated with another line search (``NewtonOptions.fallback_line_search``:
   full steps settle a contact's kink where backtracking on ‖F‖ creeps, docs/scleral_buckling.md,
-  "Which contact chatters").
+  "Which contact chatters"); the exact Jacobian every iteration solved by FGMRES on the last
+  LU factorisation, refactorised only when FGMRES needs more than ``krylov_max_it``
+  iterations (``NewtonOptions.linear_reuse = "krylov"``, :mod:`~eyemech.problems.solve.
+  stale_factorisation`; docs/scleral_buckling.md, "Krylov on a kept factorisation").
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ from eyemech.problems.run.results import (
     Timings,
     record_stopping_criterion,
 )
+from eyemech.problems.solve.stale_factorisation import StaleFactorisation
 
 if TYPE_CHECKING:
     from eyemech.problems.run.checkpoint import Checkpoints
@@ -131,6 +135,21 @@ class NewtonOptions:
     # does not apply to them (docs/scleral_buckling.md, "Newton's budget")
     stagnation_window: int = 0
     stagnation_factor: float = 0.9
+    # "krylov": every Newton direction from the current Jacobian by FGMRES preconditioned
+    # with the last LU factorisation, refactorised only when FGMRES needs more than
+    # ``krylov_max_it`` iterations or the Jacobian's pattern grew
+    # (:mod:`~eyemech.problems.solve.stale_factorisation`); "none": a factorisation per
+    # Jacobian (or per kept Jacobian with ``reuse_contraction``)
+    linear_reuse: Literal["none", "krylov"] = "none"
+    krylov_max_it: int = 20
+    # a solve that converged in more FGMRES iterations than this refactorises before the next
+    # Newton iteration's (0: only a failed one does)
+    krylov_refresh_above: int = 0
+    # FGMRES's relative tolerance on ‖J δ + F‖ / ‖F‖: far below the Newton tolerance's share
+    # per iteration, so that the convergence stays quadratic (tests/test_newton_krylov.py)
+    krylov_rtol: float = 1e-8
+    # Eisenstat–Walker's tolerance per iteration (SNES's snes_ksp_ew) instead of krylov_rtol
+    krylov_ew: bool = False
 
     def __post_init__(self) -> None:
         if self.factorisation not in FACTORISATIONS:
@@ -141,6 +160,15 @@ class NewtonOptions:
         if not 0 < self.stagnation_factor < 1:
             raise ParameterError("stagnation_factor", f"{self.stagnation_factor}: a reduction "
                                  "factor in (0, 1)")
+        if self.linear_reuse not in ("none", "krylov"):
+            raise ParameterError("linear_reuse", f"{self.linear_reuse!r} is not one of none, krylov")
+        if self.linear_reuse == "krylov" and self.reuse_contraction > 0:
+            raise ParameterError("linear_reuse", "krylov needs the fresh Jacobian of every "
+                                 "iteration: reuse_contraction must be 0")
+        if self.krylov_max_it < 1:
+            raise ParameterError("krylov_max_it", f"{self.krylov_max_it}: must be >= 1")
+        if not 0 < self.krylov_rtol < 1:
+            raise ParameterError("krylov_rtol", f"{self.krylov_rtol}: a tolerance in (0, 1)")
 
     def as_petsc(self, linear: dict | None = None, auto: str = "lu") -> dict[str, str]:
         """SNES options, then the KSP/PC options: MUMPS LU or LDLᵀ (``factorisation``;
@@ -161,6 +189,12 @@ class NewtonOptions:
             # MUMPS: more working space for the indefinite saddle-point systems
             "mat_mumps_icntl_14": 100,
         }
+        if self.linear_reuse == "krylov" and linear is None:
+            # the inner KSP's (stale_factorisation.py): FGMRES without restart up to max_it
+            options.update({"ksp_type": "fgmres", "ksp_rtol": self.krylov_rtol,
+                            "ksp_atol": 0.0, "ksp_max_it": self.krylov_max_it,
+                            "ksp_gmres_restart": self.krylov_max_it,
+                            "snes_ksp_ew": self.krylov_ew})
         if linear is not None:
             for key in ("pc_factor_mat_solver_type", "mat_mumps_icntl_14"):
                 del options[key]
@@ -263,6 +297,13 @@ class NonlinearSolver:
         self._set_options(prefix)
         if iterative is not None:
             iterative.install(self)
+        self.stale: StaleFactorisation | None = None
+        if self.options.linear_reuse == "krylov":
+            if iterative is not None:
+                raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
+                                     "not with an iterative linear solver")
+            self.stale = StaleFactorisation(self.snes.getKSP(), prefix,
+                                            self.options.krylov_refresh_above)
         self._forget_options()
         rtol, atol, stol, _max_it = self.snes.getTolerances()
         record_stopping_criterion("SNES Newton", rtol, atol, "l2 norm of the assembled residual", stol)
@@ -368,6 +409,8 @@ class NonlinearSolver:
     def factor_matrix(self) -> PETSc.Mat | None:
         """The factored matrix of a direct solver's last factorisation (None before the
         first solve, or when the preconditioner does not factor)."""
+        if self.stale is not None:
+            return self.stale.factor_matrix()
         pc = self.snes.getKSP().getPC()
         if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
             return None
@@ -566,10 +609,18 @@ class NonlinearSolver:
                             newton_iterations_all=iterations,
                             jacobians=self._jacobians - jacobians_before,
                             factorisations=numeric - numeric_before,
-                            symbolic_factorisations=symbolic - symbolic_before)
+                            symbolic_factorisations=symbolic - symbolic_before,
+                            krylov_iterations=self._krylov_iterations())
         self.last_counts = work
         self.counts.add(work)
         SOLVER_COUNTS.add(work)
+
+    def _krylov_iterations(self) -> int:
+        """Krylov iterations of the last SNES solve, failed ones included (0 for a direct
+        solve: preonly's one application per Newton iteration is no Krylov iteration)."""
+        if self.stale is None and self.iterative is None:
+            return 0
+        return int(self.snes.getLinearSolveIterations())
 
     def reason(self) -> str:
         if self.stagnated:
@@ -687,20 +738,23 @@ class StepRecord:
     jacobians: int = 0                # Jacobian assemblies
     factorisations: int = 0           # numeric factorisations
     symbolic_factorisations: int = 0  # symbolic analyses
+    krylov_iterations_all: int = 0    # Krylov iterations of all attempts (0: direct solve)
 
     @staticmethod
     def work(counts: SolverCounts) -> dict[str, int]:
         """The fields above from the solver's counts over the step's attempts."""
         return {"attempts": counts.newton_solves, "iterations_all": counts.newton_iterations_all,
                 "jacobians": counts.jacobians, "factorisations": counts.factorisations,
-                "symbolic_factorisations": counts.symbolic_factorisations}
+                "symbolic_factorisations": counts.symbolic_factorisations,
+                "krylov_iterations_all": counts.krylov_iterations}
 
     def counts(self) -> dict[str, int]:
         """The step's work under the names of ``results.json``'s step records:
         ``ctx.record_step(..., **record.counts())``."""
         return {"attempts": self.attempts, "newton_iterations_all": self.iterations_all,
                 "jacobians": self.jacobians, "factorisations": self.factorisations,
-                "symbolic_factorisations": self.symbolic_factorisations}
+                "symbolic_factorisations": self.symbolic_factorisations,
+                "krylov_iterations_all": self.krylov_iterations_all}
 
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],

@@ -1,0 +1,108 @@
+"""Newton directions from the current Jacobian, solved by FGMRES preconditioned with the
+last LU factorisation of an earlier Jacobian (``NewtonOptions.linear_reuse = "krylov"``).
+
+The idea behind PETSc's ``-snes_lag_preconditioner``, with an adaptive refresh: the
+Jacobian J_k is assembled at every Newton iteration and is the Krylov operator, so the
+direction solves J_k δ = −F_k to the Krylov tolerance and Newton keeps its convergence
+(quadratic for a fixed tolerance well below the Newton tolerance); only the
+preconditioner, an LU factorisation of a copy P of some earlier J_j, is kept. It is
+refreshed (P ← J_k, one numeric factorisation) when
+
+- FGMRES has not converged within ``max_it`` iterations (or broke down): the solve is
+  repeated on the fresh factorisation, never handed to Newton as failed (only a failure
+  on a fresh factorisation is);
+- the Jacobian's nonzero pattern grew since P was copied (contact pairs insert entries):
+  P is copied anew with the new pattern (a symbolic analysis and a numeric factorisation);
+- there is no factorisation yet.
+
+P is a matrix of its own: SNES assembles into J at every iteration, and PCSetUp compares
+the state of P, not of J, so an unchanged P keeps its factorisation. FGMRES (right
+preconditioning) measures the true residual ‖J_k δ + F_k‖ against ``rtol``·‖F_k‖; with
+Eisenstat–Walker (``snes_ksp_ew``) SNES sets that rtol per iteration on the outer KSP,
+which is read here.
+
+Implementation: the SNES's KSP is a petsc4py "python" KSP whose :meth:`StaleFactorisation.
+solve` runs an inner FGMRES+LU KSP with operators (J, P) under the solver's own options
+prefix (so MUMPS reads its ICNTLs and ``--petsc`` overrides as with the direct solver).
+The inner iterations, failed attempts included, are reported as the outer KSP's
+iteration count, which SNES sums into its linear iterations (``krylov_iterations`` in the
+solver counts). Factorisations are counted by PETSc's log events like every other.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from petsc4py import PETSc
+
+log = logging.getLogger("eyemech")
+
+
+class StaleFactorisation:
+    """Python context of the outer KSP; see the module docstring."""
+
+    def __init__(self, ksp: PETSc.KSP, prefix: str, refresh_above: int = 0) -> None:
+        self.inner = PETSc.KSP().create(ksp.comm)
+        self.inner.setOptionsPrefix(prefix)
+        self.inner.setFromOptions()  # fgmres, its tolerances, LU with the factor package
+        _rtol, self.atol, _dtol, self.max_it = self.inner.getTolerances()
+        self.pmat: PETSc.Mat | None = None
+        self._pattern = -1  # nonzeros of J when P was copied
+        self.refreshes = 0  # P ← J copies (each costs one numeric factorisation)
+        self.refreshes_after_failure = 0  # of which after FGMRES did not converge
+        # a solve that converged in more iterations than this refreshes P before the next
+        # (0: never): the next Jacobian is rarely nearer the kept one
+        self.refresh_above = refresh_above
+        self._refresh_due = False
+        ksp.setType(PETSc.KSP.Type.PYTHON)
+        ksp.setPythonContext(self)
+        ksp.getPC().setType(PETSc.PC.Type.NONE)
+
+    def factor_matrix(self) -> PETSc.Mat | None:
+        try:
+            return self.inner.getPC().getFactorMatrix()
+        except PETSc.Error:
+            return None
+
+    def _refresh(self, jacobian: PETSc.Mat, nonzeros: int) -> None:
+        """P ← J: in place when the pattern is P's (PCSetUp then factorises numerically
+        only), else a new copy (a symbolic analysis too)."""
+        if self.pmat is not None and nonzeros == self._pattern:
+            jacobian.copy(self.pmat, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        else:
+            if self.pmat is not None:
+                self.pmat.destroy()
+            self.pmat = jacobian.duplicate(copy=True)
+            self._pattern = nonzeros
+        self.inner.setOperators(jacobian, self.pmat)
+        self.refreshes += 1
+
+    def _solve_inner(self, rtol: float, b: PETSc.Vec, x: PETSc.Vec) -> tuple[int, int]:
+        self.inner.setTolerances(rtol=rtol, atol=self.atol, max_it=self.max_it)
+        self.inner.solve(b, x)
+        return self.inner.getIterationNumber(), int(self.inner.getConvergedReason())
+
+    # petsc4py's KSP python interface
+    def setUp(self, ksp: PETSc.KSP) -> None:  # noqa: N802
+        pass
+
+    def solve(self, ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec) -> None:
+        jacobian, _ = ksp.getOperators()
+        nonzeros = int(jacobian.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
+        fresh = self.pmat is None or nonzeros != self._pattern or self._refresh_due
+        if fresh:
+            self._refresh(jacobian, nonzeros)
+        else:
+            self.inner.setOperators(jacobian, self.pmat)
+        rtol = ksp.getTolerances()[0]  # Eisenstat–Walker's, when on
+        iterations, reason = self._solve_inner(rtol, b, x)
+        if reason <= 0 and not fresh:
+            log.debug("FGMRES on the kept factorisation: reason %d after %d iterations, "
+                      "refactorising", reason, iterations)
+            self.refreshes_after_failure += 1
+            self._refresh(jacobian, nonzeros)
+            more, reason = self._solve_inner(rtol, b, x)
+            iterations += more
+        self._refresh_due = 0 < self.refresh_above < iterations and reason > 0
+        ksp.setIterationNumber(iterations)
+        ksp.setConvergedReason(reason if reason != 0 else PETSc.KSP.ConvergedReason.DIVERGED_ITS)
