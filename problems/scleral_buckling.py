@@ -187,13 +187,12 @@ class Parameters(SceneParameters, SolverChoice):
     tire_length: float = field(12.0, "radial tire: its length along the meridian, measured on "
                                "the sclera", "mm")
     buckle_position: float = field(
-        12.5, "buckle centre behind the limbus, along the sclera. 12.5: the tear (centre 11.5 mm "
-        "behind the limbus) on the buckle's anterior slope, 1 mm in front of its crest, with "
-        "≈ 2.6 mm of tire behind the tear's posterior edge (a break on a buckle's descending "
-        "slope leaks there: fishmouthing); the tire's anterior corner then lies under the "
-        "detached flap, not at its root. The tear closes after suturing on the default mesh; on "
-        "the paper mesh that corner holds the tear's anterior rim open (docs/scleral_buckling.md, "
-        "\"Mesh convergence\")", "mm")
+        13.0, "buckle centre behind the limbus, along the sclera. 13.0: the tear (centre 11.5 mm "
+        "behind the limbus) on the buckle's anterior slope, ≈ 0.4 mm of tire in front of it "
+        "and ≈ 3.4 mm behind its posterior edge, as surgeons place a break (on the descending "
+        "slope it leaks: fishmouthing). With 2.0 mm of travel it closes the tear after "
+        "suturing on the coarse, default, n = 20 and paper meshes (docs/scleral_buckling.md, "
+        "\"Operations searched with the rim on its circle\")", "mm")
     band_width: float = field(2.5, "encircling band width (axial)", "mm")
     band_thickness: float = field(0.6, "encircling band thickness", "mm")
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
@@ -201,7 +200,12 @@ class Parameters(SceneParameters, SolverChoice):
     tire_height: float = field(1.0, "silicone tire height (radial)", "mm")
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm")
-    indentation: float = field(1.5, "radial inward travel of the buckle in step 2", "mm")
+    indentation: float = field(
+        2.0, "radial inward travel of the buckle in step 2. 2.0: with the buckle at 13.0 mm the "
+        "least travel searched that closes the tear after suturing on every mesh (1.5 mm leaves "
+        "the default mesh's anterior rim 0.065 mm open); it costs an acute IOP of 49–58 "
+        "mmHg and ΔAL ≈ +2.2–2.5 mm acute (docs/scleral_buckling.md, \"The tear at the "
+        "defaults\")", "mm")
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm")
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm")
     suture_force: float = field(0.2, "pull on each suture at the end of step 3", "N")

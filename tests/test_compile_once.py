@@ -60,9 +60,10 @@ def test_eye_with_new_moduli_penalty_and_mesh_compiles_nothing_after_its_first_c
     """The eye without the settling step (three stages): the coarse resolution (8 cube
     edges), then mesh_size = 2.2 mm (10 edges) with new c_sclera, penalty factor (the
     buckle's penalty follows both and the element size), detachment height (the cavity
-    wall's area and volume), bulk modulus and IOP. ≈ 11 and 20 s. The lead's finding, 5
-    Jacobian blocks compiled again in a process's second run, came from UFL's operand
-    order (forms/ordering.py, tested below on its own)."""
+    wall's area and volume), bulk modulus and IOP. 46 s for both under a load of 2 (the
+    defaults' 2 mm of travel). The lead's finding, 5 Jacobian blocks compiled again in a
+    process's second run, came from UFL's operand order (forms/ordering.py, tested below
+    on its own)."""
 
     def case(**overrides) -> scleral_buckling.Parameters:
         return scleral_buckling.Parameters(settle=False, c_sclera=0.08 + 0.01 * random.random(),
@@ -79,7 +80,7 @@ def test_eye_with_new_moduli_penalty_and_mesh_compiles_nothing_after_its_first_c
 
 def test_eye_with_a_new_buckle_and_sutures_compiles_nothing_after_its_first_case(compilations):
     """The planning map's factors (``eyemech study buckling-planning``): the coarse eye
-    twice, settle = false, half the default travel, the second case with a new buckle
+    twice, settle = false, 0.75 mm of travel, the second case with a new buckle
     position, band and tire widths, tire height, corner radius, tire arc, suture width,
     bite radius and penalty smoothing ε (> 0 in both: ε = 0 is another form). The
     buckle's sizes and position, the bites' centres and radius and ε are Constants

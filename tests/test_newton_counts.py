@@ -290,10 +290,11 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
     """The scene's defaults (secant predictor, modified Newton, 0.2 mm buckle steps,
     load steps sized by factorisations, full Newton steps while the buckle moves in) against
     the reference method on the coarse eye: the quantities of interest after buckling and
-    after suturing within 1 % (measured: ≤ 1.5e-7 relative after buckling, ≤ 1.1e-6 after
-    suturing), the tear rim's gap within 0.01 mm (1 % of its 1.03 mm after step 1; measured
-    0.00025 mm after buckling, 0.00003 mm after suturing), with at most half the numeric
-    factorisations (measured: 47 in 16 load steps against 186 in 24)."""
+    after suturing within 1 % (measured: ≤ 1.5e-6 relative after buckling and after
+    suturing), the tear rim's gap within 0.01 mm (1 % of its 1.04 mm after step 1; measured
+    0.00026 mm after buckling, 0.00021 mm after suturing), with at most half the numeric
+    factorisations (measured: 50 in 20 load steps against 177 in 24; 0.28, so the bound
+    leaves room for the solver's counts to move)."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     reference = scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE, **REFERENCE_METHOD),
                                      options=options)
@@ -313,11 +314,13 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
 
 def test_full_steps_while_the_buckle_moves_reach_the_reference_eye(budget_eye):
     """``line_search``: full Newton steps in step 2 (the default) against backtracking (bt)
-    on the coarse eye: the same solution (measured: the quantities to 3e-13 relative, the
-    rim gap to 2e-14 mm). What full steps cost depends on the mesh: with the tear's rim on
-    its circle they take 43 factorisations against bt's 41 on the coarse eye and 42 against
-    41 in step 2 on the default mesh; with the rim on grid lines they saved (default mesh 78
-    against 94, paper 125 against 177: docs/scleral_buckling.md, "Newton's budget")."""
+    on the coarse eye: the same solution (measured: the quantities to 1.1e-12 relative, the
+    rim gap to 1e-5 mm printed). What full steps cost depends on the operation and the mesh:
+    at the defaults (13.0 mm, 2.0 mm of travel) they take 50 factorisations against bt's 61
+    on the coarse eye; with the buckle at 12.5 mm and 1.5 mm of travel 43 against 41 there
+    and 42 against 41 in step 2 on the default mesh; with the rim on grid lines they saved
+    (default mesh 78 against 94, paper 125 against 177: docs/scleral_buckling.md, "Newton's
+    budget")."""
     backtracking = scleral_buckling.run(
         scleral_buckling.Parameters(**BUDGET_EYE, line_search="bt"),
         options=RunOptions(fields=False, pictures=False, quiet=True))
@@ -328,7 +331,7 @@ def test_full_steps_while_the_buckle_moves_reach_the_reference_eye(budget_eye):
         assert actual["tear_rim_gap_max_mm"] == pytest.approx(expected["tear_rim_gap_max_mm"],
                                                               abs=1e-6), stage
     counts = budget_eye.as_json()["solver_counts"]
-    # within a tenth of bt's work (measured 43 against 41), and no failed solve
+    # within a tenth of bt's work (measured 50 against 61), and no failed solve
     assert counts["factorisations"] <= 1.1 * backtracking.as_json()["solver_counts"]["factorisations"]
     assert counts["failed_newton_solves"] == 0
 
@@ -377,10 +380,10 @@ def test_full_steps_in_the_settling_step_save_factorisations():
     settling load step starts from P's pinned row alone (‖F_0‖ ≈ 1.6e-3 on the default mesh): the full step's second-order
     remainder in the displacement rows is larger, bt clamps its step at 0.1 and the residual
     creeps × 0.9 per iteration (there 22 iterations, 21 factorisations) where full steps
-    converge in 6. Measured on the coarse eye: 62 factorisations in 20 load steps against
-    102 in 23, step 4's 15 against 55; the settled axial-length change 0.36608 against
-    0.36445 mm (0.45 %), the refraction change −0.97209 against −0.97855 D (0.66 %; the
-    reference method's −0.97539 D lies between), IOP 15 mmHg both."""
+    converge in 6. Measured on the coarse eye at the defaults: 68 factorisations in 25 load
+    steps against 87 in 26, step 4's 18 against 37; the settled axial-length change 0.44977
+    against 0.44851 mm (0.28 %), the refraction change −0.3155 against −0.3185 D (0.003 D),
+    IOP 15 mmHg both."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     full, backtracking = (scleral_buckling.run(
         scleral_buckling.Parameters(resolution="coarse", settle_line_search=line_search,
@@ -388,16 +391,18 @@ def test_full_steps_in_the_settling_step_save_factorisations():
                                     stagnation_window=3, settle_reuse_test="residual"),
         options=options) for line_search in ("basic", "bt"))
     expected, actual = backtracking.quantities["after_settling"], full.quantities["after_settling"]
-    for key in ("axial_length_change_mm", "iop_mmHg", "refraction_change_D"):
+    for key in ("axial_length_change_mm", "iop_mmHg"):
         assert actual[key] == pytest.approx(expected[key], rel=0.01), key
-    # the settled cornea's power change is near zero and path-dependent at 0.01 D (reference
-    # method −0.0104, bt −0.0055, full steps −0.0163 D): 0.02 D is 0.05 % of its 41 D power
-    assert actual["corneal_power_change_D"] == pytest.approx(expected["corneal_power_change_D"],
-                                                             abs=0.02)
-    # 1 % of the rim's 1.03 mm gap after step 1 (measured 0.0261 against 0.0260 mm)
+    # the settled cornea's power change and the refraction (−0.32 D at the defaults) are
+    # path-dependent at 0.01 D (measured 0.0064 and 0.0030 D apart): 0.02 D is 0.05 % of
+    # the cornea's 41 D power
+    for key in ("corneal_power_change_D", "refraction_change_D"):
+        assert actual[key] == pytest.approx(expected[key], abs=0.02), key
+    # 1 % of the rim's 1.04 mm gap after step 1 (measured −0.00003 mm both)
     assert actual["tear_rim_gap_max_mm"] == pytest.approx(expected["tear_rim_gap_max_mm"],
                                                           abs=0.01)
-    assert _stage_factorisations(full, 4) <= 0.5 * _stage_factorisations(backtracking, 4)
+    # measured 18 against 37 (0.49); 0.75 leaves room for the solver's counts to move
+    assert _stage_factorisations(full, 4) <= 0.75 * _stage_factorisations(backtracking, 4)
     assert full.as_json()["solver_counts"]["factorisations"] < \
         backtracking.as_json()["solver_counts"]["factorisations"]
 
@@ -515,15 +520,19 @@ def test_the_step_relative_contraction_test_keeps_the_factorisation_while_backtr
 
 def test_energy_line_search_in_the_suture_step_saves_factorisations():
     """``suture_line_search = cp`` (the default) against bt in step 3 on the default mesh
-    (steps 1–3): the same eye after suturing within 1 % with fewer factorisations in step 3.
-    bt rejects a step that raises ‖F‖ and creeps at its 0.1 floor; cp takes the step where
-    the energy's directional derivative vanishes. Measured (the tear's rim on its circle,
-    with settling): step 3's 19 factorisations against 27, 141 in all against 150; after
+    (steps 1–3) with the buckle at 12.5 mm and 1.5 mm of travel, where bt creeps: the same
+    eye after suturing within 1 % with fewer factorisations in step 3. bt rejects a step
+    that raises ‖F‖ and creeps at its 0.1 floor; cp takes the step where the energy's
+    directional derivative vanishes. Measured (the tear's rim on its circle, with
+    settling): step 3's 19 factorisations against 27, 141 in all against 150; after
     suturing the axial-length change 1.5489 against 1.5499 mm, the rim gap 0.0327 against
-    0.0332 mm. The coarse eye is no proxy here: its step 3 takes 7 either way."""
+    0.0332 mm. At the defaults (13.0 mm, 2.0 mm) neither creeps: both take 10 in step 3
+    (63 in steps 1–3) to the same digits. The coarse eye is no proxy here: its step 3
+    takes 7 either way."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     energy, backtracking = (scleral_buckling.run(
-        scleral_buckling.Parameters(settle=False, suture_line_search=line_search),
+        scleral_buckling.Parameters(settle=False, buckle_position=12.5, indentation=1.5,
+                                    suture_line_search=line_search),
         options=options) for line_search in ("cp", "bt"))
     expected, actual = backtracking.quantities["after_suturing"], energy.quantities["after_suturing"]
     for key in ("axial_length_change_mm", "iop_mmHg", "refraction_change_D"):

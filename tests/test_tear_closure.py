@@ -2,7 +2,8 @@
 loop over the tire pushes it in until the sclera's contact force balances the pull, and
 its travel grows with the pull; drainage without a detachment (or without the settled
 step it acts in) is refused. Tear closure after suturing at the defaults is checked by
-``test_scleral_buckling.test_the_tear_closes_after_suturing``; drainage's effect by
+``test_scleral_buckling.test_the_tear_is_closed_after_suturing_on_the_coarse_eye`` and
+``::test_the_tear_closes_after_suturing_on_the_default_mesh``; drainage's effect by
 ``test_drainage``."""
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ QUIET = RunOptions(fields=False, pictures=False)
 REFERENCE_STEPPING = dict(predictor="none", jacobian_reuse="0", buckle_step="0.25",
                           step_effort="iterations", hard_step_effort="0")
 SEWN = dict(resolution="coarse", buckle="segmental", suture_azimuths="0", indentation="0.2",
-            suture_force="0.3", settle="false", **REFERENCE_STEPPING)
+            suture_force="0.3", settle="false", buckle_position="12.5", **REFERENCE_STEPPING)
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +93,8 @@ def test_sutures_lift_the_tire_off_a_shallow_band():
     # stays on the band (docs/scleral_buckling.md, "Not done").
     result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
                                               indentation="0.3", suture_force="0.25",
-                                              settle="false", **REFERENCE_STEPPING)),
+                                              buckle_position="12.5", settle="false",
+                                              **REFERENCE_STEPPING)),
                     options=QUIET)
     after = result.quantities["after_suturing"]
     assert result.quantities["after_buckling"]["tire_free"] is False

@@ -5,7 +5,7 @@ refraction change from the eye before surgery (acute, after suturing; settled, a
 IOP has returned) and the acute IOP rise — and whether it closes the tear
 (``tear_closed_nts`` after suturing).
 
-Sweeps, each from the scene's defaults (buckle 12.5 mm behind the limbus, travel 1.5 mm,
+Sweeps, each from the scene's defaults (buckle 13.0 mm behind the limbus, travel 2.0 mm,
 0.2 N sutures 8.9 mm wide): the buckle kind (encircling band with the tire at the tear,
 band alone, tire alone) × the band's travel; then, for the default kind and travel, the
 buckle position, the suture force and the suture width, one at a time (the default case
@@ -27,16 +27,16 @@ from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, write_csv
 
 BASE = {"resolution": "coarse", "suture_azimuths": "0"}
-DEFAULTS = {"buckle": "encircling+segmental", "indentation": "1.5", "buckle_position": "12.5",
+DEFAULTS = {"buckle": "encircling+segmental", "indentation": "2.0", "buckle_position": "13.0",
             "suture_force": "0.2", "suture_width": "8.9"}
 # (factor, grid): each sweep varies its grid's keys; the other factors keep DEFAULTS.
 SWEEPS = (("kind", {"buckle": ["encircling+segmental", "encircling", "segmental"],
                     "indentation": ["1.0", "1.5", "2.0"]}),
-          ("position", {"buckle_position": ["11.0", "11.5", "12.0", "13.0"]}),
+          ("position", {"buckle_position": ["11.0", "11.5", "12.0", "12.5"]}),
           ("suture_force", {"suture_force": ["0.1", "0.3"]}),
           ("suture_width", {"suture_width": ["7.5", "11.0"]}))
 QUICK_SWEEPS = (("kind", {"buckle": ["encircling+segmental", "segmental"],
-                          "indentation": ["1.5"]}),)
+                          "indentation": ["2.0"]}),)
 # tear_closed_nts: every node of the tear's rim within this of the choroid
 CLOSED_GAP_MM = scleral_buckling.Parameters().tear_closure_tolerance
 # one-factor panels of the chart: (factor, parameter, axis label)
@@ -127,7 +127,8 @@ def _chart(rows: list[dict], path: Path) -> None:
         for ax, (key, _) in zip(axes[:, 0], COSTS):
             _plot(ax, xs, cases, key, kind)
     axes[-1, 0].set_xlabel("buckle travel (mm)")
-    axes[0, 0].set_title("buckle kind × travel (at 12.5 mm)", fontsize=9)
+    axes[0, 0].set_title(f"buckle kind × travel (at {DEFAULTS['buckle_position']} mm)",
+                         fontsize=9)
     for column, factor in enumerate(factors, start=1):
         _, parameter, label = next(f for f in ONE_FACTOR if f[0] == factor)
         cases = sorted(_one_factor_rows(rows, factor), key=lambda r: float(r[parameter]))
@@ -136,8 +137,8 @@ def _chart(rows: list[dict], path: Path) -> None:
             _plot(ax, xs, cases, key, None)
             ax.axvline(float(DEFAULTS[parameter]), color="0.6", ls=":", lw=1)
         axes[-1, column].set_xlabel(label)
-        axes[0, column].set_title(f"{factor.replace('_', ' ')} (band + tire, 1.5 mm; "
-                                  "dotted: default)", fontsize=9)
+        axes[0, column].set_title(f"{factor.replace('_', ' ')} (band + tire, "
+                                  f"{DEFAULTS['indentation']} mm; dotted: default)", fontsize=9)
     for ax in axes.flat:
         ax.grid(alpha=0.3)
     for ax in axes[0]:  # the closure criterion of tear_closed_nts
