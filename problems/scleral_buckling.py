@@ -177,6 +177,12 @@ class Parameters(SceneParameters, SolverChoice):
     buckle_attachment: Literal["sutured", "frictionless"] = field(
         "sutured", "sutured: the sclera under the buckle's footprint is tied to it tangentially "
         "from step 2 on; frictionless: it may slide along the buckle")
+    frictionless_slip_stiffness: float = field(
+        0.003, "frictionless: a weak tangential spring under the buckle's footprint from step 2 "
+        "on, standing for the buckle's friction on the sclera (a regularisation: the slide "
+        "along the buckle is a near-zero-stiffness mode, and at 0 Newton stalls on the coarse "
+        "eye with 1 mm of travel; 0.003 holds about 4/5 of the slide, "
+        "docs/scleral_buckling.md, \"The frictionless buckle's spring\")", "MPa/mm")
     tire_arc_deg: float = field(90.0, "arc of the circumferential silicone tire about the optic "
                                 "axis, centred on the tear's meridian (360: a full ring)", "deg")
     tire_orientation: Literal["circumferential", "radial"] = field(
@@ -374,7 +380,7 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("settle_step", f"{self.settle_step}: a fraction in [0, 0.75] "
                                  "of step 4 (0: the other steps' largest)")
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
-                                 "contact_smoothing", "indentation", "suture_force",
+                                 "contact_smoothing", "frictionless_slip_stiffness", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
         if self.material == "table-1":
             for key, default in (("c20_sclera", CALIBRATED_C20_SCLERA),
@@ -787,6 +793,13 @@ class BucklingModel:
             residual += self.retina_drag * ufl.inner(self.u - self.drag_reference, v) * retina_face
         if params.buckle_attachment == "sutured":
             tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.contact_penalty,
+                                        contact_ds(self.eye.tag("sclera_outer")))
+            residual += ufl.derivative(tie, self.u, v)
+        elif params.frictionless_slip_stiffness > 0:
+            # a weak spring for the buckle's friction on the sclera: it removes the
+            # frictionless slide's near-zero stiffness (docs/scleral_buckling.md, Attachment)
+            spring = dolfinx.fem.Constant(self.eye.mesh, params.frictionless_slip_stiffness)
+            tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * spring,
                                         contact_ds(self.eye.tag("sclera_outer")))
             residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
