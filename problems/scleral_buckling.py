@@ -125,6 +125,10 @@ KERATOMETRY_ZONE = 3.0  # mm from the axis: the central cornea a keratometer rea
 # docs/scleral_buckling.md "Calibrated eye"); the cornea keeps Table 1's ratio to the sclera
 CALIBRATED_C20_SCLERA = 56.7
 CORNEA_TO_SCLERA = 0.0333 / 0.0833
+# MPa/mm: the frictionless buckle's regularising spring, 3.5 times the slide's own
+# stiffness (≈ 8.5e-4 MPa/mm on the coarse eye): docs/scleral_buckling.md,
+# "The frictionless buckle's spring"
+FRICTIONLESS_SLIP_STIFFNESS = 0.003
 
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
 BENCHMARK = {"resolution": "paper"}
@@ -178,7 +182,7 @@ class Parameters(SceneParameters, SolverChoice):
         "sutured", "sutured: the sclera under the buckle's footprint is tied to it tangentially "
         "from step 2 on; frictionless: it may slide along the buckle")
     frictionless_slip_stiffness: float = field(
-        0.003, "frictionless: a weak tangential spring under the buckle's footprint from step 2 "
+        FRICTIONLESS_SLIP_STIFFNESS, "frictionless: a weak tangential spring under the buckle's footprint from step 2 "
         "on, standing for the buckle's friction on the sclera (a regularisation: the slide "
         "along the buckle is a near-zero-stiffness mode, and at 0 Newton stalls on the coarse "
         "eye with 1 mm of travel; 0.003 holds about 4/5 of the slide, "
@@ -388,6 +392,9 @@ class Parameters(SceneParameters, SolverChoice):
                 if getattr(self, key) != default:
                     raise ParameterError(key, "is used only with material=calibrated (table-1 "
                                          "is neo-Hookean)")
+        if self.buckle_attachment == "sutured" and self.frictionless_slip_stiffness != FRICTIONLESS_SLIP_STIFFNESS:
+            raise ParameterError("frictionless_slip_stiffness", "is used only with "
+                                 "buckle_attachment=frictionless (the sutured buckle is tied)")
         if not 0 < self.tire_arc_deg <= 360:
             raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
                                  "lie in (0, 360] degrees")

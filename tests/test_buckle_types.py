@@ -112,6 +112,9 @@ def test_realistic_buckles_run_to_the_end(overrides):
     ({"buckle": "rubber-band"}, "buckle"),
     ({"buckle_position": "45"}, "buckle_position"),    # the buckle off the eye
     ({"indentation": "12"}, "indentation"),            # deeper than the sclera's radius
+    ({"frictionless_slip_stiffness": "0"}, "frictionless_slip_stiffness"),  # sutured: unused
+    ({"buckle_attachment": "frictionless", "frictionless_slip_stiffness": "-1"},
+     "frictionless_slip_stiffness"),
 ])
 def test_bad_buckles_are_refused(overrides, key):
     with pytest.raises(ParameterError) as info:
