@@ -528,14 +528,32 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             follow_path(model.solver, model.apply, _stepping(params), predictor=predictor,
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
-        except SolveFailure:
-            ctx.result.quantities.update(model.measure())
+        except SolveFailure as failure:
+            measured = model.measure()
+            ctx.result.quantities.update(measured)
+            if params.buckle_attachment == "frictionless":
+                failure.args = (f"{failure.args[0]} {slide_note(measured, params)}",)
             raise
         finally:
             writer.close()
         ctx.result.quantities.update(model.measure())
         ctx.result.quantities.update(model.summary())
     return ctx.result
+
+
+def slide_note(measured: dict, params: Parameters) -> str:
+    """What a failed frictionless run did: the sclera's slide along the buckle at the last
+    converged state, and the spring that holds it (docs/scleral_buckling.md, "The
+    frictionless buckle's spring")."""
+    spring = (f"frictionless_slip_stiffness = {params.frictionless_slip_stiffness:g} MPa/mm; "
+              f"without the spring the slide is a near-zero-stiffness mode (about 8.5e-4 "
+              f"MPa/mm on the coarse eye) and Newton stalls or the slide flips from step to step "
+              f"(docs/scleral_buckling.md, \"The frictionless buckle's spring\").")
+    if "buckle_slip_max_mm" not in measured:
+        return f"The frictionless buckle: {spring}"
+    return (f"The frictionless buckle: at the last converged state the sclera had slid "
+            f"{measured['buckle_slip_axial_mean_mm']:+.3f} mm forward on average along it "
+            f"({measured['buckle_slip_max_mm']:.3f} mm at most); {spring}")
 
 
 def _stepping(params: Parameters) -> Stepping:

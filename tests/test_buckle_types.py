@@ -72,6 +72,17 @@ def test_frictionless_buckle_runs_to_the_end_and_slides():
     assert result.quantities["after_settling"]["buckle_slip_max_mm"] > 0.3
 
 
+def test_a_failed_frictionless_run_names_the_slide():
+    # the note appended to the solver's message (exit 3) when a frictionless run fails; the
+    # numbers are those of the spring-free 12.5 mm run stalled in step 2 (measured)
+    params = build(sb.Parameters, {"buckle_attachment": "frictionless",
+                                   "frictionless_slip_stiffness": "0"})
+    note = sb.slide_note({"buckle_slip_axial_mean_mm": 0.635, "buckle_slip_max_mm": 0.806}, params)
+    assert "slid +0.635 mm forward" in note and "0.806 mm at most" in note
+    assert "frictionless_slip_stiffness = 0 MPa/mm" in note
+    assert "near-zero-stiffness" in sb.slide_note({}, params)
+
+
 def test_segmental_buckle_lengthens_the_eye_less_than_an_encircling_one():
     # clinical series: encircling bands lengthen the eye (~+0.8 mm), segmental buckles
     # change the axial length little; the same 1 mm travel of a 7 mm tire over 90°
