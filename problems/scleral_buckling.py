@@ -125,6 +125,10 @@ KERATOMETRY_ZONE = 3.0  # mm from the axis: the central cornea a keratometer rea
 # docs/scleral_buckling.md "Calibrated eye"); the cornea keeps Table 1's ratio to the sclera
 CALIBRATED_C20_SCLERA = 56.7
 CORNEA_TO_SCLERA = 0.0333 / 0.0833
+# MPa/mm: the frictionless buckle's regularising spring, 3.5 times the slide's own
+# stiffness (≈ 8.5e-4 MPa/mm on the coarse eye): docs/scleral_buckling.md,
+# "The frictionless buckle's spring"
+FRICTIONLESS_SLIP_STIFFNESS = 0.003
 
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra)
 BENCHMARK = {"resolution": "paper"}
@@ -177,6 +181,12 @@ class Parameters(SceneParameters, SolverChoice):
     buckle_attachment: Literal["sutured", "frictionless"] = field(
         "sutured", "sutured: the sclera under the buckle's footprint is tied to it tangentially "
         "from step 2 on; frictionless: it may slide along the buckle")
+    frictionless_slip_stiffness: float = field(
+        FRICTIONLESS_SLIP_STIFFNESS, "frictionless: a weak tangential spring under the buckle's footprint from step 2 "
+        "on, standing for the buckle's friction on the sclera (a regularisation: the slide "
+        "along the buckle is a near-zero-stiffness mode, and at 0 Newton stalls on the coarse "
+        "eye with 1 mm of travel; 0.003 holds about 4/5 of the slide, "
+        "docs/scleral_buckling.md, \"The frictionless buckle's spring\")", "MPa/mm")
     tire_arc_deg: float = field(90.0, "arc of the circumferential silicone tire about the optic "
                                 "axis, centred on the tear's meridian (360: a full ring)", "deg")
     tire_orientation: Literal["circumferential", "radial"] = field(
@@ -374,7 +384,7 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("settle_step", f"{self.settle_step}: a fraction in [0, 0.75] "
                                  "of step 4 (0: the other steps' largest)")
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
-                                 "contact_smoothing", "indentation", "suture_force",
+                                 "contact_smoothing", "frictionless_slip_stiffness", "indentation", "suture_force",
                                  "detachment_height", "tear_radius")
         if self.material == "table-1":
             for key, default in (("c20_sclera", CALIBRATED_C20_SCLERA),
@@ -382,6 +392,9 @@ class Parameters(SceneParameters, SolverChoice):
                 if getattr(self, key) != default:
                     raise ParameterError(key, "is used only with material=calibrated (table-1 "
                                          "is neo-Hookean)")
+        if self.buckle_attachment == "sutured" and self.frictionless_slip_stiffness != FRICTIONLESS_SLIP_STIFFNESS:
+            raise ParameterError("frictionless_slip_stiffness", "is used only with "
+                                 "buckle_attachment=frictionless (the sutured buckle is tied)")
         if not 0 < self.tire_arc_deg <= 360:
             raise ParameterError("tire_arc_deg", f"{self.tire_arc_deg} degrees: the tire's arc must "
                                  "lie in (0, 360] degrees")
@@ -515,14 +528,32 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             follow_path(model.solver, model.apply, _stepping(params), predictor=predictor,
                         on_converged=lambda record: _converged(model, ctx, writer, record),
                         label=SCENE.name, quiet=ctx.options.quiet, checkpoints=ctx.checkpoints)
-        except SolveFailure:
-            ctx.result.quantities.update(model.measure())
+        except SolveFailure as failure:
+            measured = model.measure()
+            ctx.result.quantities.update(measured)
+            if params.buckle_attachment == "frictionless":
+                failure.args = (f"{failure.args[0]} {slide_note(measured, params)}",)
             raise
         finally:
             writer.close()
         ctx.result.quantities.update(model.measure())
         ctx.result.quantities.update(model.summary())
     return ctx.result
+
+
+def slide_note(measured: dict, params: Parameters) -> str:
+    """What a failed frictionless run did: the sclera's slide along the buckle at the last
+    converged state, and the spring that holds it (docs/scleral_buckling.md, "The
+    frictionless buckle's spring")."""
+    spring = (f"frictionless_slip_stiffness = {params.frictionless_slip_stiffness:g} MPa/mm; "
+              f"without the spring the slide is a near-zero-stiffness mode (about 8.5e-4 "
+              f"MPa/mm on the coarse eye) and Newton stalls or the slide flips from step to step "
+              f"(docs/scleral_buckling.md, \"The frictionless buckle's spring\").")
+    if "buckle_slip_max_mm" not in measured:
+        return f"The frictionless buckle: {spring}"
+    return (f"The frictionless buckle: at the last converged state the sclera had slid "
+            f"{measured['buckle_slip_axial_mean_mm']:+.3f} mm forward on average along it "
+            f"({measured['buckle_slip_max_mm']:.3f} mm at most); {spring}")
 
 
 def _stepping(params: Parameters) -> Stepping:
@@ -787,6 +818,13 @@ class BucklingModel:
             residual += self.retina_drag * ufl.inner(self.u - self.drag_reference, v) * retina_face
         if params.buckle_attachment == "sutured":
             tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * self.contact_penalty,
+                                        contact_ds(self.eye.tag("sclera_outer")))
+            residual += ufl.derivative(tie, self.u, v)
+        elif params.frictionless_slip_stiffness > 0:
+            # a weak spring for the buckle's friction on the sclera: it removes the
+            # frictionless slide's near-zero stiffness (docs/scleral_buckling.md, Attachment)
+            spring = dolfinx.fem.Constant(self.eye.mesh, params.frictionless_slip_stiffness)
+            tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * spring,
                                         contact_ds(self.eye.tag("sclera_outer")))
             residual += ufl.derivative(tie, self.u, v)
         residual += self.sutures.residual(v, ds(self.eye.tag("sclera_outer")))
