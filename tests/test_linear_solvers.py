@@ -81,10 +81,8 @@ def test_bad_solver_choice_is_refused(overrides, key):
 
 # scleral buckling: the coarse eye (802 Q1P0 cells, 4,242 dofs) keeps this under a
 # minute; the default resolution takes ~3 min iterative on 2 ranks here.
-# The sutured buckle at its default place, 1 mm of travel, steps 1–3: the sutured eye's
-# result depends on its load path (docs/scleral_buckling.md, "Not done / not verified"), so
-# the comparison keeps the step the direct and iterative solvers both converge; this test
-# is about the linear solvers.
+# The sutured buckle at its default place, 1 mm of travel, steps 1–3 (the sutured eye's
+# result can depend on its load path: docs/scleral_buckling.md, "Not done / not verified").
 BUCKLING = ["--set", "resolution=coarse", "--set", "indentation=1.0", "--set", "settle=false"]
 QUANTITIES = ("axial_length_change_mm", "buckle_indentation_mm", "iop_mmHg", "cavity_volume_mm3",
               "retina_choroid_gap_min_mm", "retina_choroid_gap_mean_mm", "von_mises_max_MPa",
