@@ -54,7 +54,9 @@ def solve(linear_reuse: str = "none", krylov_max_it: int = 20, krylov_predict_af
             "histories": histories, "counts": solver.counts.as_dict(),
             "refreshes": stale.refreshes if stale else None,
             "refreshes_after_failure": stale.refreshes_after_failure if stale else None,
-            "early_refreshes": stale.early_refreshes if stale else None}
+            "early_refreshes": stale.early_refreshes if stale else None,
+            "early_iterations": stale.early_iterations if stale else None,
+            "fgmres_iterations": stale.iterations if stale else None}
 
 
 if __name__ == "__main__":

@@ -57,6 +57,8 @@ class StaleFactorisation:
         # the early refresh's k (0: off): see the module docstring
         self.predict_after = predict_after
         self.early_refreshes = 0  # of the refreshes after failure, those predicted after k
+        self.early_iterations = 0  # FGMRES iterations of the solves stopped by the prediction
+        self.iterations = 0  # FGMRES iterations of every solve, stopped and failed ones included
         self._rtol = 0.0
         self._initial = 0.0  # ‖r_0‖ = ‖b‖ (FGMRES starts from x = 0)
         self._on_kept = False  # the solve runs on a kept factorisation (may stop early)
@@ -95,8 +97,13 @@ class StaleFactorisation:
                      on_kept: bool) -> tuple[int, int]:
         self.inner.setTolerances(rtol=rtol, atol=self.atol, max_it=self.max_it)
         self._rtol, self._initial, self._on_kept = rtol, b.norm(), on_kept
+        early = self.early_refreshes
         self.inner.solve(b, x)
-        return self.inner.getIterationNumber(), int(self.inner.getConvergedReason())
+        iterations = self.inner.getIterationNumber()
+        self.iterations += iterations
+        if self.early_refreshes > early:
+            self.early_iterations += iterations
+        return iterations, int(self.inner.getConvergedReason())
 
     def _converged(self, _ksp: PETSc.KSP, its: int, rnorm: float) -> int:
         """PETSc's default test (‖r‖ ≤ max(rtol ‖b‖, atol), at most ``max_it``) and, on a
