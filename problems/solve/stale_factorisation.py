@@ -12,7 +12,9 @@ refreshed (P ← J_k, one numeric factorisation) when
   repeated on the fresh factorisation, never handed to Newton as failed (only a failure
   on a fresh factorisation is);
 - FGMRES is predicted not to converge within ``max_it`` (``predict_after`` = k > 0): after
-  k iterations on a kept factorisation, the mean contraction ρ = (‖r_k‖/‖r_0‖)^(1/k)
+  k iterations on a kept factorisation, the contraction of the last half of them,
+  ρ = (‖r_k‖/‖r_h‖)^(1/(k−h)) with h = ⌊k/2⌋ (GMRES accelerates as it resolves the
+  preconditioned operator's outlying eigenvalues, so the mean from ‖r_0‖ is pessimistic),
   extrapolated to the tolerance, k + log(rtol‖r_0‖/‖r_k‖)/log ρ, exceeds ``max_it``; the
   solve stops there (its k iterations counted) and is repeated as after a failure, so a
   factorisation too stale to pay costs k iterations instead of ``max_it``;
@@ -62,6 +64,7 @@ class StaleFactorisation:
         self._rtol = 0.0
         self._initial = 0.0  # ‖r_0‖ = ‖b‖ (FGMRES starts from x = 0)
         self._on_kept = False  # the solve runs on a kept factorisation (may stop early)
+        self._history: list[float] = []  # ‖r_0‖, ‖r_1‖, … of the current solve
         self.pmat: PETSc.Mat | None = None
         self._pattern = -1  # nonzeros of J when P was copied
         self.refreshes = 0  # P ← J copies (each costs one numeric factorisation)
@@ -116,8 +119,12 @@ class StaleFactorisation:
             return reason.CONVERGED_RTOL if rnorm > self.atol else reason.CONVERGED_ATOL
         if its >= self.max_it:
             return reason.DIVERGED_MAX_IT
-        if self._on_kept and its == self.predict_after > 0 and self._initial > 0:
-            rate = (rnorm / self._initial) ** (1.0 / its)
+        if its == 0:
+            self._history = []
+        self._history.append(rnorm)
+        if self._on_kept and its == self.predict_after > 0:
+            half = its // 2  # the rate of the last half: GMRES's convergence accelerates
+            rate = (rnorm / self._history[half]) ** (1.0 / (its - half))
             if rate >= 1.0 or its + math.log(target / rnorm) / math.log(rate) > self.max_it:
                 self.early_refreshes += 1
                 return reason.DIVERGED_MAX_IT
