@@ -268,9 +268,10 @@ class Parameters(SceneParameters, SolverChoice):
         "none", "krylov = every Newton direction from the current Jacobian by FGMRES "
         "preconditioned with the last LU factorisation, refactorised only when FGMRES needs "
         "more than krylov_max_it iterations or contact grows the Jacobian's pattern (Newton's "
-        "convergence kept; jacobian_reuse is then ignored): 4-5x fewer factorisations on "
-        "every mesh, but not faster at the paper's resolution on 2 ranks (slower, or a tie "
-        "with krylov_refresh_above=10), hence not the default; "
+        "convergence kept; jacobian_reuse is then ignored, krylov_jacobian_reuse used): 2-5x "
+        "fewer factorisations on every mesh, but not measurably faster at the paper's "
+        "resolution on 2 ranks (slower alone, within 3 % with krylov_predict_after=5), "
+        "hence not the default; "
         "none = a factorisation per Jacobian (docs/scleral_buckling.md, Krylov on a kept "
         "factorisation)")
     krylov_max_it: int = field(20, "linear_reuse=krylov: FGMRES iterations on the kept "
