@@ -122,7 +122,7 @@ class StaleFactorisation:
         if its == 0:
             self._history = []
         self._history.append(rnorm)
-        if self._on_kept and its == self.predict_after > 0:
+        if self._on_kept and its == self.predict_after > 0 and target > 0:
             half = its // 2  # the rate of the last half: GMRES's convergence accelerates
             rate = (rnorm / self._history[half]) ** (1.0 / (its - half))
             if rate >= 1.0 or its + math.log(target / rnorm) / math.log(rate) > self.max_it:
