@@ -278,9 +278,10 @@ class Parameters(SceneParameters, SolverChoice):
         "none", "krylov = every Newton direction from the current Jacobian by FGMRES "
         "preconditioned with the last LU factorisation, refactorised only when FGMRES needs "
         "more than krylov_max_it iterations or contact grows the Jacobian's pattern (Newton's "
-        "convergence kept; jacobian_reuse is then ignored): 4-5x fewer factorisations on "
-        "every mesh, but not faster at the paper's resolution on 2 ranks (slower, or a tie "
-        "with krylov_refresh_above=10), hence not the default; "
+        "convergence kept; jacobian_reuse is then ignored, krylov_jacobian_reuse used): 2-5x "
+        "fewer factorisations on every mesh, but not measurably faster at the paper's "
+        "resolution on 2 ranks (slower alone, within 3 % with krylov_predict_after=5), "
+        "hence not the default; "
         "none = a factorisation per Jacobian (docs/scleral_buckling.md, Krylov on a kept "
         "factorisation)")
     krylov_max_it: int = field(20, "linear_reuse=krylov: FGMRES iterations on the kept "
@@ -290,6 +291,15 @@ class Parameters(SceneParameters, SolverChoice):
         "this refactorises before the next one (0: only a failed FGMRES solve does)")
     krylov_ew: bool = field(False, "linear_reuse=krylov: Eisenstat-Walker's FGMRES tolerance "
                             "per Newton iteration instead of a relative 1e-8")
+    krylov_predict_after: int = field(
+        0, "linear_reuse=krylov: after this many FGMRES iterations on a kept factorisation, "
+        "refactorise at once when their mean contraction predicts more than krylov_max_it "
+        "(0: off)")
+    krylov_jacobian_reuse: float = field(
+        0.0, "linear_reuse=krylov: keep the assembled Jacobian too while each Newton iteration "
+        "reduces the residual by this factor or more, below 1 % of the solve's first "
+        "(modified Newton on the kept factorisation, as jacobian_reuse; 0: a Jacobian every "
+        "iteration)")
     buckle_step: float = field(
         0.125, "largest buckle travel per load step of step 2, as a fraction of the buckle's "
         "radial thickness (the other steps keep a quarter)")
@@ -373,6 +383,12 @@ class Parameters(SceneParameters, SolverChoice):
                                  "the buckle's thickness (deeper jumps throw the sclera through it)")
         if self.krylov_max_it < 1:
             raise ParameterError("krylov_max_it", f"{self.krylov_max_it}: must be >= 1")
+        if not 0 <= self.krylov_predict_after < self.krylov_max_it:
+            raise ParameterError("krylov_predict_after", f"{self.krylov_predict_after}: must be "
+                                 f"in [0, krylov_max_it = {self.krylov_max_it})")
+        if not 0 <= self.krylov_jacobian_reuse < 1:
+            raise ParameterError("krylov_jacobian_reuse", f"{self.krylov_jacobian_reuse}: a "
+                                 "contraction factor in [0, 1)")
         if self.linear_reuse == "krylov" and self.solver == "iterative":
             raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
                                  "not with solver=iterative")
@@ -731,11 +747,13 @@ class BucklingModel:
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
         krylov = params.linear_reuse == "krylov"
         newton = dataclasses.replace(ctx.options.newton,
-                                     reuse_contraction=0.0 if krylov else params.jacobian_reuse,
+                                     reuse_contraction=params.krylov_jacobian_reuse if krylov
+                                     else params.jacobian_reuse,
                                      linear_reuse=params.linear_reuse,
                                      krylov_max_it=params.krylov_max_it,
                                      krylov_ew=params.krylov_ew,
                                      krylov_refresh_above=params.krylov_refresh_above,
+                                     krylov_predict_after=params.krylov_predict_after,
                                      reuse_step_relative=params.jacobian_reuse_test == "step",
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,

@@ -29,8 +29,8 @@ from eyemech.problems.solve.driver import NewtonOptions, NonlinearSolver
 LOADS = (20.0, 40.0, 60.0, 80.0)
 
 
-def solve(linear_reuse: str = "none", krylov_max_it: int = 20,
-          comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
+def solve(linear_reuse: str = "none", krylov_max_it: int = 20, krylov_predict_after: int = 0,
+          reuse_contraction: float = 0.0, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     mesh = dolfinx.mesh.create_unit_square(comm, 24, 24)
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
     u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
@@ -39,7 +39,8 @@ def solve(linear_reuse: str = "none", krylov_max_it: int = 20,
     facets = dolfinx.mesh.locate_entities_boundary(mesh, 1, lambda x: np.full(x.shape[1], True))
     bc = dolfinx.fem.dirichletbc(0.0, dolfinx.fem.locate_dofs_topological(V, 1, facets), V)
     options = NewtonOptions(line_search="basic", linear_reuse=linear_reuse,
-                            krylov_max_it=krylov_max_it)
+                            krylov_max_it=krylov_max_it, krylov_predict_after=krylov_predict_after,
+                            reuse_contraction=reuse_contraction)
     solver = NonlinearSolver(residual, u, [bc], options=options)
     histories, converged = [], []
     for value in LOADS:
@@ -52,7 +53,10 @@ def solve(linear_reuse: str = "none", krylov_max_it: int = 20,
     return {"u_squared": comm.allreduce(float(square), op=MPI.SUM), "converged": converged,
             "histories": histories, "counts": solver.counts.as_dict(),
             "refreshes": stale.refreshes if stale else None,
-            "refreshes_after_failure": stale.refreshes_after_failure if stale else None}
+            "refreshes_after_failure": stale.refreshes_after_failure if stale else None,
+            "early_refreshes": stale.early_refreshes if stale else None,
+            "early_iterations": stale.early_iterations if stale else None,
+            "fgmres_iterations": stale.iterations if stale else None}
 
 
 if __name__ == "__main__":

@@ -138,13 +138,19 @@ class NewtonOptions:
     # "krylov": every Newton direction from the current Jacobian by FGMRES preconditioned
     # with the last LU factorisation, refactorised only when FGMRES needs more than
     # ``krylov_max_it`` iterations or the Jacobian's pattern grew
-    # (:mod:`~eyemech.problems.solve.stale_factorisation`); "none": a factorisation per
-    # Jacobian (or per kept Jacobian with ``reuse_contraction``)
+    # (:mod:`~eyemech.problems.solve.stale_factorisation`), with ``reuse_contraction`` > 0
+    # the assembled Jacobian kept too while Newton contracts (modified Newton on the kept
+    # factorisation); "none": a factorisation per Jacobian (or per kept Jacobian with
+    # ``reuse_contraction``)
     linear_reuse: Literal["none", "krylov"] = "none"
     krylov_max_it: int = 20
     # a solve that converged in more FGMRES iterations than this refactorises before the next
     # Newton iteration's (0: only a failed one does)
     krylov_refresh_above: int = 0
+    # after this many FGMRES iterations on a kept factorisation, stop and refactorise when
+    # their mean contraction predicts more than ``krylov_max_it`` (0: off; the iterations
+    # spent are counted)
+    krylov_predict_after: int = 0
     # FGMRES's relative tolerance on ‖J δ + F‖ / ‖F‖: far below the Newton tolerance's share
     # per iteration, so that the convergence stays quadratic (tests/test_newton_krylov.py)
     krylov_rtol: float = 1e-8
@@ -162,11 +168,11 @@ class NewtonOptions:
                                  "factor in (0, 1)")
         if self.linear_reuse not in ("none", "krylov"):
             raise ParameterError("linear_reuse", f"{self.linear_reuse!r} is not one of none, krylov")
-        if self.linear_reuse == "krylov" and self.reuse_contraction > 0:
-            raise ParameterError("linear_reuse", "krylov needs the fresh Jacobian of every "
-                                 "iteration: reuse_contraction must be 0")
         if self.krylov_max_it < 1:
             raise ParameterError("krylov_max_it", f"{self.krylov_max_it}: must be >= 1")
+        if not 0 <= self.krylov_predict_after < self.krylov_max_it:
+            raise ParameterError("krylov_predict_after", f"{self.krylov_predict_after}: must be "
+                                 f"in [0, krylov_max_it = {self.krylov_max_it})")
         if not 0 < self.krylov_rtol < 1:
             raise ParameterError("krylov_rtol", f"{self.krylov_rtol}: a tolerance in (0, 1)")
 
@@ -303,7 +309,8 @@ class NonlinearSolver:
                 raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
                                      "not with an iterative linear solver")
             self.stale = StaleFactorisation(self.snes.getKSP(), prefix,
-                                            self.options.krylov_refresh_above)
+                                            self.options.krylov_refresh_above,
+                                            self.options.krylov_predict_after)
         self._forget_options()
         rtol, atol, stol, _max_it = self.snes.getTolerances()
         record_stopping_criterion("SNES Newton", rtol, atol, "l2 norm of the assembled residual", stol)

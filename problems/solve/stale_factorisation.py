@@ -11,6 +11,13 @@ refreshed (P ← J_k, one numeric factorisation) when
 - FGMRES has not converged within ``max_it`` iterations (or broke down): the solve is
   repeated on the fresh factorisation, never handed to Newton as failed (only a failure
   on a fresh factorisation is);
+- FGMRES is predicted not to converge within ``max_it`` (``predict_after`` = k > 0): after
+  k iterations on a kept factorisation, the contraction of the last half of them,
+  ρ = (‖r_k‖/‖r_h‖)^(1/(k−h)) with h = ⌊k/2⌋ (GMRES accelerates as it resolves the
+  preconditioned operator's outlying eigenvalues, so the mean from ‖r_0‖ is pessimistic),
+  extrapolated to the tolerance, k + log(rtol‖r_0‖/‖r_k‖)/log ρ, exceeds ``max_it``; the
+  solve stops there (its k iterations counted) and is repeated as after a failure, so a
+  factorisation too stale to pay costs k iterations instead of ``max_it``;
 - the Jacobian's nonzero pattern grew since P was copied (contact pairs insert entries):
   P is copied anew with the new pattern (a symbolic analysis and a numeric factorisation);
 - there is no factorisation yet.
@@ -32,6 +39,7 @@ solver counts). Factorisations are counted by PETSc's log events like every othe
 from __future__ import annotations
 
 import logging
+import math
 
 from petsc4py import PETSc
 
@@ -41,11 +49,22 @@ log = logging.getLogger("eyemech")
 class StaleFactorisation:
     """Python context of the outer KSP; see the module docstring."""
 
-    def __init__(self, ksp: PETSc.KSP, prefix: str, refresh_above: int = 0) -> None:
+    def __init__(self, ksp: PETSc.KSP, prefix: str, refresh_above: int = 0,
+                 predict_after: int = 0) -> None:
         self.inner = PETSc.KSP().create(ksp.comm)
         self.inner.setOptionsPrefix(prefix)
         self.inner.setFromOptions()  # fgmres, its tolerances, LU with the factor package
         _rtol, self.atol, _dtol, self.max_it = self.inner.getTolerances()
+        self.inner.setConvergenceTest(self._converged)
+        # the early refresh's k (0: off): see the module docstring
+        self.predict_after = predict_after
+        self.early_refreshes = 0  # of the refreshes after failure, those predicted after k
+        self.early_iterations = 0  # FGMRES iterations of the solves stopped by the prediction
+        self.iterations = 0  # FGMRES iterations of every solve, stopped and failed ones included
+        self._rtol = 0.0
+        self._initial = 0.0  # ‖r_0‖ = ‖b‖ (FGMRES starts from x = 0)
+        self._on_kept = False  # the solve runs on a kept factorisation (may stop early)
+        self._history: list[float] = []  # ‖r_0‖, ‖r_1‖, … of the current solve
         self.pmat: PETSc.Mat | None = None
         self._pattern = -1  # nonzeros of J when P was copied
         self.refreshes = 0  # P ← J copies (each costs one numeric factorisation)
@@ -77,10 +96,39 @@ class StaleFactorisation:
         self.inner.setOperators(jacobian, self.pmat)
         self.refreshes += 1
 
-    def _solve_inner(self, rtol: float, b: PETSc.Vec, x: PETSc.Vec) -> tuple[int, int]:
+    def _solve_inner(self, rtol: float, b: PETSc.Vec, x: PETSc.Vec,
+                     on_kept: bool) -> tuple[int, int]:
         self.inner.setTolerances(rtol=rtol, atol=self.atol, max_it=self.max_it)
+        self._rtol, self._initial, self._on_kept = rtol, b.norm(), on_kept
+        early = self.early_refreshes
         self.inner.solve(b, x)
-        return self.inner.getIterationNumber(), int(self.inner.getConvergedReason())
+        iterations = self.inner.getIterationNumber()
+        self.iterations += iterations
+        if self.early_refreshes > early:
+            self.early_iterations += iterations
+        return iterations, int(self.inner.getConvergedReason())
+
+    def _converged(self, _ksp: PETSc.KSP, its: int, rnorm: float) -> int:
+        """PETSc's default test (‖r‖ ≤ max(rtol ‖b‖, atol), at most ``max_it``) and, on a
+        kept factorisation, the early refresh's prediction at iteration ``predict_after``."""
+        reason = PETSc.KSP.ConvergedReason
+        if not math.isfinite(rnorm):
+            return reason.DIVERGED_NANORINF
+        target = max(self._rtol * self._initial, self.atol)
+        if rnorm <= target:
+            return reason.CONVERGED_RTOL if rnorm > self.atol else reason.CONVERGED_ATOL
+        if its >= self.max_it:
+            return reason.DIVERGED_MAX_IT
+        if its == 0:
+            self._history = []
+        self._history.append(rnorm)
+        if self._on_kept and its == self.predict_after > 0 and target > 0:
+            half = its // 2  # the rate of the last half: GMRES's convergence accelerates
+            rate = (rnorm / self._history[half]) ** (1.0 / (its - half))
+            if rate >= 1.0 or its + math.log(target / rnorm) / math.log(rate) > self.max_it:
+                self.early_refreshes += 1
+                return reason.DIVERGED_MAX_IT
+        return reason.ITERATING
 
     # petsc4py's KSP python interface
     def setUp(self, ksp: PETSc.KSP) -> None:  # noqa: N802
@@ -95,14 +143,14 @@ class StaleFactorisation:
         else:
             self.inner.setOperators(jacobian, self.pmat)
         rtol = ksp.getTolerances()[0]  # Eisenstat–Walker's, when on
-        iterations, reason = self._solve_inner(rtol, b, x)
+        iterations, reason = self._solve_inner(rtol, b, x, on_kept=not fresh)
         if reason <= 0 and not fresh:
             log.debug("FGMRES on the kept factorisation: reason %d after %d iterations, "
                       "refactorising", reason, iterations)
             self.refreshes_after_failure += 1
             self._refresh(jacobian, nonzeros)
-            more, reason = self._solve_inner(rtol, b, x)
+            more, reason = self._solve_inner(rtol, b, x, on_kept=False)
             iterations += more
         self._refresh_due = 0 < self.refresh_above < iterations and reason > 0
         ksp.setIterationNumber(iterations)
-        ksp.setConvergedReason(reason if reason != 0 else PETSc.KSP.ConvergedReason.DIVERGED_ITS)
+        ksp.setConvergedReason(reason if reason != 0 else PETSc.KSP.ConvergedReason.DIVERGED_MAX_IT)
