@@ -840,7 +840,8 @@ class BucklingModel:
             residual += ufl.derivative(tie, self.u, v)
         elif params.frictionless_slip_stiffness > 0:
             # a weak spring for the buckle's friction on the sclera: it removes the
-            # frictionless slide's near-zero stiffness (docs/scleral_buckling.md, Attachment)
+            # frictionless slide's near-zero stiffness (docs/scleral_buckling.md, "The frictionless
+            # buckle's spring")
             spring = dolfinx.fem.Constant(self.eye.mesh, params.frictionless_slip_stiffness)
             tie = tangential_tie_energy(self.buckle, self.u, self.u_tied, self.tied * spring,
                                         contact_ds(self.eye.tag("sclera_outer")))
