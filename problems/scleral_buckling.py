@@ -649,7 +649,8 @@ def _converged(model: "BucklingModel", ctx: RunContext, writer, record) -> None:
                   "newton_iterations_all": counts["newton_iterations_all"] + extra["iterations_all"],
                   **{k: counts[k] + extra[k] for k in ("jacobians", "factorisations",
                                                       "symbolic_factorisations",
-                                                      "krylov_iterations_all")}}
+                                                      "krylov_iterations_all",
+                                                      "matrix_mallocs")}}
     values = model.measure() | settling
     ctx.record_step(step=record.step, load=record.load, stage=stage,
                     newton_iterations=record.iterations, cuts=record.cuts, **counts,

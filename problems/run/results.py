@@ -90,6 +90,9 @@ class SolverCounts:
     factorisations: int = 0            # numeric factorisations
     symbolic_factorisations: int = 0   # symbolic analyses (a new matrix pattern needs one)
     krylov_iterations: int = 0         # Krylov iterations (0 for a direct solve's preonly)
+    # PETSc's reallocations of the Jacobian's storage (MatGetInfo "mallocs", summed over
+    # ranks): one per insertion outside the preallocated pattern, e.g. a new contact pair
+    matrix_mallocs: int = 0
 
     def copy(self) -> "SolverCounts":
         return dataclasses.replace(self)

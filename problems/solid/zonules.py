@@ -94,7 +94,11 @@ class ZonuleBars:
             index = dofs[keep].astype(PETSc.IntType)
             matrix.setValues(index, index, np.zeros((len(index), len(index))),
                              addv=PETSc.InsertMode.ADD)
-        matrix.assemble()
+        # a flush, not a final assembly: a final one squeezes out every slot not yet
+        # used, i.e. the finite-element pattern DOLFINx preallocated, and the first
+        # Jacobian then grows the matrix by mallocs row by row
+        matrix.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
+        matrix.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
 
     def coupling_entries(self) -> int:
         """Matrix entries the bars add to the finite-element pattern (the lens–ciliary

@@ -580,6 +580,7 @@ class NonlinearSolver:
         self._callback_error = None
         numeric_before, symbolic_before = self._factorisations()
         jacobians_before = self._jacobians
+        mallocs_before = self._matrix_mallocs()
         converged = False
         # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
         self._insert_options()
@@ -596,7 +597,8 @@ class NonlinearSolver:
         finally:
             self.snes.setTolerances(atol=atol)
             self._forget_options()
-            self._tally(converged, numeric_before, symbolic_before, jacobians_before)
+            self._tally(converged, numeric_before, symbolic_before, jacobians_before,
+                        mallocs_before)
         elapsed = time.perf_counter() - start
         # assembly inside SNES is timed by the callbacks; "solve" is the rest
         # (factorisation, triangular solves, line search bookkeeping)
@@ -607,7 +609,7 @@ class NonlinearSolver:
         return converged, iterations
 
     def _tally(self, converged: bool, numeric_before: int, symbolic_before: int,
-               jacobians_before: int) -> None:
+               jacobians_before: int, mallocs_before: int) -> None:
         """The last solve's work, also when it raised (a callback's error included)."""
         numeric, symbolic = self._factorisations()
         iterations = self.snes.getIterationNumber()
@@ -617,10 +619,16 @@ class NonlinearSolver:
                             jacobians=self._jacobians - jacobians_before,
                             factorisations=numeric - numeric_before,
                             symbolic_factorisations=symbolic - symbolic_before,
-                            krylov_iterations=self._krylov_iterations())
+                            krylov_iterations=self._krylov_iterations(),
+                            matrix_mallocs=self._matrix_mallocs() - mallocs_before)
         self.last_counts = work
         self.counts.add(work)
         SOLVER_COUNTS.add(work)
+
+    def _matrix_mallocs(self) -> int:
+        """Reallocations of the Jacobian's storage so far, all ranks (collective)."""
+        matrix = self.snes.getJacobian()[0]
+        return int(matrix.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["mallocs"])
 
     def _krylov_iterations(self) -> int:
         """Krylov iterations of the last SNES solve, failed ones included (0 for a direct
@@ -746,6 +754,7 @@ class StepRecord:
     factorisations: int = 0           # numeric factorisations
     symbolic_factorisations: int = 0  # symbolic analyses
     krylov_iterations_all: int = 0    # Krylov iterations of all attempts (0: direct solve)
+    matrix_mallocs: int = 0           # reallocations of the Jacobian's storage
 
     @staticmethod
     def work(counts: SolverCounts) -> dict[str, int]:
@@ -753,7 +762,8 @@ class StepRecord:
         return {"attempts": counts.newton_solves, "iterations_all": counts.newton_iterations_all,
                 "jacobians": counts.jacobians, "factorisations": counts.factorisations,
                 "symbolic_factorisations": counts.symbolic_factorisations,
-                "krylov_iterations_all": counts.krylov_iterations}
+                "krylov_iterations_all": counts.krylov_iterations,
+                "matrix_mallocs": counts.matrix_mallocs}
 
     def counts(self) -> dict[str, int]:
         """The step's work under the names of ``results.json``'s step records:
@@ -761,7 +771,8 @@ class StepRecord:
         return {"attempts": self.attempts, "newton_iterations_all": self.iterations_all,
                 "jacobians": self.jacobians, "factorisations": self.factorisations,
                 "symbolic_factorisations": self.symbolic_factorisations,
-                "krylov_iterations_all": self.krylov_iterations_all}
+                "krylov_iterations_all": self.krylov_iterations_all,
+                "matrix_mallocs": self.matrix_mallocs}
 
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
