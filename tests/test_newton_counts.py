@@ -218,10 +218,11 @@ def test_bench_rows_carry_the_counts(tmp_path, monkeypatch):
     assert row["factorisations"] == row["newton_iterations_all"]
     assert row["symbolic_factorisations"] == 1 and row["failed_newton_solves"] == 0
     table = (tmp_path / "sphere-inflation.md").read_text().splitlines()
-    assert "| 205 |  |  |  |  |  | ok |" in table[-2]
-    # LU alone: no Krylov iteration
+    assert "| 205 |  |  |  |  |  |  | ok |" in table[-2]
+    assert table[-1].startswith(f"| {row['date']} | {row['machine']} | 1 | mesh_size=4.0 |")
+    # LU alone: no Krylov iteration; no reallocation of the Jacobian
     assert table[-1].endswith(f"| {row['newton_iterations']} | {row['newton_iterations_all']} | 0 "
-                              f"| {row['factorisations']} | 1 | 0 | ok |")
+                              f"| {row['factorisations']} | 1 | 0 | 0 | ok |")
 
 
 def test_modified_newton_and_predictor_reach_full_newtons_solution_with_fewer_factorisations():

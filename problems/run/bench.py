@@ -21,17 +21,19 @@ from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import build
 from eyemech.problems.run.results import versions, write_text_atomic
 
-COLUMNS = ("date", "machine", "ranks", "dofs", "cells", "mesh", "form_compilation", "assembly",
-           "solve", "contact_search", "output", "total", "peak_memory_mb", "newton_iterations",
-           "newton_iterations_all", "failed_newton_solves", "factorisations",
-           "symbolic_factorisations", "krylov_iterations", "status")
+PHASES = ("mesh", "form_compilation", "assembly", "solve", "contact_search", "output", "total")
+COLUMNS = ("date", "machine", "ranks", "settings", "dofs", "cells", *PHASES, "peak_memory_mb",
+           "newton_iterations", "newton_iterations_all", "failed_newton_solves", "factorisations",
+           "symbolic_factorisations", "krylov_iterations", "matrix_mallocs", "status")
 # what the counts mean (the table's notes)
 COUNTS = ("newton_iterations: of the converged solves (the steps' own); newton_iterations_all: "
           "of all solves, the failed attempts of cut steps included (failed_newton_solves of "
           "them); factorisations: numeric LU factorisations PETSc performed (its log events), "
           "symbolic_factorisations: its symbolic analyses (one per new matrix pattern); "
           "krylov_iterations: Krylov iterations of all solves (0 with LU alone; linear_reuse="
-          "krylov: FGMRES on the kept factorisation, its failed attempts included)")
+          "krylov: FGMRES on the kept factorisation, its failed attempts included); "
+          "matrix_mallocs: PETSc's reallocations of the Jacobian's storage (entries outside "
+          "its preallocated pattern)")
 
 
 def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: RunOptions | None = None):
@@ -46,16 +48,17 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
     timings = result.timings
     row = {"date": datetime.date.today().isoformat(),
            "machine": f"{platform.node()} ({platform.machine()}, {__import__('os').cpu_count()} cpus)",
-           "ranks": comm.size, "dofs": result.quantities.get("dofs"),
+           "ranks": comm.size, "settings": _settings(overrides),
+           "dofs": result.quantities.get("dofs"),
            "cells": result.quantities.get("cells"),
-           **{k: round(timings.get(k, 0.0), 2) for k in COLUMNS[5:12]},
+           **{k: round(timings.get(k, 0.0), 2) for k in PHASES},
            "peak_memory_mb": round(result.peak_memory_mb, 1),
            "newton_iterations": sum(s.get("newton_iterations", 0) for s in result.steps),
            "status": result.status}
     counts = result.counts()
     row.update({k: counts[k] for k in ("newton_iterations_all", "failed_newton_solves",
                                        "factorisations", "symbolic_factorisations",
-                                       "krylov_iterations")})
+                                       "krylov_iterations", "matrix_mallocs")})
     table = Path(out) / f"{scene.name}.csv"
     rows = list(csv.DictReader(table.open())) if table.exists() else []
     rows.append({k: row[k] for k in COLUMNS})
@@ -68,10 +71,16 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
     return row
 
 
+def _settings(overrides: dict) -> str:
+    """The parameters a row ran with beyond the scene's defaults."""
+    return " ".join(f"{key}={value}" for key, value in overrides.items()) or "defaults"
+
+
 def _markdown(name: str, overrides: dict, rows: list[dict]) -> str:
     v = versions()
     lines = [f"# Benchmark `{name}`", "",
-             f"Settings: {', '.join(f'`{k}={val}`' for k, val in overrides.items()) or 'defaults'}; "
+             f"Settings: each row's `settings` (beyond the scene's defaults; this version's "
+             f"benchmark: `{_settings(overrides)}`); "
              f"SNES Newton with MUMPS LU; DOLFINx {v.get('dolfinx', '?')}, PETSc {v.get('petsc', '?')}. "
              "Seconds per phase (form compilation is a first-run cost: FFCx caches it); "
              "peak memory is the largest resident set of any rank. "
