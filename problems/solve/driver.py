@@ -192,7 +192,10 @@ class NewtonOptions:
             "ksp_type": "preonly",
             "pc_type": "cholesky" if factorisation == "ldlt" else "lu",
             "pc_factor_mat_solver_type": self.linear_solver,
-            # MUMPS: more working space for the indefinite saddle-point systems
+            # MUMPS: more working space for the indefinite saddle-point systems; its other
+            # options stay MUMPS's defaults (METIS at the eye's size): no ordering, scaling or
+            # block low-rank setting was faster, docs/scleral_buckling.md, "MUMPS's options
+            # at the paper's resolution"
             "mat_mumps_icntl_14": 100,
         }
         if self.linear_reuse == "krylov" and linear is None:
