@@ -313,6 +313,12 @@ class Parameters(SceneParameters, SolverChoice):
         "on the residual's norm, which creeps at its 0.1 floor where a step crosses the "
         "contact's kink. Step 3 as suture_line_search says, step 4 as settle_line_search "
         "(docs/scleral_buckling.md, Which contact chatters); cp: as in suture_line_search")
+    full_step_nan: Literal["cut", "retry"] = field(
+        "cut", "a solve with full steps (line_search=basic) whose Newton step makes the "
+        "residual NaN or inf (inverted elements: the load step is too large for the mesh): "
+        "cut = its load step is cut at once; retry = the solve is repeated with bt first, "
+        "which crawled at its 0.1 floor to the iteration limit at the paper's resolution "
+        "(docs/scleral_buckling.md, A NaN cuts the load step)")
     suture_line_search: Literal["cp", "bt", "basic"] = field(
         "cp", "Newton's line search in step 3 (the sutures' pull): cp = the step length where "
         "the energy's directional derivative F(u + a du).du vanishes (no rejection of a step "
@@ -757,6 +763,7 @@ class BucklingModel:
                                      krylov_refresh_above=params.krylov_refresh_above,
                                      krylov_predict_after=params.krylov_predict_after,
                                      reuse_step_relative=params.jacobian_reuse_test == "step",
+                                     cut_on_nan=params.full_step_nan == "cut",
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,
                                          params.settle_line_search} != {"bt"}

@@ -270,6 +270,57 @@ def test_a_failed_full_step_solve_is_repeated_with_the_fallback_line_search():
     assert plain.solve()[0] is False and plain.counts.newton_solves == 1
 
 
+def _log_path(cut_on_nan: bool) -> tuple[NonlinearSolver, list, np.ndarray]:
+    """ln u = 3 (1 − load) on one DG0 dof, followed from u = e³ (load 0) to u = 1 (load 1)
+    in one load step if it converges: Newton's full step u ← u (1 − ln u + 3 (1 − load))
+    leaves u > 0 only while ln u − 3 (1 − load) < 1, so at load 1 and at 0.5 it makes u
+    negative and ln u NaN (DIVERGED_FUNCTION_NANORINF), as an inverted element does."""
+    mesh = dolfinx.mesh.create_unit_interval(MPI.COMM_SELF, 1)
+    V = dolfinx.fem.functionspace(mesh, ("DG", 0))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    u.x.array[:] = np.exp(3.0)
+    level = dolfinx.fem.Constant(mesh, 3.0)
+    options = NewtonOptions(line_search="basic", fallback_line_search="bt", cut_on_nan=cut_on_nan)
+    solver = driver.NonlinearSolver((ufl.ln(u) - level) * v * ufl.dx, u, options=options)
+    records = follow_path(solver, lambda value, _increment: setattr(level, "value", 3.0 * (1 - value)),
+                          Stepping(0.0, 1.0, initial_step=1.0, max_step=1.0), quiet=True)
+    return solver, records, u.x.array
+
+
+def test_a_full_step_that_makes_the_residual_nan_cuts_the_load_step():
+    """``cut_on_nan``: a full-step solve that fails with a NaN residual is not repeated with
+    the fallback line search; its load step is cut at once (at load 1 and 0.5: 2 cuts), each
+    failed attempt counted (one factorisation each, no converged iteration). Without it the
+    same NaN is repeated with bt, which converges from load 0 to 1 in one step (5
+    iterations, 6 factorisations in all, measured): on this smooth problem the retry is the
+    cheaper one; on the eye at the paper's resolution bt crawled at its 0.1 floor across
+    the contact's kink (docs/scleral_buckling.md, "A NaN cuts the load step")."""
+    retried, retried_records, retried_u = _log_path(cut_on_nan=False)
+    assert len(retried_records) == 1 and retried_records[0].cuts == 0
+    assert retried.counts.newton_solves == 2 and retried.counts.failed_newton_solves == 1
+    assert np.allclose(retried_u, 1.0, atol=1e-9)
+
+    cut, records, u = _log_path(cut_on_nan=True)
+    assert np.allclose(u, 1.0, atol=1e-9)
+    assert records[0].cuts == 2 and records[0].increment == pytest.approx(0.25)
+    # one solve per attempt: no bt solve behind a NaN (measured: 8 solves, 3 failed)
+    assert cut.counts.newton_solves == sum(r.attempts for r in records)
+    assert cut.counts.failed_newton_solves == sum(r.cuts for r in records) >= 2
+    # the failed attempts' factorisations are counted: one each (measured 8 = 6 + 2)
+    assert records[0].factorisations == records[0].jacobians == records[0].iterations + 2
+    assert cut.snes.getLineSearch().getType() == "basic"
+
+    # a failure without NaN (atan's full steps overshoot ever further) is still retried
+    mesh = dolfinx.mesh.create_unit_interval(MPI.COMM_SELF, 4)
+    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+    w, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    w.x.array[:] = 2.0
+    options = NewtonOptions(line_search="basic", max_it=8, fallback_line_search="bt",
+                            cut_on_nan=True)
+    overshoot = driver.NonlinearSolver(ufl.atan(w) * v * ufl.dx, w, options=options)
+    assert overshoot.solve()[0] and overshoot.counts.newton_solves == 2
+
+
 # the coarse eye without the settling step (its 4th stage only lengthens the test)
 BUDGET_EYE = {"resolution": "coarse", "settle": False}
 
@@ -340,7 +391,8 @@ def test_full_steps_while_the_buckle_moves_reach_the_reference_eye(budget_eye):
 @pytest.mark.parametrize("key, value", [("jacobian_reuse", 1.0), ("jacobian_reuse", -0.1),
                                         ("buckle_step", 0.5), ("buckle_step", 0.0),
                                         ("hard_step_effort", -1), ("stagnation_window", -1),
-                                        ("settle_step", 0.9), ("settle_step", -0.1)])
+                                        ("settle_step", 0.9), ("settle_step", -0.1),
+                                        ("full_step_nan", "sometimes")])
 def test_budget_parameters_out_of_range_are_refused(key, value):
     from eyemech.problems.run.parameters import ParameterError
 

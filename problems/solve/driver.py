@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Callable, Literal, Sequence
 import dolfinx
 import dolfinx.fem.petsc
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
@@ -125,6 +126,13 @@ class NewtonOptions:
     # ‖F‖ creeps at its 0.1 floor, and the retry keeps a cycling active set from cutting
     # the step; "": no retry; docs/scleral_buckling.md, "Which contact chatters")
     fallback_line_search: str = ""
+    # a solve with full steps (line search ``basic``) that fails because a Newton step made
+    # the residual NaN or inf (inverted elements: the load step is too large for the mesh)
+    # is not repeated with ``fallback_line_search``, so that its load step is cut at once:
+    # at the paper's resolution the bt retry after such a failure crawled at its 0.1 floor
+    # to the iteration limit before the cut (docs/scleral_buckling.md, "A NaN cuts the load
+    # step"). False: such a solve is repeated with the fallback as any other failure.
+    cut_on_nan: bool = False
     # a solve with backtracking (``bt``, whose residual falls at every accepted step) whose
     # residual fell by less than 1 − ``stagnation_factor`` over the last
     # ``stagnation_window`` iterations is stopped as failed before the next Jacobian
@@ -560,6 +568,11 @@ class NonlinearSolver:
         fallback, current = self.options.fallback_line_search, line_search.getType()
         if not fallback or fallback == current:
             return False, self.snes.getIterationNumber()
+        if self.options.cut_on_nan and current == "basic" and self.diverged_to_nan():
+            log.info("Newton with full steps failed (%s), residuals %s: the load step is cut "
+                     "(cut_on_nan)", self.reason(),
+                     " ".join(f"{r:.2e}" for r in self.residual_history))
+            return False, self.snes.getIterationNumber()
         log.info("Newton with line search %s failed (%s), residuals %s: again with %s", current,
                  self.reason(), " ".join(f"{r:.2e}" for r in self.residual_history), fallback)
         self.restore_state(start_state)
@@ -639,6 +652,14 @@ class NonlinearSolver:
         if self.stale is None and self.iterative is None:
             return 0
         return int(self.snes.getLinearSolveIterations())
+
+    def diverged_to_nan(self) -> bool:
+        """The last solve failed because a residual was NaN or inf (SNES's
+        DIVERGED_FUNCTION_NANORINF, or a non-finite norm in ``residual_history``)."""
+        local = (self.snes.getConvergedReason() == PETSc.SNES.ConvergedReason.DIVERGED_FUNCTION_NANORINF
+                 or not all(np.isfinite(self.residual_history)))
+        # one answer on all ranks: the retry that follows, or not, is collective
+        return bool(self.snes.comm.tompi4py().allreduce(local, op=MPI.LOR))
 
     def reason(self) -> str:
         if self.stagnated:
