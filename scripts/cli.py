@@ -5,7 +5,7 @@
                      [--checkpoint-every N|Tm] [--resume DIR]
     eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R] [--resume]
     eyemech study NAME|all|list [--quick] [--out DIR]
-    eyemech bench NAME [--out docs/bench]
+    eyemech bench NAME [--set KEY=VALUE ...] [--out docs/bench]
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
 failed (the last converged state and results.json with status "failed" are kept),
@@ -83,6 +83,9 @@ def _parser() -> argparse.ArgumentParser:
     p_bench = sub.add_parser("bench", help="time a scene at its benchmark size (table in --out)")
     p_bench.add_argument("name", help="scene name")
     p_bench.add_argument("--out", default="docs/bench", help="output folder")
+    p_bench.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                         help="override one parameter on top of the scene's benchmark settings "
+                              "(repeatable; the row's settings column names them all)")
     return parser
 
 
@@ -113,8 +116,10 @@ def main(argv: list[str] | None = None) -> int:
             return _study(args, comm, say)
         if args.command == "bench":
             from eyemech.problems.run.bench import run_benchmark
+            from eyemech.problems.run.parameters import parse_assignments
 
-            row = run_benchmark(problems.get(args.name), Path(args.out), comm)
+            row = run_benchmark(problems.get(args.name), Path(args.out), comm,
+                                overrides=parse_assignments(args.sets))
             say(f"{args.name}: {row}")
             return 0
         scene = problems.get(args.name)

@@ -225,6 +225,20 @@ def test_bench_rows_carry_the_counts(tmp_path, monkeypatch):
                               f"| {row['factorisations']} | 1 | 0 | 0 | ok |")
 
 
+def test_bench_overrides_are_run_and_named_in_the_row(tmp_path, monkeypatch):
+    """``eyemech bench NAME --set k=v`` runs the benchmark settings updated by the overrides;
+    the row's settings column names both."""
+    from eyemech import problems
+    from eyemech.problems.run import bench
+
+    monkeypatch.setattr(sphere_inflation, "BENCHMARK", TINY, raising=False)
+    row = bench.run_benchmark(problems.get("sphere-inflation"), tmp_path,
+                              overrides={"load_steps": "2"})
+    assert row["settings"] == "mesh_size=4.0 load_steps=2"
+    result = json.loads((tmp_path / "sphere-inflation-1ranks" / "results.json").read_text())
+    assert result["parameters"]["load_steps"] == 2 and len(result["steps"]) == 2
+
+
 def test_modified_newton_and_predictor_reach_full_newtons_solution_with_fewer_factorisations():
     """The nonlinear Poisson problem in 5 load steps: the secant predictor and modified
     Newton (a kept factorisation while the residual contracts by 0.5 or better, below 1 %

@@ -36,9 +36,11 @@ COUNTS = ("newton_iterations: of the converged solves (the steps' own); newton_i
           "its preallocated pattern)")
 
 
-def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: RunOptions | None = None):
+def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: RunOptions | None = None,
+                  overrides: dict | None = None):
+    """One row: the scene at its ``BENCHMARK`` settings, updated by ``overrides``."""
     module = importlib.import_module(scene.run.__module__)
-    overrides = dict(getattr(module, "BENCHMARK", {}))
+    overrides = {**getattr(module, "BENCHMARK", {}), **(overrides or {})}
     params = build(scene.parameters, overrides)
     options = options or RunOptions(fields=False, pictures=False)
     result = scene.run(params, comm=comm, out=Path(out) / f"{scene.name}-{comm.size}ranks",
