@@ -167,6 +167,10 @@ def test_krylov_reuse_refuses_what_it_cannot_do():
     assert refused.value.key == "krylov_max_it"
     with pytest.raises(ParameterError) as refused:
         scleral_buckling.Parameters(resolution="coarse", linear_reuse="krylov",
+                                    krylov_rtol=1.0).validate()
+    assert refused.value.key == "krylov_rtol"
+    with pytest.raises(ParameterError) as refused:
+        scleral_buckling.Parameters(resolution="coarse", linear_reuse="krylov",
                                     solver="iterative").validate()
     assert refused.value.key == "linear_reuse"
 
