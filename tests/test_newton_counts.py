@@ -371,11 +371,12 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
 def test_the_first_jacobian_fills_the_preallocated_pattern(budget_eye):
     """The eye's Jacobian is assembled into the pattern DOLFINx preallocated: only entries
     outside it (the zonule bars' couplings, retina pairs) make PETSc reallocate. A final
-    assembly of the bars' zeros before the first Jacobian squeezed the unused pattern out,
-    and the first Jacobian then grew row by row: 18,337 reallocations on the coarse eye
-    (4,242 unknowns), about 200 s of one rank's first Jacobian at the paper's resolution.
-    Measured since: 124 in the first load step (the bars' rows), 217 in the run; the bound
-    is a tenth of the unknowns."""
+    assembly of the bars' zeros before the first Jacobian squeezes the unused pattern out,
+    and the first Jacobian then grows row by row: 18,337 reallocations on the coarse eye
+    (4,242 unknowns), about 200 s of one rank's first Jacobian at the paper's resolution
+    (docs/scleral_buckling.md, "The Jacobian's preallocation"). With the flush assembly of
+    ZonuleBars.allow_new_nonzeros: 124 in the first load step (the bars' rows), 217 in the
+    run; the bound is a tenth of the unknowns."""
     steps = budget_eye.as_json()["steps"]
     unknowns = budget_eye.quantities["dofs"]
     assert 0 < steps[0]["matrix_mallocs"] < unknowns / 10
