@@ -256,6 +256,11 @@ class Parameters(SceneParameters, SolverChoice):
         "rule: node-to-rigid-surface contact)")
     retina_contact: bool = field(True, "enforce retina–choroid contact (off: the gap is only "
                                  "measured and the retina may pass through the choroid)")
+    retina_contact_method: Literal["node-to-surface", "segment-to-segment"] = field(
+        "node-to-surface", "the retina–choroid pair: retina nodes on choroid triangles, or "
+        "segment-to-segment (mortar integration over the retina's facets: passes the contact "
+        "patch test, docs/contact.md; its cost in the eye: docs/scleral_buckling.md, "
+        "Segment-to-segment retina contact)")
     settle: bool = field(True, "step 4: the settled state hours after surgery; outflow returns "
                          "the IOP to its pre-operative value (the liquid volume is released)")
     tear_closure_tolerance: float = field(0.05, "gap below which the tear's rim counts as closed",
@@ -1024,8 +1029,14 @@ class BucklingModel:
                                        alpha, self.bcs, search_depth=self.geometry.choroid_thickness,
                                        smoothing=self.params.contact_smoothing,
                                        timings=self.ctx.timings,
-                                       block_spaces=[f.function_space for f in self.fields])
-        contact.refuse_initial_penetration("detachment_height")
+                                       block_spaces=[f.function_space for f in self.fields],
+                                       method=self.params.retina_contact_method)
+        # segments are measured between flat facets of two curved surfaces that meet at the
+        # rim: up to a chord's sagitta h²/8R apart where the surfaces touch
+        sagitta = self.element_size ** 2 / (8 * self.geometry.sclera_radius)
+        contact.refuse_initial_penetration(
+            "detachment_height",
+            tolerance=sagitta if self.params.retina_contact_method == "segment-to-segment" else 0.0)
         self.solver.residual_hooks.append(contact.residual_hook)
         self.solver.jacobian_hooks.append(contact.jacobian_hook)
         if self.params.restore_contact_memory:
