@@ -603,18 +603,21 @@ class NonlinearSolver:
         rtol, atol, stol, max_it = self.snes.getTolerances()
         if reference_norm is not None:
             self.snes.setTolerances(atol=max(atol, rtol * reference_norm))
+        raising = True  # an error leaves this solve (possibly on this rank only)
         try:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
             converged = reason > 0 and all(np.isfinite(self.residual_history))
+            raising = False
         except PETSc.Error:  # e.g. a zero pivot from an inverted element
             if self._callback_error is not None:
                 raise self._callback_error from None
+            raising = False
         finally:
             self.snes.setTolerances(atol=atol)
             self._forget_options()
             self._tally(converged, numeric_before, symbolic_before, jacobians_before,
-                        mallocs_before)
+                        None if raising else mallocs_before)
         elapsed = time.perf_counter() - start
         # assembly inside SNES is timed by the callbacks; "solve" is the rest
         # (factorisation, triangular solves, line search bookkeeping)
@@ -625,8 +628,11 @@ class NonlinearSolver:
         return converged, iterations
 
     def _tally(self, converged: bool, numeric_before: int, symbolic_before: int,
-               jacobians_before: int, mallocs_before: int) -> None:
-        """The last solve's work, also when it raised (a callback's error included)."""
+               jacobians_before: int, mallocs_before: int | None) -> None:
+        """The last solve's work, also when it raised (a callback's error included).
+        ``mallocs_before`` None: an error is leaving the solve, maybe on this rank alone,
+        so the reallocations (a reduction over the ranks) are not counted: a collective
+        call here would wait for ranks that are still inside SNES (tests/test_faults.py)."""
         numeric, symbolic = self._factorisations()
         iterations = self.snes.getIterationNumber()
         work = SolverCounts(newton_solves=1, failed_newton_solves=0 if converged else 1,
@@ -636,7 +642,8 @@ class NonlinearSolver:
                             factorisations=numeric - numeric_before,
                             symbolic_factorisations=symbolic - symbolic_before,
                             krylov_iterations=self._krylov_iterations(),
-                            matrix_mallocs=self._matrix_mallocs() - mallocs_before)
+                            matrix_mallocs=0 if mallocs_before is None
+                            else self._matrix_mallocs() - mallocs_before)
         self.last_counts = work
         self.counts.add(work)
         SOLVER_COUNTS.add(work)
