@@ -133,6 +133,9 @@ FRICTIONLESS_SLIP_STIFFNESS = 0.003
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra) and its three
 # steps (IOP, buckle, sutures), without the settling step
 BENCHMARK = {"resolution": "paper", "settle": False}
+# the retina's contact partners preallocated: the master triangles within half an element
+# beyond the nearest one (docs/scleral_buckling.md, "The contact pattern, preallocated")
+RETINA_PATTERN_REACH = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -792,8 +795,8 @@ class BucklingModel:
         self.detached = "retina_detached" in self.eye.names  # false: detachment_height = 0
         self.retina = self._retina_contact() if params.retina_contact and self.detached else None
         # the formulation's pattern (solid, liquid row and column, zonule bars), before
-        # any contact pair: PETSc grows the matrix as retina pairs appear, so the later
-        # allocation depends on the load path (and differs in a run resumed from a checkpoint)
+        # any contact pair: the retina's preallocated pairs and those added at a solve's
+        # start depend on the load path (and differ in a run resumed from a checkpoint)
         # (DOLFINx's exact preallocation plus the bars' couplings, counted: PETSc's own
         # allocation grows by chunks when the bars are inserted, differently on 1 and 2 ranks)
         self.pattern_nonzeros = self._fe_nonzeros + (
@@ -1030,7 +1033,8 @@ class BucklingModel:
                                        smoothing=self.params.contact_smoothing,
                                        timings=self.ctx.timings,
                                        block_spaces=[f.function_space for f in self.fields],
-                                       method=self.params.retina_contact_method)
+                                       method=self.params.retina_contact_method,
+                                       pattern_reach=RETINA_PATTERN_REACH * self.element_size)
         # segments are measured between flat facets of two curved surfaces that meet at the
         # rim: up to a chord's sagitta h²/8R apart where the surfaces touch
         sagitta = self.element_size ** 2 / (8 * self.geometry.sclera_radius)
@@ -1042,6 +1046,7 @@ class BucklingModel:
         if self.params.restore_contact_memory:
             self.solver.memory_hooks.append((contact.memory, contact.restore_memory))
         contact.allow_new_nonzeros(self.solver.problem.A)
+        self.solver.pattern_hooks.append(contact.grow_pattern)
         return contact
 
     def _probes(self) -> None:

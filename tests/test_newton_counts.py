@@ -384,6 +384,19 @@ def test_the_first_jacobian_fills_the_preallocated_pattern(budget_eye):
         s["matrix_mallocs"] for s in steps)
 
 
+def test_the_retina_contact_pattern_is_preallocated(budget_eye):
+    """The retina's contact pairs enter the matrix's pattern before they form: those
+    within half an element of the nearest master triangle at set-up
+    (NodeToSurfaceContact.allow_new_nonzeros), and at each solve's start those about to
+    form (grow_pattern). The pattern, and so MUMPS's symbolic analysis, then stays fixed:
+    one analysis in the coarse eye's three steps (measured 1; 4, in load steps 1, 13, 14
+    and 15, when PETSc grew the matrix as pairs formed; docs/scleral_buckling.md, "The
+    contact pattern, preallocated")."""
+    steps = budget_eye.as_json()["steps"]
+    assert budget_eye.as_json()["solver_counts"]["symbolic_factorisations"] <= 2
+    assert all(step["symbolic_factorisations"] <= 1 for step in steps)
+
+
 def test_segment_to_segment_retina_contact_gives_the_node_to_surface_eye(budget_eye):
     """The retina–choroid pair by segment-to-segment contact (mortar integration; it passes
     the patch test, tests/test_contact.py) against the default node-to-surface pair on the

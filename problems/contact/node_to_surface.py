@@ -82,6 +82,11 @@ class NodeToSurfaceContact:
     the plain ⟨−g⟩ law), ``block_spaces`` the spaces of a blocked system
     (``kind="mpi"``, displacement first) when ``u`` is one block of it.
 
+    ``pattern_reach`` > 0 preallocates the contact's matrix pattern
+    (:meth:`allow_new_nonzeros`, :meth:`grow_pattern`): a slave node is coupled in advance to
+    the master triangles whose reference centroids lie within its nearest one's distance
+    plus ``pattern_reach``; 0 lets PETSc grow the matrix as pairs form.
+
     ``method``: "node-to-surface" (this class, the default) or "segment-to-segment",
     which makes a :class:`~eyemech.problems.contact.segment_to_segment.SegmentToSegmentContact`
     (the pressure integrated over the slave surface segmented by the master
@@ -102,7 +107,7 @@ class NodeToSurfaceContact:
     def __init__(self, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str, master: str,
                  penalty: float, bcs=(), search_depth: float = np.inf, candidates: int = 8,
                  smoothing: float = 0.0, timings: Timings | None = None,
-                 block_spaces=None, method: str = "node-to-surface"):
+                 block_spaces=None, method: str = "node-to-surface", pattern_reach: float = 0.0):
         if not penalty > 0:
             raise ValueError(f"the penalty must be > 0, got {penalty}")
         if not smoothing >= 0:
@@ -111,6 +116,10 @@ class NodeToSurfaceContact:
         tagged.require_nonempty(slave, master)
         self.u, self.penalty, self.search_depth = u, float(penalty), float(search_depth)
         self.candidates = candidates
+        if not pattern_reach >= 0:
+            raise ValueError(f"the pattern reach must be >= 0, got {pattern_reach}")
+        self.pattern_reach = float(pattern_reach)
+        self._pattern_keys = np.zeros(0, dtype=np.int64)  # (slave, master) node pairs inserted
         self.timings = timings or Timings()
         self.comm = tagged.mesh.comm
         space = u.function_space
@@ -185,9 +194,86 @@ class NodeToSurfaceContact:
             raise MeshError(f"the master region '{master}' has no facets")
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
-        """Contact couples dofs the finite-element pattern does not: let PETSc grow it."""
+        """Contact couples dofs the finite-element pattern does not. With a
+        ``pattern_reach`` > 0 the couplings of each slave node with the nodes of the
+        master triangles whose reference centroids lie within (the distance to the
+        nearest centroid + ``pattern_reach``) of the node's reference position are
+        inserted here, once, as zeros: the pairs the node can form without sliding
+        further than that along the master surface. PETSc grows the matrix for any other
+        pair (:meth:`grow_pattern` at a solve's start, or the Jacobian hook). Collective."""
         matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
+        slaves = np.zeros(0, dtype=np.int64)
+        masters = np.zeros((0, self._triangle_coupled_nodes(np.zeros(0, dtype=int)).shape[1]), np.int64)
+        if self.pattern_reach > 0:
+            reference = self._reference_master()[self.triangle_nodes].mean(axis=1)  # collective
+        if self.pattern_reach > 0 and len(self.slave_blocks):
+            tree, points = cKDTree(reference), self.reference[self.slave_blocks]
+            nearest_distance, _ = tree.query(points)
+            within = tree.query_ball_point(points, nearest_distance + self.pattern_reach)
+            counts = np.array([len(triangles) for triangles in within])
+            triangles = np.concatenate([np.asarray(t, dtype=np.int64) for t in within])
+            slaves, masters = np.repeat(self.slave_global, counts), self._triangle_coupled_nodes(triangles)
+        self._insert_couplings(matrix, slaves, masters)
+
+    def grow_pattern(self, matrix: PETSc.Mat) -> None:
+        """Insert, as zeros, the pairs about to form that the matrix does not have yet:
+        each owned slave node within ``pattern_reach`` of its closest master triangle
+        (the triangle the search pairs it with) coupled to that triangle's nodes.
+        Called at the start of every solve (``NonlinearSolver.pattern_hooks``), so that
+        the matrix's pattern, and MUMPS's symbolic analysis, change at the start of a
+        solve rather than between its iterations. Collective."""
+        slaves = np.zeros(0, dtype=np.int64)
+        masters = np.zeros((0, self._triangle_coupled_nodes(np.zeros(0, dtype=int)).shape[1]), np.int64)
+        if self.pattern_reach > 0:
+            with self.timings("contact_search"):
+                corners = self._master_positions()[self.triangle_nodes]  # collective
+                positions = self._positions(self.slave_blocks)
+                if len(positions):
+                    k = min(self.candidates, len(corners))
+                    _, nearest = cKDTree(corners.mean(axis=1)).query(positions, k=k)
+                    nearest = np.asarray(nearest).reshape(len(positions), k)
+                    points, _ = closest_points(positions[:, None, :], corners[nearest])
+                    distance = np.linalg.norm(positions[:, None, :] - points, axis=2)
+                    rows = np.arange(len(positions))
+                    closest = np.argmin(distance, axis=1)
+                    near = distance[rows, closest] < self.pattern_reach
+                    slaves = self.slave_global[near]
+                    masters = self._triangle_coupled_nodes(nearest[rows, closest][near])
+        self._insert_couplings(matrix, slaves, masters)
+
+    def _insert_couplings(self, matrix: PETSc.Mat, slaves: np.ndarray, masters: np.ndarray) -> None:
+        """Zeros at (slave node, master node) and (master, slave) for ``slaves[i]`` and
+        every node of ``masters[i]``, those not inserted before; then a flush (a final
+        assembly would squeeze out preallocated slots not yet used). Collective."""
+        slaves = np.repeat(np.asarray(slaves, dtype=np.int64), masters.shape[1])
+        masters = np.asarray(masters, dtype=np.int64).ravel()
+        keys = np.unique(slaves * np.int64(self.imap.size_global) + masters)
+        keys = keys[~np.isin(keys, self._pattern_keys, assume_unique=True)]
+        self._pattern_keys = np.union1d(self._pattern_keys, keys)
+        slaves, masters = np.divmod(keys, np.int64(self.imap.size_global))
+        with self.timings("contact_jacobian"):
+            nodes, starts = np.unique(slaves, return_index=True)
+            for slave, group in zip(nodes, np.split(masters, starts[1:])):
+                rows, cols = self._free_dofs(np.array([slave])), self._free_dofs(group)
+                if len(rows) and len(cols):
+                    matrix.setValues(rows, cols, np.zeros((len(rows), len(cols))),
+                                     addv=PETSc.InsertMode.ADD)
+                    matrix.setValues(cols, rows, np.zeros((len(cols), len(rows))),
+                                     addv=PETSc.InsertMode.ADD)
+            matrix.assemblyBegin(PETSc.Mat.AssemblyType.FLUSH)
+            matrix.assemblyEnd(PETSc.Mat.AssemblyType.FLUSH)
+
+    def _triangle_coupled_nodes(self, triangles: np.ndarray) -> np.ndarray:
+        """Global master nodes a pair with each of ``triangles`` couples to a slave node."""
+        return self.triangles[triangles]
+
+    def _free_dofs(self, nodes: np.ndarray) -> np.ndarray:
+        """PETSc indices of the nodes' components not held by a Dirichlet condition."""
+        dofs = (self.layout.base(nodes)[:, None] + np.arange(self.bs)).ravel()
+        if self._constrained:
+            dofs = dofs[~np.isin(dofs, list(self._constrained))]
+        return dofs.astype(PETSc.IntType)
 
     # -- shared slave/master nodes and per-node gaps (the eye's detached retina) ----------
     def _drop_slaves_on_master(self) -> None:

@@ -90,9 +90,10 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
     def __init__(self, u, tagged: TaggedMesh, slave: str, master: str, penalty: float, bcs=(),
                  search_depth: float = np.inf, candidates: int = 8, smoothing: float = 0.0,
                  timings=None, block_spaces=None, method: str = "segment-to-segment",
-                 quadrature_degree: int | None = None, facing: float = 0.5):
+                 quadrature_degree: int | None = None, facing: float = 0.5,
+                 pattern_reach: float = 0.0):
         super().__init__(u, tagged, slave, master, penalty, bcs, search_depth, candidates,
-                         smoothing, timings, block_spaces)
+                         smoothing, timings, block_spaces, pattern_reach=pattern_reach)
         degree = u.function_space.ufl_element().embedded_superdegree
         self.quadrature_degree = int(quadrature_degree or 2 * degree)
         self.facing = float(facing)
@@ -315,6 +316,11 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
                                 master_shape[active], normal[active], gaps[active],
                                 weight[active], X[active], segment_id[active], min_gap,
                                 len(np.unique(segment_id)))
+
+    def _triangle_coupled_nodes(self, triangles: np.ndarray) -> np.ndarray:
+        """A segment couples the slave facet to every node of the master facet (not only
+        the triangle's three)."""
+        return self.master_facet_nodes[triangles]
 
     # -- assembly hooks ---------------------------------------------------------------------
     def _segment_dofs(self, state: SegmentState) -> np.ndarray:

@@ -301,6 +301,11 @@ class NonlinearSolver:
         # forms/buckle.py's Buckle.depth_through): :func:`follow_path` refuses a predicted
         # start and a converged state that went through an obstacle (``Stepping.depth_limit``)
         self.depth_hooks: list[Callable[[], float]] = []
+        # each inserts (as zeros) the matrix entries the next solve may need beyond the
+        # finite-element pattern, at the solve's start (collective; e.g. contact pairs
+        # that may form in it): the pattern, and so MUMPS's symbolic analysis, then stays
+        # fixed through the solve (NodeToSurfaceContact.grow_pattern)
+        self.pattern_hooks: list[Callable[[PETSc.Mat], None]] = []
         self.rejected_predictions = 0  # predicted starts refused for their depth
         self.through_obstacle = False  # the last converged solve was refused for its depth
         self._jacobians = 0  # Jacobian assemblies so far
@@ -597,6 +602,8 @@ class NonlinearSolver:
         numeric_before, symbolic_before = self._factorisations()
         jacobians_before = self._jacobians
         mallocs_before = self._matrix_mallocs()
+        for hook in self.pattern_hooks:
+            hook(self.problem.A)
         converged = False
         # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
         self._insert_options()
