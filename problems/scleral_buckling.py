@@ -156,9 +156,10 @@ class Parameters(SceneParameters, SolverChoice):
                  "condensed (eliminated cell by cell, p = bulk_modulus (J̄ − 1): the mean-dilatation "
                  "method, a displacement system; docs/scleral_buckling.md, \"Condensed Q1P0\")")
     condensed_bulk_ratio: float = field(
-        1000.0, "dg0_pressure=condensed: each tissue's κ/μ (μ = 2c), so that its volume change "
-                "is O(μ/κ) = 1e-3 of its strain; the liquid's bulk modulus instead (κ/μ up to "
-                "1.3e6 in the retina) stalled Newton at the first load step")
+        1000.0, "dg0_pressure=condensed: each tissue's bulk modulus over its shear modulus μ = 2c, "
+                "so that its volume change is O(μ/κ) = 1e-3 of its strain (100: IOP 1.4 % off "
+                "mixed; 10,000 or the liquid's modulus: Newton creeps from the first load step; "
+                "docs/scleral_buckling.md, \"Condensed Q1P0\")")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa")
@@ -400,6 +401,8 @@ class Parameters(SceneParameters, SolverChoice):
                               "suture_bite_radius", "tire_length",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
+        if not self.condensed_bulk_ratio > 0:
+            raise ParameterError("condensed_bulk_ratio", f"{self.condensed_bulk_ratio}: must be > 0")
         if self.dg0_pressure == "condensed" and (self.element != "Q1P0" or self.solver != "direct"):
             raise ParameterError("dg0_pressure", "condensed needs element Q1P0 and solver direct "
                                  f"(the iterative solver splits [u, p]), not {self.element}, "

@@ -167,3 +167,33 @@ def test_condensed_sphere_against_the_exact_radius_and_mixed_q1p0():
 def test_condensed_needs_q1p0():
     with pytest.raises(ParameterError, match="dg0_pressure"):
         si.Parameters(element="P2P1", dg0_pressure="condensed").validate()
+
+
+def test_condensed_eye_gives_the_mixed_eye():
+    """The coarse eye's three steps (docs/scleral_buckling.md, "Condensed Q1P0"): the
+    condensed Q1P0 (κ/μ = 1,000 per tissue) against the mixed one, after buckling and after
+    suturing, within 1 % and the rim gap within 0.01 mm."""
+    from eyemech.problems import scleral_buckling as sb
+
+    def run(dg0_pressure: str) -> dict:
+        params = sb.Parameters(resolution="coarse", settle=False, dg0_pressure=dg0_pressure)
+        return sb.run(params, options=RunOptions(fields=False, pictures=False, quiet=True)).quantities
+
+    mixed, condensed = run("mixed"), run("condensed")
+    assert mixed["dofs"] - condensed["dofs"] == 802  # one pressure per cell: the coarse eye has 802 hexahedra
+    for stage in ("after_buckling", "after_suturing"):
+        for key in ("axial_length_change_mm", "refraction_change_D", "iop_mmHg"):
+            # measured ≤ 0.14 % (IOP); 0.07 % axial length, 0.10 % refraction
+            assert condensed[stage][key] == pytest.approx(mixed[stage][key], rel=0.01), (stage, key)
+        # measured +0.003 / +0.001 mm
+        assert abs(condensed[stage]["tear_rim_gap_max_mm"]
+                   - mixed[stage]["tear_rim_gap_max_mm"]) < 0.01
+
+
+def test_condensed_eye_bad_input():
+    from eyemech.problems import scleral_buckling as sb
+
+    with pytest.raises(ParameterError, match="dg0_pressure"):
+        sb.Parameters(element="Q2P1", dg0_pressure="condensed").validate()
+    with pytest.raises(ParameterError, match="condensed_bulk_ratio"):
+        sb.Parameters(condensed_bulk_ratio=-1.0).validate()
