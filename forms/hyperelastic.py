@@ -113,3 +113,29 @@ def nearly_incompressible_energy_density(material: Material, F, bulk_modulus, ki
     of C̄ = J^(-2/3) C) plus a bulk penalty. With K ≫ μ and low-order elements it
     locks volumetrically (the point of the ``P1`` family)."""
     return material.strain_energy(F) + volumetric_energy(ufl.det(F), bulk_modulus, kind)
+
+
+def mean_dilatation_pressure(mean_jacobian, bulk_modulus):
+    """p̄ = U'(J̄) = κ (J̄ − 1), U = κ/2 (J̄ − 1)²: the pressure of the mean-dilatation
+    method (Nagtegaal, Parks & Rice 1974; Simo, Taylor & Pister 1985), with J̄ the cell
+    mean of J, (1/|K|) ∫_K J dX, a DG0 field. It is Q1P0's DG0 multiplier of the
+    perturbed constraint ∫ (J − 1 − p/κ) q dX = 0, eliminated cell by cell; κ → ∞ gives
+    the incompressible mixed element back, at a distance O(μ/κ)."""
+    return bulk_modulus * (mean_jacobian - 1)
+
+
+def mean_dilatation_energy_density(material: Material, F, mean_jacobian, bulk_modulus):
+    """W(F) + U(J̄), U = κ/2 (J̄ − 1)²: integrated over a cell, ∫_K W dX + |K| U(J̄_K),
+    the stored energy of the condensed Q1P0 element. J̄ is a DG0 coefficient computed from
+    u outside UFL, so UFL cannot differentiate through it: the residual is the variation
+    with the pressure p̄ = U'(J̄) held fixed, :func:`mean_dilatation_work_density`."""
+    return material.strain_energy(F) + volumetric_energy(mean_jacobian, bulk_modulus, "quadratic")
+
+
+def mean_dilatation_work_density(material: Material, F, mean_pressure):
+    """W(F) + p̄ J: its variation in u with p̄ held fixed is the condensed residual
+    ∫ (∂W/∂F + p̄ J F⁻ᵀ) : ∇v dX, the gradient of the energy of
+    :func:`mean_dilatation_energy_density` (Σ_K |K| U'(J̄_K) δJ̄_K = ∫ p̄ δJ dX). Its second
+    variation is the tangent without the cells' rank-one volumetric part
+    (κ/|K|) b_K b_Kᵀ, b_K = ∫_K δJ dX, which is added element by element."""
+    return material.strain_energy(F) + mean_pressure * ufl.det(F)

@@ -85,6 +85,7 @@ from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.cavity import check_closed, real_pressure_space
+from eyemech.problems.solid.mean_dilatation import MeanDilatation
 from eyemech.problems.solid.probes import (
     CellField,
     NodeProbe,
@@ -153,6 +154,15 @@ class Parameters(SceneParameters, SolverChoice):
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
                                    "meshing; the paper resolution has 8,150)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
+    dg0_pressure: Literal["mixed", "condensed"] = field(
+        "mixed", "Q1P0's DG0 pressure: mixed (an unknown per cell, exactly incompressible) or "
+                 "condensed (eliminated cell by cell, p = bulk_modulus (J̄ − 1): the mean-dilatation "
+                 "method, a displacement system; docs/scleral_buckling.md, \"Condensed Q1P0\")")
+    condensed_bulk_ratio: float = field(
+        300.0, "dg0_pressure=condensed: each tissue's bulk modulus over its shear modulus μ = 2c "
+               "(its volume change O(μ/κ) of its strain): 300 ends the paper's three steps within "
+               "0.4 % of mixed; 100 moves the IOP 1.4 %; 1,000 fails in step 2 at the paper's "
+               "resolution, 10,000 in step 1 (docs/scleral_buckling.md, \"Condensed Q1P0\")")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa")
@@ -394,6 +404,12 @@ class Parameters(SceneParameters, SolverChoice):
                               "suture_bite_radius", "tire_length",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
+        if not self.condensed_bulk_ratio > 0:
+            raise ParameterError("condensed_bulk_ratio", f"{self.condensed_bulk_ratio}: must be > 0")
+        if self.dg0_pressure == "condensed" and (self.element != "Q1P0" or self.solver != "direct"):
+            raise ParameterError("dg0_pressure", "condensed needs element Q1P0 and solver direct "
+                                 f"(the iterative solver splits [u, p]), not {self.element}, "
+                                 f"{self.solver}")
         if not 0 <= self.jacobian_reuse < 1:
             raise ParameterError("jacobian_reuse", f"{self.jacobian_reuse}: a contraction factor "
                                  "in [0, 1) (0: full Newton)")
@@ -700,8 +716,9 @@ class BucklingModel:
         self.family = family
         mesh = self.eye.mesh
         # [u, p, P, δ_tire]: the cavity pressure and the tire's radial travel are Real unknowns
+        condensed = params.dg0_pressure == "condensed"
         fields, tests = solid_fields(mesh, family, real_pressure_space(mesh),
-                                     real_pressure_space(mesh))
+                                     real_pressure_space(mesh), condensed=condensed)
         self.fields, self.u, self.P, self.tire_travel = fields, fields[0], fields[-2], fields[-1]
         self.P.name, self.tire_travel.name = "P", "tire_travel"
         metadata = {"quadrature_degree": family.quadrature_degree}
@@ -763,9 +780,15 @@ class BucklingModel:
         self.sutures = SutureForces(mesh, self.u.function_space, self._suture_points(),
                                     self.sclera_nodes, params.suture_bite_radius)
         self._tire_scales(ds(self.eye.tag("sclera_outer")))
+        self.bcs = self._boundary_conditions()
+        # the tissues' pressure: Q1P0's mixed DG0 unknown, or its condensed p̄ = κ (J̄ − 1)
+        # with κ a fixed multiple of each tissue's shear modulus (condensed_bulk_ratio)
+        self.mean_dilatation = MeanDilatation(
+            self.u, params.condensed_bulk_ratio * 2 * self.stiffness, dx, self.bcs,
+            block_spaces=[f.function_space for f in fields]) if condensed else None
+        self.pressure = self.mean_dilatation.pressure if condensed else fields[1]
         residual = self.residual(tests, dx, ds)
 
-        self.bcs = self._boundary_conditions()
         # μ = 2c per cell weights the iterative solver's pressure mass matrix
         krylov = params.linear_reuse == "krylov"
         newton = dataclasses.replace(ctx.options.newton,
@@ -786,6 +809,9 @@ class BucklingModel:
         self.solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, self.bcs,
                                       options=newton, timings=ctx.timings,
                                       iterative=params.linear_solver(2 * self.stiffness, dx))
+        if self.mean_dilatation is not None:
+            self.solver.state_hooks.append(self.mean_dilatation.update)
+            self.solver.jacobian_hooks.append(self.mean_dilatation.jacobian_hook)
         # a load step may not carry the sclera through the rigid buckle (Stepping.depth_limit)
         self._outer_owned: tuple[np.ndarray, np.ndarray] | None = None
         self.solver.depth_hooks.append(self.depth_through_buckle)
@@ -812,7 +838,8 @@ class BucklingModel:
     def residual(self, tests, dx, ds):
         """The eye's residual, all of it but the node-wise terms:
 
-        R = R_solid(u, p)                    incompressible tissues, neo-Hooke or Yeoh (Q1P0 …)
+        R = R_solid(u, p)                    incompressible tissues, neo-Hooke or Yeoh (Q1P0 …;
+                                             or p̄ = κ (J̄ − 1) condensed, dg0_pressure)
           + ∫ P J F⁻ᵀN·v dA                 the vitreous pressure P on the cavity wall
           + c · R_liquid + (1 − c) · R_pin   P's row: the liquid law from step 2 (c = 1),
                                              P pinned to the IOP ramp in step 1 (c = 0)
@@ -839,7 +866,9 @@ class BucklingModel:
                                      self.initial_pressure, self.bulk_modulus)
         pinned = self.initial_volume / self.bulk_modulus * (self.P - self.pressure_target) \
             / self.wall_area * qP * self.wall
-        residual = (solid_residual(self.law, family, self.fields, tests, dx)
+        condensed = getattr(self.mean_dilatation, "pressure", None)
+        residual = (solid_residual(self.law, family, self.fields, tests, dx,
+                                   condensed_pressure=condensed)
                     + follower_pressure(self.P, self.u, v, self.wall)
                     + self.coupled * liquid + (1 - self.coupled) * pinned)
         contact_ds = self.eye.ds(_contact_quadrature(params.contact_integration, family))
@@ -1334,7 +1363,8 @@ class BucklingModel:
         """Everything a restart needs besides the load (docs/restart.md): the unknowns,
         the liquid's P_ini/V_ini and switch, the buckle, the sutures' directions, the
         stage's line search and its retry's, the contact's sticky memory, the stage results."""
-        for name, f in zip(("u", "p", "P", "tire_travel"), self.fields):
+        for name, f in (("u", self.u), ("p", self.pressure), ("P", self.P),
+                        ("tire_travel", self.tire_travel)):
             checkpoints.function(name, f)
         checkpoints.function("u_tied", self.u_tied)
         checkpoints.function("u_drag_reference", self.drag_reference)

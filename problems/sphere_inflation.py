@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import dolfinx
 import dolfinx.fem
@@ -28,6 +28,7 @@ from eyemech.problems.run.output import (
 )
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
+from eyemech.problems.solid.mean_dilatation import MeanDilatation
 from eyemech.problems.solid.residual import solid_residual
 from eyemech.problems.solid.spaces import (
     ELEMENTS,
@@ -60,13 +61,20 @@ class Parameters(SceneParameters, SolverChoice):
     mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
     element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
     bulk_modulus: float = field(100.0, "bulk modulus of the displacement-only P1 family "
-                                "(U = K/4 (J² − 1 − 2 ln J)); unused by mixed families", "MPa")
+                                "(U = K/4 (J² − 1 − 2 ln J)) and of Q1P0 with dg0_pressure = condensed "
+                                "(U = K/2 (J̄ − 1)²); unused by the mixed families", "MPa")
+    dg0_pressure: Literal["mixed", "condensed"] = field(
+        "mixed", "Q1P0's DG0 pressure: mixed (an unknown per cell, exactly incompressible) or "
+                 "condensed (eliminated cell by cell, p = K (J̄ − 1): the mean-dilatation method, "
+                 "O(μ/K) from mixed; docs/hyperelastic.md)")
     load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
         self.require_nonnegative("mesh_size")
         check_element(self.element)
+        if self.dg0_pressure == "condensed" and self.element != "Q1P0":
+            raise ParameterError("dg0_pressure", f"condensed needs element Q1P0, not {self.element}")
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius}), "
                                  f"got {self.outer_radius}")
@@ -100,7 +108,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             shell = spherical_shell(params.inner_radius, params.outer_radius, params.element_size,
                                     order=family.geometry_order, hexahedra=family.hexahedral,
                                     comm=ctx.comm)
-        fields, tests = solid_fields(shell.mesh, family)
+        condensed = params.dg0_pressure == "condensed"
+        fields, tests = solid_fields(shell.mesh, family, condensed=condensed)
         u, v = fields[0], tests[0]
         metadata = {"quadrature_degree": family.quadrature_degree}
         ds, dx = shell.ds(metadata), shell.dx(metadata)
@@ -108,14 +117,19 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         # material numbers as Constants, not literals: a sweep over them compiles the forms once
         c10 = dolfinx.fem.Constant(shell.mesh, params.c10)
         bulk_modulus = dolfinx.fem.Constant(shell.mesh, params.bulk_modulus)
-        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx, bulk_modulus)
-                    + follower_pressure(pressure, u, v, ds(shell.tag("cavity_wall"))))
         bcs = symmetry_bcs(u.function_space, shell, {"symmetry_x": 0, "symmetry_y": 1,
                                                      "symmetry_z": 2})
+        mean_dilatation = MeanDilatation(u, bulk_modulus, dx, bcs) if condensed else None
+        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx, bulk_modulus,
+                                   condensed_pressure=getattr(mean_dilatation, "pressure", None))
+                    + follower_pressure(pressure, u, v, ds(shell.tag("cavity_wall"))))
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
                                  iterative=params.linear_solver(2 * c10, dx),
                                  auto_factorisation=auto_factorisation(params.element))
+        if mean_dilatation is not None:
+            solver.state_hooks.append(mean_dilatation.update)
+            solver.jacobian_hooks.append(mean_dilatation.jacobian_hook)
 
         volume_form = dolfinx.fem.form(8.0 * enclosed_volume(u, ds(shell.tag("cavity_wall"))))
         x = ufl.SpatialCoordinate(shell.mesh) + u
@@ -130,7 +144,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         u.name = "displacement"
         writer = ctx.field_writer([u])
-        pressure_out = [lagrange_view(fields[1], "pressure")] if len(fields) > 1 else []
+        pressure_field = mean_dilatation.pressure if condensed else fields[1] if len(fields) > 1 else None
+        pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
         writer_p = ctx.field_writer([view for view, _ in pressure_out])
         series = ctx.pyvista_series()
         # pressure on the displacement's nodes, for pyvista (one grid, one space); made only

@@ -12,15 +12,20 @@ from eyemech.forms import (
     Material,
     deformation_gradient,
     incompressible_energy_density,
+    mean_dilatation_work_density,
     nearly_incompressible_energy_density,
 )
 from eyemech.problems.solid.spaces import ElementFamily
 
 
 def solid_residual(material: Material | Mapping[int, Material], family: ElementFamily, fields,
-                   tests, dx, bulk_modulus=None):
+                   tests, dx, bulk_modulus=None, condensed_pressure=None):
     """Residual (sum over blocks) of the stored energy; ``fields``/``tests`` start with
     u (and p for mixed families) as returned by :func:`spaces.solid_fields`.
+
+    ``condensed_pressure``: Q1P0 with its DG0 pressure condensed, the field p̄ of
+    :class:`~eyemech.problems.solid.mean_dilatation.MeanDilatation` (held fixed in the
+    residual's variation; ``fields`` then start with u alone).
 
     ``material`` is one law for the whole mesh, or ``{cell_tag: law}`` integrated over
     ``dx(cell_tag)`` (``dx`` must then carry the cell tags as subdomain data)."""
@@ -32,12 +37,14 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     energy = 0
     for tag, law in parts:
         measure = dx if tag is None else dx(tag)
-        if family.pressure_family is None:
+        if condensed_pressure is not None:
+            energy += mean_dilatation_work_density(law, F, condensed_pressure) * measure
+        elif family.pressure_family is None:
             energy += nearly_incompressible_energy_density(law, F, bulk_modulus) * measure
         else:
             energy += incompressible_energy_density(law, F, fields[1]) * measure
     residual = ufl.derivative(energy, u, v)
-    if family.pressure_family is not None:
+    if family.pressure_family is not None and condensed_pressure is None:
         residual += ufl.derivative(energy, fields[1], tests[1])
     return residual
 

@@ -100,12 +100,16 @@ def mixed_displacement_pressure(mesh: dolfinx.mesh.Mesh, family: ElementFamily):
     return (u, p), test_functions(V, Q)
 
 
-def solid_fields(mesh: dolfinx.mesh.Mesh, family: ElementFamily, *extra: dolfinx.fem.FunctionSpace):
+def solid_fields(mesh: dolfinx.mesh.Mesh, family: ElementFamily, *extra: dolfinx.fem.FunctionSpace,
+                 condensed: bool = False):
     """Unknowns and test functions of a solid of ``family``: [u, p] (mixed families)
-    or [u] (displacement only), followed by one per ``extra`` space (e.g. a Real
-    space for a cavity pressure), all in one blocked system."""
+    or [u] (displacement only, or ``condensed``: Q1P0's pressure eliminated cell by cell,
+    :mod:`~eyemech.problems.solid.mean_dilatation`), followed by one per ``extra`` space
+    (e.g. a Real space for a cavity pressure), all in one blocked system."""
+    if condensed and family.name != "Q1P0":
+        raise ValueError(f"only Q1P0's DG0 pressure condenses cell by cell, not {family.name}'s")
     spaces = [displacement_space(mesh, family)]
-    if family.pressure_family is not None:
+    if family.pressure_family is not None and not condensed:
         spaces.append(pressure_space(mesh, family))
     spaces += list(extra)
     return [dolfinx.fem.Function(V) for V in spaces], list(test_functions(*spaces))

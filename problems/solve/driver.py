@@ -293,6 +293,10 @@ class NonlinearSolver:
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
+        # run with the unknowns at x before the residual and the Jacobian are assembled, and
+        # after a state is restored: fields computed from the unknowns that the forms read
+        # as coefficients (e.g. the condensed pressure, problems/solid/mean_dilatation.py)
+        self.state_hooks: list[Callable[[], None]] = []
         # (save, restore) pairs of the hooks' memory between iterates (:meth:`save_memory`)
         self.memory_hooks: list[tuple[Callable[[], object], Callable[[object], None]]] = []
         self._start_memory: list = []
@@ -369,6 +373,7 @@ class NonlinearSolver:
                 calls[0] += 1
                 if raise_on and calls[0] == 2:  # test hook (problems/run/faults.py)
                     raise_test_error(snes.comm.tompi4py().rank)
+                self._update_state(x)
                 f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
                 for hook in self.residual_hooks:
                     hook(x, vec)
@@ -385,6 +390,7 @@ class NonlinearSolver:
             self._jacobians += 1
             self._jacobian_valid = True
             with self._remember_errors():
+                self._update_state(x)
                 j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
                 for hook in self.jacobian_hooks:
                     hook(x, mat)
@@ -394,6 +400,18 @@ class NonlinearSolver:
 
         self.snes.setFunction(residual, b)
         self.snes.setJacobian(jacobian, A, P)
+
+    def _update_state(self, x: PETSc.Vec) -> None:
+        """The unknowns set to x (as DOLFINx's assembly callbacks set them), then the
+        ``state_hooks``."""
+        if not self.state_hooks:
+            return
+        x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        dolfinx.fem.petsc.assign(x, self.unknowns if len(self.unknowns) > 1 else self.unknowns[0])
+        for u in self.unknowns:
+            u.x.scatter_forward()
+        for hook in self.state_hooks:
+            hook()
 
     @contextlib.contextmanager
     def _remember_errors(self):
@@ -461,6 +479,8 @@ class NonlinearSolver:
         for u, values in zip(self.unknowns, state):
             u.x.array[:] = values
             u.x.scatter_forward()
+        for hook in self.state_hooks:
+            hook()
 
     def jacobian_nonzeros(self) -> int:
         """Nonzeros allocated in the Jacobian (global)."""
