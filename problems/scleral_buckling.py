@@ -130,6 +130,10 @@ CORNEA_TO_SCLERA = 0.0333 / 0.0833
 # "The frictionless buckle's spring"
 FRICTIONLESS_SLIP_STIFFNESS = 0.003
 
+# hexahedra through the sclera: 8 layers of the 0.5 mm equator are 0.06 mm thick, far below
+# the in-plane size of every named resolution (in-plane over layer thickness 36 (coarse) to 11 (paper) at 8 layers)
+MAX_COAT_LAYERS = 8
+
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra) and its three
 # steps (IOP, buckle, sutures), without the settling step
 BENCHMARK = {"resolution": "paper", "settle": False}
@@ -150,6 +154,9 @@ class Parameters(SceneParameters, SolverChoice):
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
                                    "meshing; the paper resolution has 8,150)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
+    coat_layers: int = field(
+        2, "hexahedra through the sclera's and the cornea's thickness (1-8); Q1P0 with 2 locks "
+           "in bending: docs/scleral_buckling.md, Q2P1 and Q1P0 at equal accuracy")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa")
@@ -391,6 +398,9 @@ class Parameters(SceneParameters, SolverChoice):
                               "suture_bite_radius", "tire_length",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
+        if not 1 <= self.coat_layers <= MAX_COAT_LAYERS:
+            raise ParameterError("coat_layers", f"{self.coat_layers}: an integer from 1 to "
+                                 f"{MAX_COAT_LAYERS} (hexahedra through the sclera)")
         if not 0 <= self.jacobian_reuse < 1:
             raise ParameterError("jacobian_reuse", f"{self.jacobian_reuse}: a contraction factor "
                                  "in [0, 1) (0: full Newton)")
@@ -529,7 +539,7 @@ class Parameters(SceneParameters, SolverChoice):
         return self.geometry().estimated_cells
 
     def geometry(self) -> EyeGeometry:
-        return EyeGeometry(cells_per_edge=self.cells_per_edge,
+        return EyeGeometry(cells_per_edge=self.cells_per_edge, coat_layers=self.coat_layers,
                            detachment_height=self.detachment_height,
                            retina_thickness=self.retina_thickness, lens=self.lens,
                            tear_radius=self.tear_radius,
