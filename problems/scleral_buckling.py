@@ -130,8 +130,8 @@ CORNEA_TO_SCLERA = 0.0333 / 0.0833
 # "The frictionless buckle's spring"
 FRICTIONLESS_SLIP_STIFFNESS = 0.003
 
-# hexahedra through the sclera: 8 layers of the 0.5 mm equator are 0.06 mm thick, far below
-# the in-plane size of every named resolution (in-plane over layer thickness 36 (coarse) to 11 (paper) at 8 layers)
+# hexahedra through the sclera: 8 layers of the 0.5 mm equator are 0.06 mm thick, in-plane
+# sizes 36 (coarse) to 11 (paper) times that; more would only add cells
 MAX_COAT_LAYERS = 8
 
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra) and its three
@@ -155,8 +155,9 @@ class Parameters(SceneParameters, SolverChoice):
                                    "meshing; the paper resolution has 8,150)")
     element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)")
     coat_layers: int = field(
-        2, "hexahedra through the sclera's and the cornea's thickness (1-8); Q1P0 with 2 locks "
-           "in bending: docs/scleral_buckling.md, Q2P1 and Q1P0 at equal accuracy")
+        2, "hexahedra through the sclera (1-8; the cornea has 2 more); more do not relieve "
+           "Q1P0's bending locking, which is in-plane (ΔAL +0.3-0.5 % with 4 or 6): "
+           "docs/scleral_buckling.md, Q2P1 and Q1P0 at equal accuracy")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa")
