@@ -120,6 +120,8 @@ class EyeGeometry:
     def validate(self) -> None:
         if self.cells_per_edge % 2 or self.cells_per_edge < 4:
             raise MeshError("cells_per_edge must be an even number >= 4")
+        if self.coat_layers < 1:
+            raise MeshError("coat_layers must be >= 1")
         if not self.ora_serrata_angle < self.detachment_from < self.tear_angle < self.detachment_to:
             raise MeshError("need ora serrata < detachment start < tear angle < detachment end")
         if self.cornea_diameter / 2 >= self.sclera_radius or self.cornea_radius <= self.cornea_diameter / 2:

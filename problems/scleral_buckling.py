@@ -131,6 +131,10 @@ CORNEA_TO_SCLERA = 0.0333 / 0.0833
 # "The frictionless buckle's spring"
 FRICTIONLESS_SLIP_STIFFNESS = 0.003
 
+# hexahedra through the sclera: 8 layers of the 0.5 mm equator are 0.06 mm thick, in-plane
+# sizes 36 (coarse) to 11 (paper) times that; more would only add cells
+MAX_COAT_LAYERS = 8
+
 # `eyemech bench scleral-buckling`: the paper's resolution (>= 7,421 hexahedra) and its three
 # steps (IOP, buckle, sutures), without the settling step
 BENCHMARK = {"resolution": "paper", "settle": False}
@@ -163,6 +167,10 @@ class Parameters(SceneParameters, SolverChoice):
                "(its volume change O(μ/κ) of its strain): 300 ends the paper's three steps within "
                "0.4 % of mixed; 100 moves the IOP 1.4 %; 1,000 fails in step 2 at the paper's "
                "resolution, 10,000 in step 1 (docs/scleral_buckling.md, \"Condensed Q1P0\")")
+    coat_layers: int = field(
+        2, "hexahedra through the sclera (1-8; the cornea has 2 more); more do not relieve "
+           "Q1P0's bending locking, which is in-plane (ΔAL +0.3-0.5 % with 4 or 6): "
+           "docs/scleral_buckling.md, Q2P1 and Q1P0 at equal accuracy")
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg")
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa")
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa")
@@ -410,6 +418,9 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("dg0_pressure", "condensed needs element Q1P0 and solver direct "
                                  f"(the iterative solver splits [u, p]), not {self.element}, "
                                  f"{self.solver}")
+        if not 1 <= self.coat_layers <= MAX_COAT_LAYERS:
+            raise ParameterError("coat_layers", f"{self.coat_layers}: an integer from 1 to "
+                                 f"{MAX_COAT_LAYERS} (hexahedra through the sclera)")
         if not 0 <= self.jacobian_reuse < 1:
             raise ParameterError("jacobian_reuse", f"{self.jacobian_reuse}: a contraction factor "
                                  "in [0, 1) (0: full Newton)")
@@ -548,7 +559,7 @@ class Parameters(SceneParameters, SolverChoice):
         return self.geometry().estimated_cells
 
     def geometry(self) -> EyeGeometry:
-        return EyeGeometry(cells_per_edge=self.cells_per_edge,
+        return EyeGeometry(cells_per_edge=self.cells_per_edge, coat_layers=self.coat_layers,
                            detachment_height=self.detachment_height,
                            retina_thickness=self.retina_thickness, lens=self.lens,
                            tear_radius=self.tear_radius,

@@ -143,6 +143,35 @@ def test_eye_sizes_from_the_bending_length_and_absolute():
     build(scleral_buckling.Parameters, {"cells_per_bending_length": "2.5", "retina_thickness": "0.1"})
 
 
+@pytest.mark.parametrize("value", ["0", "9", "2.5"])
+def test_eye_coat_layers_out_of_range_are_refused_naming_it(value):
+    with pytest.raises(ParameterError) as info:
+        build(scleral_buckling.Parameters, {"coat_layers": value})
+    assert info.value.key == "coat_layers"
+
+
+def test_eye_coat_layers_split_the_same_wall():
+    """4 layers: twice the sclera's hexahedra of 2, the other coats' unchanged (the cornea
+    fills every layer of the wall, so it gains the 2 extra), the same outer and inner
+    surfaces, and the estimate before meshing within 1 %."""
+    from eyemech.meshes.eye import TISSUES
+
+    params = scleral_buckling.Parameters(resolution="coarse", coat_layers=4)
+    geometry = params.geometry()
+    assert geometry.coat_layers == 4 and geometry.cells_per_edge == 8
+    four, two = build_grid(geometry), build_grid(EyeGeometry(cells_per_edge=8))
+    assert geometry.estimated_cells == pytest.approx(len(four.hexes), rel=0.01)  # 1,184 / 1,186
+    count = {name: [int((grid.tissue == TISSUES.index(name)).sum()) for grid in (two, four)]
+             for name in TISSUES}
+    assert count.pop("sclera") == [360, 720]
+    assert count.pop("cornea") == [48, 72]  # 12 quads × (2 + 2), × (4 + 2)
+    assert all(a == b for a, b in count.values()), count
+    for name in ("sclera_outer", "cornea_outer", "retina_inner"):
+        assert len(four.faces[name]) == len(two.faces[name])
+        assert np.allclose(np.sort(four.points[four.faces[name]].ravel()),
+                           np.sort(two.points[two.faces[name]].ravel()))
+
+
 # -- the structured benchmarks: exact counts before meshing, refused past the limit -------
 @pytest.mark.parametrize("diagonal", ["crossed", "right", "alternating"])
 def test_shell_grid_counts_are_exact(diagonal):
