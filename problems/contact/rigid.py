@@ -7,12 +7,14 @@ from __future__ import annotations
 import dolfinx
 import dolfinx.fem
 import numpy as np
+import ufl
 from mpi4py import MPI
 
 from eyemech.forms import contact
 from eyemech.forms.kinematics import without_variables
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.parameters import ParameterError
+from eyemech.problems.solve.augmentation import relative_change
 
 
 def slave_nodes(u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str) -> np.ndarray:
@@ -62,8 +64,77 @@ def surface_integral(integrand, measure) -> callable:
     return evaluate
 
 
-def resultant_force(obstacle, u, penalty, measure) -> list[callable]:
-    """The three components of ∫ α ⟨−g⟩ n dA: the force the obstacle exerts on the body."""
-    traction = contact.contact_traction(obstacle, u, penalty)
+def resultant_force(obstacle, u, penalty, measure, multiplier=None) -> list[callable]:
+    """The three components of ∫ α ⟨−g⟩ n dA (∫ ⟨λ − α g⟩ n dA with an augmented Lagrangian
+    ``multiplier``): the force the obstacle exerts on the body."""
+    traction = contact.contact_traction(obstacle, u, penalty, multiplier)
     return [surface_integral(traction[i], measure) for i in range(len(u))]
+
+
+
+class ObstacleMultipliers:
+    """Augmented Lagrangian multipliers λ of a rigid obstacle's contact, one per node of the
+    ``slave`` facets: a scalar Lagrange Function of ``u``'s degree (``function``, zero off
+    the slave surface) for :func:`eyemech.forms.contact.smoothed_penalty_energy`'s
+    ``multiplier``.
+
+    Nodal rather than at the contact integral's quadrature points: DOLFINx's quadrature
+    spaces live at cell points, not at a facet integral's, and a nodal field is Laursen's
+    node-based multiplier, checkpointed as any Function. Between the nodes the integrand
+    sees λ interpolated, so at Uzawa's fixed point the nodes in contact have g = 0 and the
+    quadrature points between them the small remainder of a curved obstacle against a
+    bilinear face. The update λ ← ⟨λ − α g⟩ (:func:`eyemech.forms.contact.augmented_pressure`)
+    is interpolated at the nodes of the cells next to the slave facets."""
+
+    def __init__(self, obstacle, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str,
+                 penalty, smoothing=0.0, name: str = "contact_multiplier"):
+        tagged.require_nonempty(slave)
+        mesh = tagged.mesh
+        degree = u.function_space.ufl_element().embedded_superdegree
+        space = dolfinx.fem.functionspace(mesh, ("Lagrange", degree))
+        self.function = dolfinx.fem.Function(space, name=name)
+        self._trial = dolfinx.fem.Function(space)
+        fdim = mesh.topology.dim - 1
+        facets = tagged.facets(slave)
+        self.nodes = dolfinx.fem.locate_dofs_topological(space, fdim, facets)
+        self.owned = self.nodes[self.nodes < space.dofmap.index_map.size_local]
+        mesh.topology.create_connectivity(fdim, mesh.topology.dim)
+        self.cells = dolfinx.mesh.compute_incident_entities(mesh.topology, facets, fdim,
+                                                            mesh.topology.dim)
+        gap = obstacle.gap(contact.deformed_position(u))
+        points = space.element.interpolation_points
+        self._update = dolfinx.fem.Expression(without_variables(
+            contact.augmented_pressure(gap, self.function, penalty, smoothing)), points)
+        self._penetration = dolfinx.fem.Expression(without_variables(
+            ufl.max_value(-gap, 0.0)), points)
+        self._next = self.function.x.array.copy()
+        self.comm = mesh.comm
+
+    def trial_multipliers(self) -> float:
+        """λ_new = p(g − λ/α) at the slave nodes at the current ``u``, kept aside; the
+        relative change ‖λ_new − λ‖/‖λ_new‖ over the owned slave nodes (collective)."""
+        self._trial.interpolate(self._update, cells0=self.cells)
+        self._next = np.zeros_like(self.function.x.array)
+        self._next[self.nodes] = self._trial.x.array[self.nodes]
+        return relative_change(self._next[self.owned], self.function.x.array[self.owned], self.comm)
+
+    def commit_multipliers(self) -> None:
+        self.function.x.array[:] = self._next
+        self.function.x.scatter_forward()
+
+    def memory(self) -> np.ndarray:
+        return self.function.x.array.copy()
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.function.x.array[:] = saved
+
+    def max_penetration(self) -> float:
+        """max ⟨−g⟩ over the slave nodes (collective)."""
+        self._trial.interpolate(self._penetration, cells0=self.cells)
+        local = float(np.max(self._trial.x.array[self.owned], initial=0.0))
+        return self.comm.allreduce(local, op=MPI.MAX)
+
+    def max_multiplier(self) -> float:
+        local = float(np.max(self.function.x.array[self.owned], initial=0.0))
+        return self.comm.allreduce(local, op=MPI.MAX)
 
