@@ -7,7 +7,6 @@ from __future__ import annotations
 import dolfinx
 import dolfinx.fem
 import numpy as np
-import ufl
 from mpi4py import MPI
 
 from eyemech.forms import contact
@@ -80,11 +79,15 @@ class ObstacleMultipliers:
 
     Nodal rather than at the contact integral's quadrature points: DOLFINx's quadrature
     spaces live at cell points, not at a facet integral's, and a nodal field is Laursen's
-    node-based multiplier, checkpointed as any Function. Between the nodes the integrand
-    sees λ interpolated, so at Uzawa's fixed point the nodes in contact have g = 0 and the
-    quadrature points between them the small remainder of a curved obstacle against a
-    bilinear face. The update λ ← ⟨λ − α g⟩ (:func:`eyemech.forms.contact.augmented_pressure`)
-    is interpolated at the nodes of the cells next to the slave facets."""
+    node-based multiplier, checkpointed as any Function. The update λ ← ⟨λ − α g⟩
+    (:func:`eyemech.forms.contact.augmented_pressure`) is interpolated at the nodes of the
+    cells next to the slave facets, so at Uzawa's fixed point no node lies inside the
+    obstacle, while the integrand sees λ interpolated between the nodes plus the penalty
+    α⟨−g⟩ of the quadrature points that a face spanning a convex corner puts inside it:
+    the converged answer lies between the nodal constraint (α → 0) and the penalty's
+    quadrature-point constraint (α → ∞), and depends on α where the mesh does not resolve
+    the obstacle's curvature (the buckle's corners: docs/contact.md, "Augmented
+    Lagrangian")."""
 
     def __init__(self, obstacle, u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str,
                  penalty, smoothing=0.0, name: str = "contact_multiplier"):
@@ -105,8 +108,6 @@ class ObstacleMultipliers:
         points = space.element.interpolation_points
         self._update = dolfinx.fem.Expression(without_variables(
             contact.augmented_pressure(gap, self.function, penalty, smoothing)), points)
-        self._penetration = dolfinx.fem.Expression(without_variables(
-            ufl.max_value(-gap, 0.0)), points)
         self._next = self.function.x.array.copy()
         self.comm = mesh.comm
 
@@ -127,14 +128,3 @@ class ObstacleMultipliers:
 
     def restore(self, saved: np.ndarray) -> None:
         self.function.x.array[:] = saved
-
-    def max_penetration(self) -> float:
-        """max ⟨−g⟩ over the slave nodes (collective)."""
-        self._trial.interpolate(self._penetration, cells0=self.cells)
-        local = float(np.max(self._trial.x.array[self.owned], initial=0.0))
-        return self.comm.allreduce(local, op=MPI.MAX)
-
-    def max_multiplier(self) -> float:
-        local = float(np.max(self.function.x.array[self.owned], initial=0.0))
-        return self.comm.allreduce(local, op=MPI.MAX)
-
