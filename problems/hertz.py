@@ -74,10 +74,11 @@ class Parameters(SceneParameters):
     initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm")
     load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
     contact_method: Literal["penalty", "augmented-lagrangian"] = field(
-        "penalty", "penalty: p = α⟨−g⟩; augmented-lagrangian: p = ⟨λ − α g⟩ with nodal multipliers "
-        "λ updated after every converged load step (Uzawa) until they change by less than "
-        "augmentation_tolerance: the penetration falls towards zero at any penalty "
-        "(docs/contact.md, Augmented Lagrangian)")
+        "penalty", "penalty: p = α⟨−g⟩; augmented-lagrangian: p = ⟨λ − α g⟩ with multipliers λ at "
+        "the ball's surface nodes, updated after every converged load step (Uzawa) until they "
+        "change by less than augmentation_tolerance: at factor 3 the penetration 460× below the "
+        "penalty's, the force 0.24 % above factor 300's (the nodal constraint against the "
+        "penalty's Gauss points; docs/contact.md §4b)")
     augmentation_tolerance: float = field(
         0.01, "augmented-lagrangian: a step is done when its multipliers change by at most this "
         "fraction (‖λ_new − λ‖/‖λ_new‖)")
