@@ -63,7 +63,6 @@ class Augmentation:
     max_updates: int = 10
     updates: int = 0          # augmentations (Newton solves after a multiplier update), all steps
     limit_reached: int = 0    # steps accepted at max_updates
-    last_change: float = 0.0  # the relative change of the multipliers at the last check
 
     def run(self, solver: "NonlinearSolver", iterations: int) -> tuple[bool, int, int]:
         """After a converged solve: update and re-solve until the multipliers settle.
@@ -71,7 +70,6 @@ class Augmentation:
         performed = 0
         while True:
             change = max(m.trial_multipliers() for m in self.multipliers)
-            self.last_change = change
             if change <= self.tolerance:
                 return True, iterations, performed
             if performed >= self.max_updates:
