@@ -246,9 +246,40 @@ def smoothed_penalty_density(g, penalty, smoothing):
                         penalty * (eps - g) ** 3 / (12 * eps)))
 
 
-def smoothed_penalty_energy(obstacle, u, penalty, smoothing, measure):
-    """Π_c = ∫ φ(g(X + u)) dA over ``measure`` with φ of :func:`smoothed_penalty_density`."""
-    return smoothed_penalty_density(obstacle.gap(deformed_position(u)), penalty, smoothing) * measure
+def smoothed_penalty_energy(obstacle, u, penalty, smoothing, measure, multiplier=None):
+    """Π_c = ∫ φ(g(X + u)) dA over ``measure`` with φ of :func:`smoothed_penalty_density`;
+    with a ``multiplier`` λ (a UFL scalar, e.g. a nodal Function) the augmented Lagrangian
+    energy ∫ φ(g − λ/α) dA of :func:`augmented_gap` (None: the penalty, the λ = 0 case)."""
+    gap = obstacle.gap(deformed_position(u))
+    if multiplier is not None:
+        gap = augmented_gap(gap, multiplier, penalty)
+    return smoothed_penalty_density(gap, penalty, smoothing) * measure
+
+
+def augmented_gap(g, multiplier, penalty):
+    """g − λ/α: the augmented Lagrangian contact law is the penalty law of this shifted gap.
+
+    With the multiplier λ ≥ 0 (a contact pressure) held fixed, the pressure
+    p = α⟨−(g − λ/α)⟩ = ⟨λ − α g⟩ (Simo & Laursen 1992; Laursen 2002, §5.3), and the
+    energy density φ(g − λ/α) of :func:`smoothed_penalty_density` (up to a constant) has
+    p = −∂φ/∂g; λ = 0 is the penalty. Uzawa's update after each converged solve is
+    λ ← p(g − λ/α) (:func:`augmented_pressure`); at its fixed point a point in contact
+    carries the pressure λ at g = 0 (with the round-off ε: at the gap where p(g) = λ),
+    whatever α. Works on UFL expressions and on numpy arrays."""
+    return g - multiplier / penalty
+
+
+def augmented_pressure(g, multiplier, penalty, smoothing):
+    """p = −φ'(g − λ/α) ≥ 0 in UFL (φ of :func:`smoothed_penalty_density`, ε = ``smoothing``):
+    the contact pressure with the multiplier λ held fixed, and Uzawa's next λ."""
+    shifted = augmented_gap(g, multiplier, penalty)
+    if isinstance(smoothing, (int, float)) and smoothing <= 0:
+        return ufl.max_value(-penalty * shifted, 0.0)
+    eps = smoothing
+    return ufl.conditional(
+        ufl.ge(shifted, eps), 0.0,
+        ufl.conditional(ufl.le(shifted, -eps), -penalty * shifted,
+                        penalty * (eps - shifted) ** 2 / (4 * eps)))
 
 
 def smoothed_penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -274,9 +305,17 @@ def tangential_slips(normal: np.ndarray, anchor: np.ndarray, positions: np.ndarr
     return projector, slip, np.linalg.norm(slip, axis=1)
 
 
-def contact_traction(obstacle, u, penalty):
-    """t = α ⟨−g⟩ n: the force per reference area the obstacle exerts on the body."""
-    return penalty * penetration(obstacle, u) * obstacle_normal(obstacle, u)
+def contact_pressure(obstacle, u, penalty, multiplier=None):
+    """α ⟨−g⟩, or ⟨λ − α g⟩ with an augmented Lagrangian ``multiplier`` λ."""
+    if multiplier is None:
+        return penalty * penetration(obstacle, u)
+    return augmented_pressure(obstacle.gap(deformed_position(u)), multiplier, penalty, 0.0)
+
+
+def contact_traction(obstacle, u, penalty, multiplier=None):
+    """t = α ⟨−g⟩ n (⟨λ − α g⟩ n with a ``multiplier``): the force per reference area the
+    obstacle exerts on the body."""
+    return contact_pressure(obstacle, u, penalty, multiplier) * obstacle_normal(obstacle, u)
 
 
 def default_penalty(youngs_modulus: float, mesh_size: float, factor: float = 30.0) -> float:

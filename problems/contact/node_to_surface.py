@@ -51,11 +51,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
-from eyemech.forms.contact import smoothed_penalty_pressure
+from eyemech.forms.contact import augmented_gap, smoothed_penalty_pressure
 from eyemech.meshes.tagged import MeshError, TaggedMesh
 from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.run.results import Timings
 from eyemech.problems.solid.spaces import PetscNodeLayout
+from eyemech.problems.solve.augmentation import relative_change
 
 
 @dataclasses.dataclass
@@ -68,6 +69,13 @@ class ContactState:
     triangles: np.ndarray       # master triangle index of each active pair
     shape: np.ndarray           # (n, 3) N_j(ξ) at the closest point
     min_gap: float              # smallest gap of any slave node with a partner (rank-local)
+    shifts: np.ndarray | None = None  # λ/α of the active pairs (augmented Lagrangian)
+
+    @property
+    def law_gaps(self) -> np.ndarray:
+        """The gaps the pressure law sees: g − λ/α (:func:`~eyemech.forms.contact.augmented_gap`;
+        g itself with no multipliers, the penalty)."""
+        return self.gaps if self.shifts is None else self.gaps - self.shifts
 
 
 class NodeToSurfaceContact:
@@ -134,6 +142,11 @@ class NodeToSurfaceContact:
         self._drop_slaves_on_master()
         self._constrained = set(self.layout.constrained_dofs(bcs).tolist())
         self.state: ContactState | None = None
+        # augmented Lagrangian: a contact pressure λ per owned slave node, held fixed during a
+        # Newton solve and updated by :meth:`trial_multipliers` / :meth:`commit_multipliers`
+        # after it (all zero: the penalty)
+        self.multipliers = np.zeros(len(self.slave_blocks))
+        self._next_multipliers = self.multipliers
 
     # -- set-up ---------------------------------------------------------------------------
     def _slave_setup(self, tagged: TaggedMesh, slave: str) -> None:
@@ -343,11 +356,12 @@ class NodeToSurfaceContact:
             gaps = np.einsum("ij,ij->i", slaves - a, normal)
             # a pair far below the master surface is on the wrong side: not contact
             paired = gaps > -self.search_depth
-            active = np.flatnonzero(paired & (gaps < self.smoothing))
+            shifts = self.multipliers / self.penalty  # λ/α of the augmented Lagrangian
+            active = np.flatnonzero(paired & (gaps - shifts < self.smoothing))
             min_gap = float(np.min(gaps[paired], initial=np.inf))
             self.slave_gaps = np.where(paired, gaps, np.inf)  # every owned slave node's gap
             return ContactState(active, gaps[active], normal[active], tri[active],
-                                shape[active], min_gap)
+                                shape[active], min_gap, shifts[active])
 
     def _sticky(self, slaves, corners, nearest, best, rows):
         """Keep the previous triangle while the node's projection on its plane stays
@@ -383,7 +397,7 @@ class NodeToSurfaceContact:
         """F += −w p(g) D for the active pairs (u already holds the iterate)."""
         self.state = state = self.search()
         dofs = self._pair_dofs(state)
-        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        pressure, _ = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
         scale = -self.slave_weights[state.active] * pressure
         values = scale[:, None] * self._pair_vectors(state)
         keep = ~np.isin(dofs, list(self._constrained)) if self._constrained else np.ones_like(dofs, bool)
@@ -396,7 +410,7 @@ class NodeToSurfaceContact:
         state = self.search()
         dofs = self._pair_dofs(state)
         D = self._pair_vectors(state)
-        _, slope = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        _, slope = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
         stiffness = -self.slave_weights[state.active] * slope
         constrained = self._constrained
         # timed apart (inside "assembly"): includes PETSc's mallocs for new nonzeros
@@ -413,7 +427,7 @@ class NodeToSurfaceContact:
         """Collective: active nodes, max penetration, contact area and normal force."""
         state = self.state or self.search()
         weights = self.slave_weights[state.active]
-        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        pressure, _ = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
         touching = state.gaps < 0
         local = np.array([touching.sum(), weights[touching].sum(), (weights * pressure).sum()])
         total = self.comm.allreduce(local, op=MPI.SUM)
@@ -434,10 +448,46 @@ class NodeToSurfaceContact:
         """(reference positions (n, 3), contact pressure p(g)) of this rank's slave nodes
         that touch (g < 0)."""
         state = self.state or self.search()
-        pressure, _ = penalty_pressure(state.gaps, self.penalty, self.smoothing)
+        pressure, _ = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
         touching = state.gaps < 0
         nodes = self.slave_blocks[state.active[touching]]
         return self.reference[nodes], pressure[touching]
+
+    # -- augmented Lagrangian (Uzawa) ----------------------------------------------------
+    def trial_multipliers(self) -> float:
+        """Uzawa's next multipliers at the current ``u`` (a converged solve's), λ ← p(g − λ/α)
+        per owned slave node (0 for a node without a partner), kept aside until
+        :meth:`commit_multipliers`; returns their relative change ‖λ_new − λ‖ / ‖λ_new‖
+        over all ranks (collective; 0 when both are zero)."""
+        self.search()  # the gaps at this u (the sticky triangles as the last residual's)
+        self._next_multipliers, _ = penalty_pressure(
+            augmented_gap(self.slave_gaps, self.multipliers, self.penalty), self.penalty,
+            self.smoothing)
+        return relative_change(self._next_multipliers, self.multipliers, self.comm)
+
+    def commit_multipliers(self) -> None:
+        self.multipliers = np.array(self._next_multipliers, dtype=float)
+
+    def multiplier_memory(self) -> np.ndarray:
+        return self.multipliers.copy()
+
+    def restore_multipliers(self, saved: np.ndarray) -> None:
+        self.multipliers = np.array(saved, dtype=float)
+
+    def multiplier_state(self) -> np.ndarray:
+        """(reference position, λ) of every slave node, rows (n, 4) gathered on every rank:
+        a checkpoint that does not depend on the partition."""
+        local = np.hstack([self.reference[self.slave_blocks], self.multipliers[:, None]])
+        return np.vstack(self.comm.allgather(local))
+
+    def restore_multiplier_state(self, saved: np.ndarray) -> None:
+        saved = np.asarray(saved, dtype=float).reshape(-1, 4)
+        if len(self.slave_blocks) == 0:
+            return
+        distance, row = cKDTree(saved[:, :3]).query(self.reference[self.slave_blocks])
+        if distance.max() > 1e-9 * (1.0 + np.abs(saved[:, :3]).max()):
+            raise ValueError("contact checkpoint: slave nodes differ from this mesh's")
+        self.multipliers = saved[row, 3].copy()
 
     # -- a failed solve's retry (NonlinearSolver.memory_hooks) ----------------------------
     def memory(self) -> np.ndarray | None:

@@ -62,6 +62,7 @@ from eyemech.problems.solve.stale_factorisation import StaleFactorisation
 
 if TYPE_CHECKING:
     from eyemech.problems.run.checkpoint import Checkpoints
+    from eyemech.problems.solve.augmentation import Augmentation
 
 log = logging.getLogger("eyemech")
 
@@ -813,6 +814,7 @@ class StepRecord:
     symbolic_factorisations: int = 0  # symbolic analyses
     krylov_iterations_all: int = 0    # Krylov iterations of all attempts (0: direct solve)
     matrix_mallocs: int = 0           # reallocations of the Jacobian's storage
+    augmentations: int = 0            # Newton solves after a multiplier update, all attempts
 
     @staticmethod
     def work(counts: SolverCounts) -> dict[str, int]:
@@ -830,14 +832,15 @@ class StepRecord:
                 "jacobians": self.jacobians, "factorisations": self.factorisations,
                 "symbolic_factorisations": self.symbolic_factorisations,
                 "krylov_iterations_all": self.krylov_iterations_all,
-                "matrix_mallocs": self.matrix_mallocs}
+                "matrix_mallocs": self.matrix_mallocs, "augmentations": self.augmentations}
 
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 stepping: Stepping, *, on_converged: Callable[[StepRecord], None] | None = None,
                 label: str = "", quiet: bool = False,
                 checkpoints: "Checkpoints | None" = None,
-                predictor: SecantPredictor | None = None) -> list[StepRecord]:
+                predictor: SecantPredictor | None = None,
+                augmentation: "Augmentation | None" = None) -> list[StepRecord]:
     """Solve along the path: ``apply(value, increment)`` sets loads (or time) for the
     target value, Newton solves, and ``on_converged`` records and updates history
     variables. A failed solve restores the last converged state and halves the
@@ -854,7 +857,12 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
 
     The predictor (``stepping.predictor``) moves the unknowns before each attempt; its
     solve then converges at ‖F‖ ≤ rtol ‖F(u_n, target)‖, the residual the unpredicted
-    start has (:meth:`NonlinearSolver.solve`'s ``reference_norm``)."""
+    start has (:meth:`NonlinearSolver.solve`'s ``reference_norm``).
+
+    ``augmentation`` (augmented Lagrangian contact, :mod:`~eyemech.problems.solve.augmentation`):
+    a step that converged where ``augmentation.due`` says is solved again with updated
+    contact multipliers until they settle; those solves are the step's work (counted in
+    its record, ``augmentations``), and a failed one cuts the step."""
     span = stepping.end - stepping.start
     if span <= 0:
         raise ValueError("stepping.end must be greater than stepping.start")
@@ -887,7 +895,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         counts_before = solver.counts.copy()
         if checkpoints is not None:
             checkpoints.watch_step(solver)
-        cuts = 0
+        cuts = augmented = 0
         while True:
             next_stop = next(s for s in stops if s > value + 1e-12 * span)
             target = min(value + increment, next_stop)
@@ -902,6 +910,9 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                                      reference)
             converged, iterations = solver.solve(reference) if reference is not None \
                 else solver.solve()
+            if converged and augmentation is not None and augmentation.due(target):
+                converged, iterations, updates = augmentation.run(solver, iterations)
+                augmented += updates
             if converged and solver.depth_hooks:
                 depth = solver.depth_through_obstacles()
                 if depth > stepping.depth_limit:
@@ -924,7 +935,8 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                                    *stepping.describe())
         record = StepRecord(step, target, target - value, iterations, cuts,
                             list(solver.residual_history), solver.linear_iterations,
-                            **StepRecord.work(solver.counts - counts_before))
+                            **StepRecord.work(solver.counts - counts_before),
+                            augmentations=augmented)
         value = target
         records.append(record)
         if on_converged is not None:
