@@ -75,7 +75,22 @@ def resultant_force(obstacle, u, penalty, measure, multiplier=None) -> list[call
 
 
 
-class ObstacleMultipliers:
+class _MultiplierField:
+    """What both multiplier layouts share: λ in ``self.function``, the Uzawa update
+    prepared in ``self._next`` and committed at once; memory for a cut load step."""
+
+    def commit_multipliers(self) -> None:
+        self.function.x.array[:] = self._next
+        self.function.x.scatter_forward()
+
+    def memory(self) -> np.ndarray:
+        return self.function.x.array.copy()
+
+    def restore(self, saved: np.ndarray) -> None:
+        self.function.x.array[:] = saved
+
+
+class ObstacleMultipliers(_MultiplierField):
     """Augmented Lagrangian multipliers λ of a rigid obstacle's contact, one per node of the
     ``slave`` facets: a scalar Lagrange Function of ``u``'s degree (``function``, zero off
     the slave surface) for :func:`eyemech.forms.contact.smoothed_penalty_energy`'s
@@ -123,16 +138,6 @@ class ObstacleMultipliers:
         self._next[self.nodes] = self._trial.x.array[self.nodes]
         return relative_change(self._next[self.owned], self.function.x.array[self.owned], self.comm)
 
-    def commit_multipliers(self) -> None:
-        self.function.x.array[:] = self._next
-        self.function.x.scatter_forward()
-
-    def memory(self) -> np.ndarray:
-        return self.function.x.array.copy()
-
-    def restore(self, saved: np.ndarray) -> None:
-        self.function.x.array[:] = saved
-
 
 class FacePoints:
     """The quadrature points of a facet integral over the ``slave`` facets of a hexahedral
@@ -169,7 +174,7 @@ class FacePoints:
         return full[np.arange(len(self.cells)), self.local_facets]
 
 
-class QuadraturePointMultipliers:
+class QuadraturePointMultipliers(_MultiplierField):
     """Augmented Lagrangian multipliers λ of a rigid obstacle's contact at the contact
     integral's quadrature points on a hexahedral mesh's ``slave`` faces, so that Uzawa's
     fixed point is the penalty's own constraint (g ≥ 0 at those points) and does not
@@ -222,16 +227,6 @@ class QuadraturePointMultipliers:
             dofs = self._cell_dofs[self.points.cells[here]][:, self._face_dofs[f]]
             self._next[dofs] = new[here] @ self._inverse[f].T
         return relative_change(new, old, self.comm)
-
-    def commit_multipliers(self) -> None:
-        self.function.x.array[:] = self._next
-        self.function.x.scatter_forward()
-
-    def memory(self) -> np.ndarray:
-        return self.function.x.array.copy()
-
-    def restore(self, saved: np.ndarray) -> None:
-        self.function.x.array[:] = saved
 
     def max_penetration(self) -> float:
         """max ⟨−g⟩ at the points (collective)."""
