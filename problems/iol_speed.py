@@ -62,6 +62,7 @@ import contextlib
 import dataclasses
 import os
 import time
+import weakref
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -199,10 +200,16 @@ class FiniteDifferenceJacobian:
     h = √ε (1 + ‖x‖)/‖v‖) as a PETSc shell matrix: one residual per product."""
 
     def __init__(self, solver: "StepSolver"):
-        self.solver = solver
+        # held weakly: the solver's shell matrix holds this context in C, where a cycle
+        # back to the solver is never collected (problems/solve/callbacks.py)
+        self._solver = weakref.ref(solver)
         self.base = solver.b.duplicate()  # F(x) at the linearisation point
         self.x0 = solver.x.duplicate()
         self.work = solver.b.duplicate()
+
+    @property
+    def solver(self) -> "StepSolver":
+        return self._solver()
 
     def set_point(self) -> None:
         self.solver.x.copy(self.x0)

@@ -11,6 +11,7 @@ try:
 except ImportError:
     pass
 
+import gc
 import json
 import os
 import subprocess
@@ -66,3 +67,22 @@ def compilations(monkeypatch):
 
     monkeypatch.setattr(jit, "_compile_objects", counted)
     return calls
+
+
+def _live_meshes() -> int:
+    import dolfinx.mesh
+
+    return sum(1 for obj in gc.get_objects() if isinstance(obj, dolfinx.mesh.Mesh))
+
+
+@pytest.fixture(autouse=True, scope="module")
+def meshes_are_freed():
+    """Every mesh a test module makes is freed when the module ends: a leaked mesh keeps
+    its MPI communicators, and a process that runs out of them aborts
+    (tests/test_solver_lifetime.py)."""
+    gc.collect()
+    before = _live_meshes()
+    yield
+    gc.collect()
+    leaked = _live_meshes() - before
+    assert leaked <= 0, f"{leaked} meshes outlive the test module that made them"

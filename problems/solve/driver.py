@@ -58,6 +58,7 @@ from eyemech.problems.run.results import (
     Timings,
     record_stopping_criterion,
 )
+from eyemech.problems.solve.callbacks import petsc_callback
 from eyemech.problems.solve.stale_factorisation import StaleFactorisation
 
 if TYPE_CHECKING:
@@ -341,7 +342,7 @@ class NonlinearSolver:
         self.last_counts = SolverCounts()  # work of the last solve
         self._factorisations = FactorisationCounter()
         self.stagnated = False  # the last solve was stopped by the stagnation test
-        self.snes.setMonitor(self._monitor)
+        self.snes.setMonitor(petsc_callback(self._monitor))
 
     def _monitor(self, snes: PETSc.SNES, _iteration: int, norm: float) -> None:
         """Records ‖F_k‖; stops a stagnating backtracking solve (``options.stagnation_window``). SNES
@@ -362,45 +363,45 @@ class NonlinearSolver:
         return self.problem.solver
 
     def _wrap_callbacks(self) -> None:
-        b, (f_call, f_args, f_kargs) = self.snes.getFunction()
-        A, P, (j_call, j_args, j_kargs) = self.snes.getJacobian()
+        b, self._assemble_residual = self.snes.getFunction()
+        A, P, self._assemble_jacobian = self.snes.getJacobian()
+        self._raise_on = test_raise_rank(self.unknowns[0].function_space.mesh.comm)
+        self._residual_calls = 0
+        self.snes.setFunction(petsc_callback(self._residual), b)
+        self.snes.setJacobian(petsc_callback(self._jacobian), A, P)
 
-        raise_on = test_raise_rank(self.unknowns[0].function_space.mesh.comm)
-        calls = [0]
+    def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, vec: PETSc.Vec) -> None:
+        start = time.perf_counter()
+        f_call, f_args, f_kargs = self._assemble_residual
+        with self._remember_errors():
+            self._residual_calls += 1
+            if self._raise_on and self._residual_calls == 2:  # test hook (problems/run/faults.py)
+                raise_test_error(snes.comm.tompi4py().rank)
+            self._update_state(x)
+            f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
+            for hook in self.residual_hooks:
+                hook(x, vec)
+        self.timings.add("assembly", time.perf_counter() - start)
 
-        def residual(snes, x, vec):
-            start = time.perf_counter()
-            with self._remember_errors():
-                calls[0] += 1
-                if raise_on and calls[0] == 2:  # test hook (problems/run/faults.py)
-                    raise_test_error(snes.comm.tompi4py().rank)
-                self._update_state(x)
-                f_call(snes, x, vec, *(f_args or ()), **(f_kargs or {}))
-                for hook in self.residual_hooks:
-                    hook(x, vec)
-            self.timings.add("assembly", time.perf_counter() - start)
-
-        def jacobian(snes, x, mat, pmat):
-            self._measure_step(snes, x)
-            if self._keep_jacobian():
-                # the matrix is left as it is: PCSetUp sees its state unchanged and
-                # keeps the factorisation (counted by PETSc's events, not here)
-                self._kept_iterations += 1
-                return
-            start = time.perf_counter()
-            self._jacobians += 1
-            self._jacobian_valid = True
-            with self._remember_errors():
-                self._update_state(x)
-                j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
-                for hook in self.jacobian_hooks:
-                    hook(x, mat)
-                if self.iterative is not None:
-                    self.iterative.update(x, mat)
-            self.timings.add("assembly", time.perf_counter() - start)
-
-        self.snes.setFunction(residual, b)
-        self.snes.setJacobian(jacobian, A, P)
+    def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, mat: PETSc.Mat, pmat: PETSc.Mat) -> None:
+        self._measure_step(snes, x)
+        if self._keep_jacobian():
+            # the matrix is left as it is: PCSetUp sees its state unchanged and
+            # keeps the factorisation (counted by PETSc's events, not here)
+            self._kept_iterations += 1
+            return
+        start = time.perf_counter()
+        self._jacobians += 1
+        self._jacobian_valid = True
+        j_call, j_args, j_kargs = self._assemble_jacobian
+        with self._remember_errors():
+            self._update_state(x)
+            j_call(snes, x, mat, pmat, *(j_args or ()), **(j_kargs or {}))
+            for hook in self.jacobian_hooks:
+                hook(x, mat)
+            if self.iterative is not None:
+                self.iterative.update(x, mat)
+        self.timings.add("assembly", time.perf_counter() - start)
 
     def _update_state(self, x: PETSc.Vec) -> None:
         """The unknowns set to x (as DOLFINx's assembly callbacks set them), then the

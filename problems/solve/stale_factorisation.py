@@ -43,6 +43,8 @@ import math
 
 from petsc4py import PETSc
 
+from eyemech.problems.solve.callbacks import petsc_callback
+
 log = logging.getLogger("eyemech")
 
 
@@ -55,7 +57,7 @@ class StaleFactorisation:
         self.inner.setOptionsPrefix(prefix)
         self.inner.setFromOptions()  # fgmres, its tolerances, LU with the factor package
         _rtol, self.atol, _dtol, self.max_it = self.inner.getTolerances()
-        self.inner.setConvergenceTest(self._converged)
+        self.inner.setConvergenceTest(petsc_callback(self._converged))
         # the early refresh's k (0: off): see the module docstring
         self.predict_after = predict_after
         self.early_refreshes = 0  # of the refreshes after failure, those predicted after k

@@ -1,0 +1,23 @@
+"""Python callbacks handed to PETSc objects."""
+
+from __future__ import annotations
+
+import weakref
+from typing import Callable
+
+
+def petsc_callback(method: Callable) -> Callable:
+    """``method`` of an object, for a PETSc object to call, holding the object weakly.
+
+    PETSc keeps a Python callback in C, out of sight of Python's garbage collector: a
+    solver whose SNES holds the solver's own bound methods is a cycle the collector
+    never frees, with its meshes, their MPI communicators (MPICH has about 2,000 a
+    process; a long process aborts with MPI_ERR_OTHER when they run out) and its
+    matrices. With the object held weakly, dropping the last reference frees it and
+    DOLFINx's ``NonlinearProblem.__del__`` destroys the SNES (tests/test_solver_lifetime.py)."""
+    reference = weakref.WeakMethod(method)
+
+    def call(*args, **kwargs):
+        return reference()(*args, **kwargs)
+
+    return call
