@@ -1498,6 +1498,18 @@ class BucklingModel:
         if self.retina is not None and self.augmented:
             checkpoints.value("retina_multipliers", self.retina.multiplier_state,
                               self.retina.restore_multiplier_state)
+        if self.augmentation is not None:
+            # the run's totals in the summary count the updates before the checkpoint too
+            checkpoints.value("augmentation_counts", self._augmentation_counts,
+                              self._restore_augmentation_counts)
+
+    def _augmentation_counts(self) -> dict:
+        return {"updates": self.augmentation.updates,
+                "limit_reached": self.augmentation.limit_reached}
+
+    def _restore_augmentation_counts(self, saved: dict) -> None:
+        self.augmentation.updates = int(saved["updates"])
+        self.augmentation.limit_reached = int(saved["limit_reached"])
 
     def _restore_sutures(self, saved: dict) -> None:
         self.sutures.directions = np.asarray(saved["directions"], dtype=float)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import ufl
 from mpi4py import MPI
-from test_eye_contact import GAP, two_blocks
+from test_eye_contact import GAP, pressed_blocks
 
 from eyemech.forms import compressible_neo_hooke, contact, deformation_gradient
 from eyemech.forms.kinematics import without_variables
@@ -70,16 +70,8 @@ def test_hertz_augmentations_remove_the_penetration(hertz_runs):
 def squeeze(penalty: float, augmented: bool) -> dict:
     """The upper block of :func:`test_eye_contact.two_blocks` pressed 0.05 into the lower
     one in two load steps (bottom held, top moved down), node-to-surface contact."""
-    blocks = two_blocks()
-    mesh = blocks.mesh
-    V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
-    u = dolfinx.fem.Function(V)
-    dx = ufl.dx(domain=mesh, metadata={"quadrature_degree": 2})
-    energy = compressible_neo_hooke(deformation_gradient(u), 1.0, 0.3) * dx
-    bottom = dolfinx.fem.locate_dofs_topological(V, 2, blocks.facets("bottom"))
-    top = dolfinx.fem.locate_dofs_topological(V, 2, blocks.facets("top"))
-    push = dolfinx.fem.Constant(mesh, np.zeros(3))
-    bcs = [dolfinx.fem.dirichletbc(np.zeros(3), bottom, V), dolfinx.fem.dirichletbc(push, top, V)]
+    blocks, u, energy, bcs, push = pressed_blocks()
+    V = u.function_space
     contact = NodeToSurfaceContact(u, blocks, "slave", "master", penalty, bcs, search_depth=0.5)
     solver = NonlinearSolver(ufl.derivative(energy, u, ufl.TestFunction(V)), u, bcs,
                              options=NewtonOptions(rtol=1e-11, atol=1e-12),

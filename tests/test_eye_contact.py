@@ -103,10 +103,10 @@ def test_hexahedral_master_penetration_is_exact(degree, triangles_per_face):
     assert summary["contact_normal_force"] == pytest.approx(delta - slope * 0.5, rel=1e-10)
 
 
-def squeeze(blocked: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
-    """The upper block pressed 0.05 into the lower one (bottom held, top moved down),
-    compressible neo-Hooke, penalty contact; ``blocked`` adds a decoupled DG0 block p
-    (p = 0) so u is the first block of a blocked "mpi" system."""
+def pressed_blocks(comm: MPI.Comm = MPI.COMM_WORLD):
+    """(blocks, u, energy, bcs, push) of the two blocks (:func:`two_blocks`): P1
+    displacement ``u``, compressible neo-Hooke energy (μ = 1, ν = 0.3), the bottom held
+    and the top moved by the Constant ``push``."""
     blocks = two_blocks(comm=comm)
     mesh = blocks.mesh
     V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
@@ -117,6 +117,16 @@ def squeeze(blocked: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
     top = dolfinx.fem.locate_dofs_topological(V, 2, blocks.facets("top"))
     push = dolfinx.fem.Constant(mesh, np.zeros(3))
     bcs = [dolfinx.fem.dirichletbc(np.zeros(3), bottom, V), dolfinx.fem.dirichletbc(push, top, V)]
+    return blocks, u, energy, bcs, push
+
+
+def squeeze(blocked: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
+    """The upper block pressed 0.05 into the lower one (bottom held, top moved down),
+    compressible neo-Hooke, penalty contact; ``blocked`` adds a decoupled DG0 block p
+    (p = 0) so u is the first block of a blocked "mpi" system."""
+    blocks, u, energy, bcs, push = pressed_blocks(comm)
+    mesh, V = blocks.mesh, u.function_space
+    dx = ufl.dx(domain=mesh, metadata={"quadrature_degree": 2})
     if blocked:
         Q = dolfinx.fem.functionspace(mesh, ("DG", 0))
         p = dolfinx.fem.Function(Q)

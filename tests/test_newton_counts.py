@@ -39,17 +39,23 @@ STEP_KEYS = ("attempts", "newton_iterations_all", "jacobians", "factorisations",
 
 
 @pytest.fixture
-def solvers(monkeypatch):
-    """Every NonlinearSolver that solves while the test runs (to read its factor matrix)."""
-    seen: list[NonlinearSolver] = []
-    solve = NonlinearSolver.solve
+def factors(monkeypatch):
+    """What the factor matrix of every solver closed while the test runs held as it was
+    closed (the run contract destroys a run's solvers as the run ends)."""
+    seen: list[dict | None] = []
+    close = NonlinearSolver.close
 
     def spy(self):
-        if all(s is not self for s in seen):
-            seen.append(self)
-        return solve(self)
+        factor = self.factor_matrix()
+        if factor is None or factor.getType() != "mumps":
+            seen.append(None)
+        else:
+            seen.append({"icntl": {k: factor.getMumpsIcntl(k) for k in (12, 14, 33)},
+                         "entries": factor.getMumpsInfog(29),
+                         "pc": self.snes.getKSP().getPC().getType()})
+        close(self)
 
-    monkeypatch.setattr(NonlinearSolver, "solve", spy)
+    monkeypatch.setattr(NonlinearSolver, "close", spy)
     return seen
 
 
@@ -57,7 +63,7 @@ def code_icntl_14() -> int:
     return int(NewtonOptions().as_petsc()["mat_mumps_icntl_14"])
 
 
-def test_mumps_options_of_the_code_and_of_petsc_reach_the_factor_matrix(solvers, tmp_path):
+def test_mumps_options_of_the_code_and_of_petsc_reach_the_factor_matrix(factors, tmp_path):
     """A run through the command line's own entry point (``--petsc`` as a user gives it):
     after the solve the factored matrix holds the code's ICNTL(14) and the user's ICNTL(33)
     (MUMPS's defaults: 20 and 0)."""
@@ -67,12 +73,12 @@ def test_mumps_options_of_the_code_and_of_petsc_reach_the_factor_matrix(solvers,
                  "mat_mumps_icntl_33=1", "--out", str(tmp_path), "--no-fields", "--no-pictures",
                  "--quiet"])
     assert code == 0
-    assert len(solvers) == 1
-    factor = solvers[0].factor_matrix()
-    assert factor is not None and factor.getType() == "mumps"
+    assert len(factors) == 1
+    factor = factors[0]
+    assert factor is not None, "no MUMPS factorisation"
     assert code_icntl_14() == 100
-    assert factor.getMumpsIcntl(14) == code_icntl_14()
-    assert factor.getMumpsIcntl(33) == 1
+    assert factor["icntl"][14] == code_icntl_14()
+    assert factor["icntl"][33] == 1
     # the run's numbers are counted in its results.json
     saved = json.loads((tmp_path / "results.json").read_text())
     check_counts(saved)
@@ -502,7 +508,7 @@ def test_full_steps_in_the_settling_step_save_factorisations():
         backtracking.as_json()["solver_counts"]["factorisations"]
 
 
-def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
+def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(factors, tmp_path):
     """The sphere's default (``--factorisation auto`` at P2P1) reaches MUMPS as LDLᵀ (PETSc's
     cholesky on the symmetric indefinite Jacobian, ‖A−Aᵀ‖/‖A‖ = 1.2e-16): the same Newton
     history and answer as ``--factorisation lu`` to round-off, with about half its factor
@@ -514,12 +520,11 @@ def test_mumps_ldlt_gives_the_lu_answer_with_half_the_factor(solvers, tmp_path):
         code = main(["run", "sphere-inflation", "--set", "mesh_size=4.0", "--factorisation",
                      factorisation, "--out", str(out), "--no-fields", "--no-pictures", "--quiet"])
         assert code == 0
-        factor = solvers[-1].factor_matrix()
-        assert factor is not None and factor.getType() == "mumps"
-        assert factor.getMumpsIcntl(14) == code_icntl_14()
-        assert factor.getMumpsIcntl(12) == (2 if factorisation == "auto" else 1)
-        pc_type = solvers[-1].snes.getKSP().getPC().getType()
-        return json.loads((out / "results.json").read_text()), pc_type, factor.getMumpsInfog(29)
+        factor = factors[-1]
+        assert factor is not None, "no MUMPS factorisation"
+        assert factor["icntl"][14] == code_icntl_14()
+        assert factor["icntl"][12] == (2 if factorisation == "auto" else 1)
+        return json.loads((out / "results.json").read_text()), factor["pc"], factor["entries"]
 
     lu, lu_pc, lu_entries = run("lu")
     ldlt, ldlt_pc, ldlt_entries = run("auto")

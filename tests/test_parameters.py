@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from eyemech.problems import sphere_inflation as si
-from eyemech.problems.run.parameters import ParameterError, build, describe, load_toml
+from eyemech.problems.run.parameters import ParameterError, build, check, describe, load_toml
 
 
 def test_defaults_are_valid():
@@ -72,3 +72,13 @@ def test_a_bug_in_a_solver_hook_is_raised_not_taken_for_divergence():
     solver = NonlinearSolver(residual, u, [], residual_hooks=[broken_hook])
     with pytest.raises(ValueError, match="hook bug"):
         solver.solve()
+
+
+@pytest.mark.parametrize("key, value", [("settle", "false"), ("settle", 0), ("c_sclera", "1.5")])
+def test_a_python_caller_gets_one_error_for_a_value_of_the_wrong_type(key, value):
+    """The command line converts "false" to False; a Python caller's value is taken as
+    given, and the string "false" would be a true flag."""
+    from eyemech.problems import scleral_buckling
+
+    with pytest.raises(ParameterError, match=key):
+        check(scleral_buckling.Parameters(**{key: value}))

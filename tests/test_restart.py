@@ -120,6 +120,25 @@ def test_eye_killed_mid_step_resumes_to_the_same_numbers(eye, tmp_path):
         [s["newton_iterations"] for s in steps]
 
 
+def test_augmented_lagrangian_eye_killed_mid_step_resumes_to_the_same_numbers(tmp_path):
+    """The contact multipliers are in the checkpoint (the buckle's at its Gauss points, the
+    retina's per slave node): killed in the second step of stage 3, after stage 2's
+    augmentations moved them, the resumed run ends at the uninterrupted run's numbers with
+    the same Newton iterations and augmentations, step by step."""
+    settings = dict(resolution="coarse", settle=False, contact_method="augmented-lagrangian")
+    uninterrupted = scleral_buckling.run(scleral_buckling.Parameters(**settings),
+                                         options=RunOptions(fields=False, pictures=False))
+    expected, steps = to_jsonable(uninterrupted.quantities), to_jsonable(uninterrupted.steps)
+    first_of_stage_3 = next(s["step"] for s in steps if s["stage"] == 3)
+    assert sum(s["augmentations"] for s in steps if s["stage"] == 2) > 0
+    checkpoint = killed("scleral-buckling", settings, tmp_path, f"step:{first_of_stage_3 + 1}")
+    assert checkpoint.name == f"ckpt_{first_of_stage_3:06d}"
+    saved = resume(tmp_path)
+    assert_close(expected, saved["quantities"], 1e-12)
+    for key in ("newton_iterations", "augmentations"):
+        assert [s[key] for s in saved["steps"]] == [s[key] for s in steps], key
+
+
 @pytest.mark.mpi
 def test_eye_killed_mid_checkpoint_on_two_ranks_resumes_on_one_and_two(eye, tmp_path):
     first = tmp_path / "two"

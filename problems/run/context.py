@@ -25,7 +25,7 @@ from eyemech.problems.run.results import (
     peak_memory_mb,
     write_json_atomic,
 )
-from eyemech.problems.solve.driver import NewtonOptions, SolveFailure
+from eyemech.problems.solve.driver import NewtonOptions, SolveFailure, close_solvers, solvers_created
 
 log = logging.getLogger("eyemech")
 
@@ -67,6 +67,7 @@ class RunContext:
         # the folder is made, checked and locked (all ranks raise alike when it cannot be)
         self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
             else None
+        self._solvers_before = solvers_created()
 
     def __enter__(self) -> "RunContext":
         return self
@@ -74,6 +75,8 @@ class RunContext:
     def __exit__(self, kind, error, tb) -> bool:
         # an exception on this rank alone: the other ranks wait in a collective call
         abort_if_stranding(self.comm, error)
+        # every rank is here (or the error was this rank's alone and the job is ended)
+        close_solvers(created_after=self._solvers_before)
         self.checkpoints.restore_signal_handlers()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"

@@ -184,8 +184,22 @@ def check_cell_count(params: SceneParameters) -> None:
                              f"the limit with {override}")
 
 
+def check_types(params: SceneParameters) -> None:
+    """A flag is a bool and a number is not text. The command line, TOML and ``build``
+    convert their values (:func:`convert`); a Python caller's are taken as given, and a
+    ``"false"`` flag would be true."""
+    types = _field_types(type(params))
+    for f in dataclasses.fields(params):
+        kind, value = types[f.name], getattr(params, f.name)
+        if kind is bool and not isinstance(value, bool):
+            raise ParameterError(f.name, f"expected True or False, got {value!r}")
+        if kind in (int, float) and isinstance(value, (str, bool)):
+            raise ParameterError(f.name, f"expected a number, got {value!r}")
+
+
 def check(params: SceneParameters) -> None:
     """The shared checks, then the scene's own ``validate``."""
+    check_types(params)
     check_finite(params)
     params.validate()
     check_step_count(params)

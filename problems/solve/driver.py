@@ -42,6 +42,7 @@ import dataclasses
 import logging
 import sys
 import time
+import weakref
 from typing import TYPE_CHECKING, Callable, Literal, Sequence
 
 import dolfinx
@@ -241,6 +242,40 @@ if not PETSc.Log.isActive():
     PETSc.Log.begin()
 
 
+class _Problem(dolfinx.fem.petsc.NonlinearProblem):
+    """DOLFINx's problem, but freeing its PETSc objects as petsc4py frees any other.
+
+    DOLFINx's ``__del__`` destroys the SNES, matrices and vectors at once. When the
+    collector frees a solver held in a cycle it does so at a different moment on each
+    rank, and destroying a MUMPS factorisation is collective: on 3 ranks two waited in
+    MUMPS's end while the third was in another collective call (a hang, seen in
+    tests/mpi_scenes.py). Dropped without ``__del__``, the objects go to petsc4py, which
+    destroys a serial object at once and parks a parallel one until PETSc's collective
+    garbage clean-up. :meth:`NonlinearSolver.close` destroys them explicitly (the run
+    contract calls it on every rank at the end of a run)."""
+
+    def __del__(self) -> None:
+        pass
+
+
+# the solvers not closed yet, by serial; held weakly (a dropped solver is freed as usual)
+_OPEN_SOLVERS: weakref.WeakValueDictionary[int, "NonlinearSolver"] = weakref.WeakValueDictionary()
+
+
+def solvers_created() -> int:
+    """How many solvers this process has created (the last serial)."""
+    return NonlinearSolver._count
+
+
+def close_solvers(created_after: int) -> None:
+    """Close every open solver created after the ``created_after``-th (collective: the
+    same solvers on every rank of their communicators, see :meth:`NonlinearSolver.close`)."""
+    for serial in sorted(serial for serial in list(_OPEN_SOLVERS) if serial > created_after):
+        solver = _OPEN_SOLVERS.get(serial)
+        if solver is not None:
+            solver.close()
+
+
 class FactorisationCounter:
     """Numeric and symbolic factorisations PETSc has performed in this process so far,
     from its log events."""
@@ -287,9 +322,12 @@ class NonlinearSolver:
         self.unknowns = list(unknowns) if isinstance(unknowns, (list, tuple)) else [unknowns]
         blocked = isinstance(residual, (list, tuple))
         NonlinearSolver._count += 1
-        prefix = f"eyemech{NonlinearSolver._count}_"
+        self.serial = NonlinearSolver._count  # the order of creation, alike on every rank
+        self.closed = False  # :meth:`close` destroyed the PETSc objects
+        _OPEN_SOLVERS[self.serial] = self
+        prefix = f"eyemech{self.serial}_"
         start = time.perf_counter()
-        self.problem = dolfinx.fem.petsc.NonlinearProblem(
+        self.problem = _Problem(
             residual, self.unknowns if blocked else self.unknowns[0], bcs=list(bcs), J=jacobian,
             petsc_options_prefix=prefix, kind=(matrix_kind or "mpi") if blocked else matrix_kind)
         self.timings.add("form_compilation", time.perf_counter() - start)
@@ -360,7 +398,28 @@ class NonlinearSolver:
     # -- set-up -----------------------------------------------------------------
     @property
     def snes(self) -> PETSc.SNES:
+        if self.closed:
+            raise RuntimeError(f"solver {self.serial} is closed: its PETSc objects are destroyed")
         return self.problem.solver
+
+    def close(self) -> None:
+        """Destroy the SNES, its KSP and factorisation, and the matrices and vectors, now.
+
+        Destroying a MUMPS factorisation is collective (MUMPS ends its instance on every
+        rank together), so a parallel run must not leave it to Python's cycle collector,
+        which runs at a different moment on each rank: the run contract closes a run's
+        solvers as it ends, on every rank at once (:func:`close_solvers`). The solver
+        cannot solve again; DOLFINx's later ``__del__`` finds the objects destroyed."""
+        if self.closed:
+            return
+        self.closed = True
+        if self.stale is not None:
+            self.stale.free()
+        problem = self.problem
+        for obj in (problem.solver, problem.A, problem.P_mat, problem.b, problem.x):
+            if obj is not None:
+                obj.destroy()
+        _OPEN_SOLVERS.pop(self.serial, None)
 
     def _wrap_callbacks(self) -> None:
         b, self._assemble_residual = self.snes.getFunction()
@@ -452,6 +511,8 @@ class NonlinearSolver:
     def factor_matrix(self) -> PETSc.Mat | None:
         """The factored matrix of a direct solver's last factorisation (None before the
         first solve, or when the preconditioner does not factor)."""
+        if self.closed:
+            return None
         if self.stale is not None:
             return self.stale.factor_matrix()
         pc = self.snes.getKSP().getPC()

@@ -79,6 +79,14 @@ class StaleFactorisation:
         ksp.setPythonContext(self)
         ksp.getPC().setType(PETSc.PC.Type.NONE)
 
+    def free(self) -> None:
+        """Destroy the inner KSP (with its factorisation) and P now (collective). Not
+        named ``destroy``: petsc4py calls a Python context's ``destroy(ksp)`` itself."""
+        self.inner.destroy()
+        if self.pmat is not None:
+            self.pmat.destroy()
+            self.pmat = None
+
     def factor_matrix(self) -> PETSc.Mat | None:
         try:
             return self.inner.getPC().getFactorMatrix()
