@@ -76,13 +76,18 @@ def _live_meshes() -> int:
 
 
 @pytest.fixture(autouse=True, scope="module")
-def meshes_are_freed():
+def meshes_are_freed(request):
     """Every mesh a test module makes is freed when the module ends: a leaked mesh keeps
     its MPI communicators, and a process that runs out of them aborts
     (tests/test_solver_lifetime.py)."""
     gc.collect()
     before = _live_meshes()
     yield
+    # the module's last test still holds its fixtures' values (pytest drops them after
+    # this teardown): a module-scoped fixture's mesh is not a leak
+    for item in request.session.items:
+        if item.module is request.module and getattr(item, "funcargs", None):
+            item.funcargs.clear()
     gc.collect()
     leaked = _live_meshes() - before
     assert leaked <= 0, f"{leaked} meshes outlive the test module that made them"
