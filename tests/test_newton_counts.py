@@ -241,8 +241,12 @@ def test_bench_overrides_are_run_and_named_in_the_row(tmp_path, monkeypatch):
     row = bench.run_benchmark(problems.get("sphere-inflation"), tmp_path,
                               overrides={"load_steps": "2"})
     assert row["settings"] == "mesh_size=4.0 load_steps=2"
-    result = json.loads((tmp_path / "sphere-inflation-1ranks" / "results.json").read_text())
+    # its own folder: the benchmark's own results.json is not overwritten
+    result = json.loads((tmp_path / "sphere-inflation-1ranks-load_steps=2" / "results.json")
+                        .read_text())
     assert result["parameters"]["load_steps"] == 2 and len(result["steps"]) == 2
+    # the table names the benchmark's settings, not the last row's
+    assert "this version's benchmark: `mesh_size=4.0`" in (tmp_path / "sphere-inflation.md").read_text()
 
 
 def test_modified_newton_and_predictor_reach_full_newtons_solution_with_fewer_factorisations():

@@ -40,11 +40,16 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
                   overrides: dict | None = None):
     """One row: the scene at its ``BENCHMARK`` settings, updated by ``overrides``."""
     module = importlib.import_module(scene.run.__module__)
-    overrides = {**getattr(module, "BENCHMARK", {}), **(overrides or {})}
+    benchmark = getattr(module, "BENCHMARK", {})
+    extra = {key: value for key, value in (overrides or {}).items()
+             if str(benchmark.get(key)) != str(value)}
+    overrides = {**benchmark, **extra}
     params = build(scene.parameters, overrides)
     options = options or RunOptions(fields=False, pictures=False)
-    result = scene.run(params, comm=comm, out=Path(out) / f"{scene.name}-{comm.size}ranks",
-                       options=options)
+    # a row with settings of its own keeps its own results.json beside the benchmark's
+    folder = f"{scene.name}-{comm.size}ranks" + "".join(f"-{key}={value}"
+                                                          for key, value in extra.items())
+    result = scene.run(params, comm=comm, out=Path(out) / folder, options=options)
     if comm.rank != 0:
         return None
     timings = result.timings
@@ -69,7 +74,7 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
     writer.writeheader()
     writer.writerows(rows)
     write_text_atomic(table, buffer.getvalue())
-    write_text_atomic(Path(out) / f"{scene.name}.md", _markdown(scene.name, overrides, rows))
+    write_text_atomic(Path(out) / f"{scene.name}.md", _markdown(scene.name, benchmark, rows))
     return row
 
 
@@ -78,11 +83,11 @@ def _settings(overrides: dict) -> str:
     return " ".join(f"{key}={value}" for key, value in overrides.items()) or "defaults"
 
 
-def _markdown(name: str, overrides: dict, rows: list[dict]) -> str:
+def _markdown(name: str, benchmark: dict, rows: list[dict]) -> str:
     v = versions()
     lines = [f"# Benchmark `{name}`", "",
              f"Settings: each row's `settings` (beyond the scene's defaults; this version's "
-             f"benchmark: `{_settings(overrides)}`); "
+             f"benchmark: `{_settings(benchmark)}`); "
              f"SNES Newton with MUMPS LU; DOLFINx {v.get('dolfinx', '?')}, PETSc {v.get('petsc', '?')}. "
              "Seconds per phase (form compilation is a first-run cost: FFCx caches it); "
              "peak memory is the largest resident set of any rank. "
