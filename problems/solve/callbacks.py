@@ -13,8 +13,8 @@ def petsc_callback(method: Callable) -> Callable:
     solver whose SNES holds the solver's own bound methods is a cycle the collector
     never frees, with its meshes, their MPI communicators (MPICH has about 2,000 a
     process; a long process aborts with MPI_ERR_OTHER when they run out) and its
-    matrices. With the object held weakly, dropping the last reference frees it and
-    DOLFINx's ``NonlinearProblem.__del__`` destroys the SNES (tests/test_solver_lifetime.py)."""
+    matrices. With the object held weakly, dropping the last reference frees it, and
+    petsc4py frees its PETSc objects (tests/test_solver_lifetime.py)."""
     reference = weakref.WeakMethod(method)
 
     def call(*args, **kwargs):

@@ -409,7 +409,7 @@ class NonlinearSolver:
         rank together), so a parallel run must not leave it to Python's cycle collector,
         which runs at a different moment on each rank: the run contract closes a run's
         solvers as it ends, on every rank at once (:func:`close_solvers`). The solver
-        cannot solve again; DOLFINx's later ``__del__`` finds the objects destroyed."""
+        cannot solve again (:attr:`snes` raises)."""
         if self.closed:
             return
         self.closed = True
