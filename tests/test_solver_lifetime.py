@@ -4,8 +4,8 @@ PETSc keeps the Python callbacks of a SNES or a KSP in C, where Python's garbage
 collector cannot follow them: a callback bound to the solver that owns the SNES makes a
 cycle that is never freed. Each leaked mesh keeps its MPI communicators, and MPICH has
 2,048 a process: a test session (or a notebook running a parameter study) that
-leaks a few meshes per run ends with MPI_Abort(MPI_ERR_OTHER), exit status 15, after a
-few hundred runs (problems/solve/callbacks.py).
+leaks a few meshes per run aborts ("Too many communicators"; in CI, exit status 15 and
+no pytest summary) after a few hundred runs (problems/solve/callbacks.py).
 """
 
 from __future__ import annotations
