@@ -48,10 +48,14 @@ class Writer:
                 "von_mises": model.von_mises.field.x.array[dofmap],
                 "c": model.stiffness.x.array[dofmap]})
             self.series.write(load, grid)
-            if picture and self.pictures and grid is not None:
-                self._pictures(grid, stage)
+            if picture and self.pictures:
+                # the outline reads distributed unknowns (collective): every rank computes
+                # it, only rank 0 (which holds the gathered grid) draws
+                outline = _buckle_outline(model)
+                if grid is not None:
+                    self._pictures(grid, stage, outline)
 
-    def _pictures(self, grid, stage: int) -> None:
+    def _pictures(self, grid, stage: int, outline) -> None:
         name = STAGE_NAMES[stage]
         out = self.ctx.out
         whole = out / f"step{stage}_{name}_von_mises.png"
@@ -59,10 +63,10 @@ class Writer:
                    title=f"step {stage} ({name}): von Mises stress (MPa)", show_undeformed=False,
                    cmap="inferno")
         section = out / f"step{stage}_{name}_section.png"
-        self._section(grid, section, f"step {stage} ({name}): section through the tear")
+        self._section(grid, section, f"step {stage} ({name}): section through the tear", outline)
         self.ctx.result.pictures += [whole.name, section.name]
 
-    def _section(self, grid, path, title: str) -> None:
+    def _section(self, grid, path, title: str, outline) -> None:
         """The symmetry plane x = 0 seen from −x, zoomed on the buckle, with the
         buckle's outline drawn at its current position."""
         import pyvista
@@ -77,7 +81,6 @@ class Writer:
         plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
         plotter.add_mesh(warped, scalars="c", show_edges=True, cmap="tab10", log_scale=True,
                          scalar_bar_args={"title": "tissue c (MPa)"})
-        outline = _buckle_outline(model)
         if outline is not None:
             plotter.add_lines(outline, color="red", width=4)
         centre_y = model.geometry.sclera_radius * math.sin(math.radians(model.buckle_angle))
@@ -97,7 +100,8 @@ class Writer:
 
 def _buckle_outline(model):
     """The buckle's cross-section in the symmetry plane (x = −0.01, in front of the
-    mesh), as a closed polyline; None before the buckle is placed."""
+    mesh), as a closed polyline; None before the buckle is placed. Collective: the
+    tire's travel is a distributed unknown, so every rank must call it."""
     base = float(model.base_radius.value) - float(model.indentation.value)
     if base > 1.5 * model.geometry.sclera_radius:
         return None
