@@ -98,12 +98,24 @@ class SceneParameters:
         return int(volume / (size ** 3 / (6.0 * math.sqrt(2.0))))
 
 
-def field(default: Any, help: str, unit: str = "", finite: bool = True) -> Any:
+# The groups a parameter is listed under (help, docs/parameters.md): what the model is,
+# where it lives and how finely it is meshed, and how it is solved.
+PHYSICS = "physics"
+GEOMETRY = "geometry and mesh"
+SOLVER = "solver and stepping"
+GROUPS = (PHYSICS, GEOMETRY, SOLVER)
+
+
+def field(default: Any, help: str, unit: str = "", finite: bool = True,
+          group: str = PHYSICS) -> Any:
     """A dataclass field with documentation (shown by ``eyemech list -v``).
 
-    Numbers must be finite (``inf`` and ``nan`` are refused) unless ``finite=False``."""
+    Numbers must be finite (``inf`` and ``nan`` are refused) unless ``finite=False``.
+    ``group`` is one of :data:`GROUPS`."""
+    if group not in GROUPS:
+        raise ValueError(f"group must be one of {GROUPS}, got {group!r}")
     return dataclasses.field(default=default, metadata={"help": help, "unit": unit,
-                                                        "finite": finite})
+                                                        "finite": finite, "group": group})
 
 
 def check_finite(params: SceneParameters) -> None:
