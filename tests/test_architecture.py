@@ -39,13 +39,16 @@ def sources(folder: str) -> list[Path]:
 
 
 def scene_modules() -> set[str]:
-    """Top-level modules of problems/ that define a SCENE."""
+    """Top-level modules of problems/ that define a SCENE, and packages whose __init__.py
+    does (a scene of several modules)."""
     found = set()
-    for path in (ROOT / "problems").glob("*.py"):
+    sources = [(path.stem, path) for path in (ROOT / "problems").glob("*.py")]
+    sources += [(path.parent.name, path) for path in (ROOT / "problems").glob("*/__init__.py")]
+    for name, path in sources:
         tree = ast.parse(path.read_text())
         if any(isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "SCENE" for t in node.targets)
                for node in tree.body):
-            found.add(f"eyemech.problems.{path.stem}")
+            found.add(f"eyemech.problems.{name}")
     return found
 
 
