@@ -28,23 +28,13 @@ import ufl
 from eyemech.meshes.eye import half_eye
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.parameters import MMHG
-from eyemech.problems.scleral_buckling.buckle_terms import (
-    BuckleContact,
-    BuckleTie,
-    RigidBuckle,
-    Sutures,
-    TireRow,
-)
+from eyemech.problems.scleral_buckling.body import Body
+from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, BuckleTie, RigidBuckle
+from eyemech.problems.scleral_buckling.drainage import Drainage
 from eyemech.problems.scleral_buckling.measures import Optics, RetinaGaps
 from eyemech.problems.scleral_buckling.parameters import Parameters
-from eyemech.problems.scleral_buckling.terms import (
-    Body,
-    CavityLiquid,
-    Drainage,
-    RetinaContact,
-    Tissues,
-    Zonules,
-)
+from eyemech.problems.scleral_buckling.suture_terms import Sutures, TireRow
+from eyemech.problems.scleral_buckling.terms import CavityLiquid, RetinaContact, Tissues, Zonules
 from eyemech.problems.solid.cavity import real_pressure_space
 from eyemech.problems.solid.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
 from eyemech.problems.solve.driver import NonlinearSolver

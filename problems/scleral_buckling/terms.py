@@ -1,21 +1,15 @@
-"""The eye's own terms: its tissues, the liquid in its cavity, the drainage of the
-subretinal fluid, the lens' zonules and the retina's contact with the choroid (the
-buckle's terms are in :mod:`.buckle_terms`). Each is a
+"""The eye's own terms: its tissues, the liquid in its cavity, the lens' zonules and the
+retina's contact with the choroid (the drainage is :mod:`.drainage`'s, the buckle's terms
+:mod:`.buckle_terms`' and :mod:`.suture_terms`'). Each is a
 :class:`~eyemech.problems.solve.terms.Term`: its residual, what it adds node by node,
 its checkpoint state, its measurements, its controls."""
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import logging
-import math
-
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
-import ufl
 from mpi4py import MPI
 
 from eyemech.forms import (
@@ -29,105 +23,22 @@ from eyemech.forms import (
     von_mises,
 )
 from eyemech.forms.contact import default_penalty
-from eyemech.meshes.eye import EyeGeometry, zonule_pairs
+from eyemech.meshes.eye import zonule_pairs
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.parameters import MMHG
-from eyemech.problems.run.results import Timings
+from eyemech.problems.scleral_buckling.body import Body, cell_field
 from eyemech.problems.scleral_buckling.parameters import Parameters
 from eyemech.problems.solid.cavity import check_closed
 from eyemech.problems.solid.mean_dilatation import MeanDilatation
-from eyemech.problems.solid.probes import CellField, facet_nodes
+from eyemech.problems.solid.probes import CellField
 from eyemech.problems.solid.residual import solid_residual
-from eyemech.problems.solid.spaces import ElementFamily
 from eyemech.problems.solid.zonules import ZonuleBars
 from eyemech.problems.solve.scalars import assemble_scalar
 from eyemech.problems.solve.terms import Control, Term
 
-log = logging.getLogger("eyemech")
-
 # the retina's contact partners preallocated: the master triangles within half an element
 # beyond the nearest one (docs/scleral_buckling.md, "The contact pattern, preallocated")
 RETINA_PATTERN_REACH = 0.5
-
-
-@dataclasses.dataclass
-class Body:
-    """The half eye as every term sees it: the tagged mesh, the unknowns [u, p, P, δ_tire]
-    (p only with Q1P0's mixed pressure; P the cavity's pressure and δ_tire the tire's
-    radial travel, Real unknowns), the element, its measures, the boundary conditions,
-    and the run's communicator and timings."""
-
-    eye: object  # meshes.eye.TaggedMesh
-    geometry: EyeGeometry
-    family: ElementFamily
-    fields: list
-    dx: ufl.Measure
-    ds: ufl.Measure
-    bcs: list
-    comm: MPI.Comm
-    timings: Timings
-
-    @property
-    def u(self) -> dolfinx.fem.Function:
-        return self.fields[0]
-
-    @property
-    def P(self) -> dolfinx.fem.Function:
-        return self.fields[-2]
-
-    @property
-    def tire_travel(self) -> dolfinx.fem.Function:
-        return self.fields[-1]
-
-    @property
-    def mesh(self) -> dolfinx.mesh.Mesh:
-        return self.eye.mesh
-
-    @property
-    def block_spaces(self) -> list:
-        return [f.function_space for f in self.fields]
-
-    @property
-    def wall(self) -> ufl.Measure:
-        """The cavity's wall (vitreous side, subretinal space, tear edges, lens)."""
-        return self.ds(self.eye.tag("cavity_wall"))
-
-    @functools.cached_property
-    def element_size(self) -> float:
-        """The wall's in-plane element size: a quarter meridian over the cube's edge."""
-        return 0.5 * math.pi * self.geometry.sclera_radius / self.geometry.cells_per_edge
-
-    @functools.cached_property
-    def sclera_nodes(self) -> np.ndarray:
-        """The nodes (blocks) of the sclera's outer surface, ghosts included."""
-        return facet_nodes(self.u.function_space, self.eye.facets("sclera_outer"))
-
-    @functools.cached_property
-    def _outer_owned(self) -> tuple[np.ndarray, np.ndarray]:
-        V = self.u.function_space
-        blocks = self.sclera_nodes[self.sclera_nodes < V.dofmap.index_map.size_local]
-        return blocks, V.tabulate_dof_coordinates()[blocks]
-
-    def sclera_outer_positions(self) -> np.ndarray:
-        """Deformed positions of this rank's owned nodes on the sclera's outer surface."""
-        blocks, X = self._outer_owned
-        return X + self.u.x.array.reshape(-1, 3)[blocks]
-
-    def real_value(self, f: dolfinx.fem.Function) -> float:
-        """The value of a Real unknown (collective: its dof lives on one rank)."""
-        owned = f.function_space.dofmap.index_map.size_local
-        return float(self.comm.allreduce(float(np.sum(f.x.array[:owned])), op=MPI.SUM))
-
-
-def cell_field(body: Body, name: str, values: dict[str, float]) -> dolfinx.fem.Function:
-    """A cellwise-constant coefficient from per-tissue values (0 where none given)."""
-    space = dolfinx.fem.functionspace(body.mesh, ("DG", 0))
-    c = dolfinx.fem.Function(space, name=name)
-    for tissue, value in values.items():
-        if tissue in body.eye.names:
-            cells = body.eye.cells(tissue)
-            c.x.array[space.dofmap.list[cells, 0]] = value
-    return c
 
 
 class Tissues(Term):
@@ -261,134 +172,6 @@ class CavityLiquid(Term):
 
     def measure(self) -> dict:
         return {"iop_mmHg": self.pressure() / MMHG, "cavity_volume_mm3": 2.0 * self.volume()}
-
-
-class Drainage(Term):
-    """External drainage of the subretinal fluid (``drainage = "external"``; without it the
-    term adds nothing): the subretinal faces lose the liquid pressure as ``drained`` goes
-    from 0 to 1, all but the choroid under the tear (the vitreous keeps wetting it through
-    the hole), −∫ d w P J F⁻ᵀN·v dA; and a pseudo-time drag on the retina's subretinal face
-    towards the last solved state, ∫ η (u − u_last)·v dA, with which the retina's snap onto
-    the choroid is followed solve by solve (:meth:`settle`)."""
-
-    def __init__(self, body: Body, params: Parameters, iop: float):
-        self.body, self.params, self.iop = body, params, iop
-        self.active = params.drainage != "none"
-        mesh = body.mesh
-        self.drained = dolfinx.fem.Constant(mesh, 0.0)      # subretinal pressure removed
-        self.retina_drag = dolfinx.fem.Constant(mesh, 0.0)  # η
-        self.drag_reference = dolfinx.fem.Function(body.u.function_space, name="u_drag_reference")
-        self.retina_face_dofs = np.zeros(0, dtype=np.int32)
-        if "retina_detached" in body.eye.names:
-            blocks = facet_nodes(body.u.function_space, body.eye.facets("retina_detached"))
-            self.retina_face_dofs = (3 * blocks[:, None] + np.arange(3)).ravel()
-        self.solver = None
-
-    def residual(self, tests):
-        if not self.active:
-            return None
-        body, v = self.body, tests[0]
-        eye = body.eye
-        subretinal = body.ds(tuple(eye.tag(name) for name in ("retina_detached", "choroid_detached")))
-        pressure = follower_pressure(-self.drained * self._dried() * body.P, body.u, v, subretinal)
-        drag = self.retina_drag * ufl.inner(body.u - self.drag_reference, v) \
-            * body.ds(eye.tag("retina_detached"))
-        return pressure + drag
-
-    def _dried(self) -> dolfinx.fem.Function:
-        """1 on the cells whose subretinal face drainage dries, 0 on the choroid's cells
-        under the tear's hole. Under the hole: the cell's midpoint within ``tear_radius``
-        (arc on the sclera's radius) of the tear's centre, as the mesh removes the
-        retina's cells."""
-        mesh, geo = self.body.mesh, self.body.geometry
-        weight = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 0)), name="dried")
-        weight.x.array[:] = 1.0
-        if geo.tear_radius > 0:
-            cells = np.arange(len(weight.x.array), dtype=np.int32)
-            mid = dolfinx.mesh.compute_midpoints(mesh, mesh.topology.dim, cells)
-            unit = mid / np.linalg.norm(mid, axis=1, keepdims=True)
-            centre = np.array([0.0, math.sin(math.radians(geo.tear_angle)),
-                               math.cos(math.radians(geo.tear_angle))])
-            arc = geo.sclera_radius * np.arccos(np.clip(unit @ centre, -1.0, 1.0))
-            weight.x.array[arc < geo.tear_radius] = 0.0
-        return weight
-
-    def drag_coefficient(self) -> float:
-        """η (MPa/mm) such that the full IOP moves a free retina by ``drainage_drag_step``
-        per solve: a 0.5 mm blister snaps onto the choroid in about ten solves instead of
-        in one Newton step that load control cannot take (a shallow dome pressed on its
-        convex side; docs/scleral_buckling.md, Subretinal drainage)."""
-        return self.iop / self.params.drainage_drag_step
-
-    def install(self, solver) -> None:
-        self.solver = solver
-
-    def prepare(self) -> None:
-        self.retina_drag.value = self.drag_coefficient() if self.drained.value > 0 else 0.0
-
-    def converged(self) -> None:
-        self.drag_reference.x.array[:] = self.body.u.x.array  # the drag pulls towards this state
-
-    def controls(self) -> dict[str, Control]:
-        return {"drained": Control(lambda: float(self.drained.value),
-                                   lambda value: setattr(self.drained, "value", value))}
-
-    def settle(self, tolerance: float = 1e-4, max_solves: int = 80) -> dict:
-        """Pseudo-time solves at full drainage, each dragged towards the last, until the
-        largest nodal move is below ``tolerance`` (mm); a failed solve is restored and
-        retried with the drag doubled (a shorter pseudo-time step), an easy one (≤ 4
-        iterations) halves it (down to base/1024). Then the drag is switched off and the
-        eye solved once more, so that the state reported is an equilibrium of the
-        undragged residual; if that last solve fails, the dragged state is kept and
-        ``retina_drag_free`` says so. Its report."""
-        solver, u, comm = self.solver, self.body.u, self.body.comm
-        base = self.drag_coefficient()
-        solves, move, retina_move, eta = 0, math.inf, math.inf, base
-        while solves < max_solves and move > tolerance and eta <= 1024 * base:
-            self.drag_reference.x.array[:] = u.x.array
-            self.retina_drag.value = eta
-            state = solver.save_state()
-            converged, iterations = solver.solve()
-            solves += 1
-            if not converged:
-                log.info("retina settling solve %d: η = %.3g MPa/mm failed (%s)", solves, eta,
-                         solver.reason())
-                solver.restore_state(state)
-                eta *= 2.0
-                continue
-            if iterations <= 4:  # a longer pseudo-time step: the tail of the settling
-                eta = max(base / 1024, 0.5 * eta)
-            change = u.x.array - self.drag_reference.x.array
-            move = comm.allreduce(float(np.abs(change).max()), op=MPI.MAX)
-            retina_move = comm.allreduce(float(np.abs(change[self.retina_face_dofs]).max(initial=0.0)),
-                                         op=MPI.MAX)
-            log.info("retina settling solve %d: η = %.3g MPa/mm, %d iterations, move %.3g mm "
-                     "(retina's subretinal face %.3g mm)", solves, eta, iterations, move,
-                     retina_move)
-        self.drag_reference.x.array[:] = u.x.array
-        state = solver.save_state()
-        self.retina_drag.value = 0.0
-        free, _ = solver.solve()
-        log.info("retina settling: drag-free solve %s (%s)", "converged" if free else "failed",
-                 solver.reason())
-        if not free:
-            solver.restore_state(state)
-            self.retina_drag.value = eta
-        # the drag's traction left in a kept dragged state: η times the retina face's last
-        # move (a component's largest; the drag acts on that face only)
-        traction = 0.0 if free else eta * retina_move
-        return {"retina_settling_solves": solves + 1, "retina_settling_last_move_mm": move,
-                "retina_settling_last_retina_move_mm": retina_move,
-                "retina_drag_free": bool(free),
-                "retina_drag_traction_max_mmHg": traction / MMHG}
-
-    def register(self, checkpoints) -> None:
-        checkpoints.function("u_drag_reference", self.drag_reference)
-        checkpoints.constant("drained", self.drained)
-        checkpoints.constant("retina_drag", self.retina_drag)
-
-    def measure(self) -> dict:
-        return {"subretinal_drained": float(self.drained.value)}
 
 
 class Zonules(Term):
