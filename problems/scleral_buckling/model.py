@@ -67,8 +67,8 @@ class BucklingModel:
         self.liquid = CavityLiquid(body, params)
         self.buckle = RigidBuckle(body, params)
         self.drainage = Drainage(body, params, self.liquid.iop)
-        # the buckle's penalty α = factor · E_sclera / h (E = 6c: incompressible neo-Hooke)
-        penalty = params.penalty_factor * 6.0 * params.c_sclera / body.element_size
+        # the buckle's penalty α = factor · E_sclera / h
+        penalty = params.penalty_factor * self.tissues.youngs_modulus("sclera") / body.element_size
         self.contact = BuckleContact(body, params, self.buckle, penalty)
         self.tie = BuckleTie(body, params, self.buckle, self.contact.tie_penalty)
         # the loop model: the sutures' tension pushes the tire in, whose travel balances it
@@ -78,7 +78,7 @@ class BucklingModel:
         self.optics = Optics(body)
         self.gaps = RetinaGaps(body, params.tear_closure_tolerance)
         self.zonules = Zonules(body, params) if params.lens else None
-        self.retina = RetinaContact(body, params, self.gaps) \
+        self.retina = RetinaContact(body, params, self.gaps, self.tissues.youngs_modulus("retina")) \
             if params.retina_contact and self.gaps.detached else None
         self.terms = [term for term in (self.tissues, self.liquid, self.contact, self.drainage,
                                         self.tie, self.sutures, self.tire, self.buckle,

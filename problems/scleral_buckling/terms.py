@@ -63,8 +63,14 @@ class Tissues(Term):
 
     @property
     def shear_modulus(self):
-        """μ = 2c per cell (small strain), the iterative solver's pressure-mass weight."""
+        """μ per cell at small strain (2c: the law's c10), the iterative solver's
+        pressure-mass weight and the condensed pressure's bulk modulus's scale."""
         return 2 * self.stiffness
+
+    def youngs_modulus(self, tissue: str) -> float:
+        """One tissue's small-strain Young's modulus, E = 3μ = 6c (incompressible): the
+        contacts' penalties are scaled from it."""
+        return 6.0 * self.params.stiffness()[tissue]
 
     def residual(self, tests):
         body = self.body
@@ -206,12 +212,12 @@ class RetinaContact(Term):
     (its penetration under a contact pressure p is p/α = (p/E_retina) h / factor),
     searched at every Newton iteration and added node by node to the blocked Jacobian.
     With the augmented Lagrangian a multiplier per retina node. ``gaps``: the tear's rim,
-    for the rim's measurements."""
+    for the rim's measurements; ``retina_modulus``: E_retina."""
 
-    def __init__(self, body: Body, params: Parameters, gaps):
+    def __init__(self, body: Body, params: Parameters, gaps, retina_modulus: float):
         self.body, self.params, self.gaps = body, params, gaps
         self.augmented = params.contact_method == "augmented-lagrangian"
-        alpha = default_penalty(6.0 * params.c_retina, body.element_size, params.retina_penalty_factor)
+        alpha = default_penalty(retina_modulus, body.element_size, params.retina_penalty_factor)
         if self.augmented:
             alpha *= params.augmented_penalty_scale
         # deeper than the choroid is thick, a pair is on the wrong side (not contact)
