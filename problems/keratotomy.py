@@ -192,7 +192,7 @@ class Cornea:
             residual += support
         self.residual_blocks = list(ufl.extract_blocks(residual))
         # the glassy shear modulus (the load step) scales the pressure Schur complement
-        self.iterative = params.linear_solver(material.mu_inf + material.mu_v, dx)
+        self.iterative = params.linear_solver(material.glassy_shear_modulus, dx)
         self._central_anterior(V, fdim, params.fit_diameter / 2)
         self.has_cuts = incisions > 0
         if self.has_cuts:

@@ -129,7 +129,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     (("initial_volume", initial_volume), ("wall_area", wall_area),
                      ("bulk_modulus", params.bulk_modulus))}
         bcs = symmetry_bcs(u.function_space, shell, SYMMETRY)
-        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx)
+        law = NeoHooke(c10)
+        residual = (solid_residual(law, family, fields, tests, dx)
                     + follower_pressure(external, u, v, ds(shell.tag("outer"))))
         if real:
             P, qP = fields[-1], tests[-1]
@@ -144,7 +145,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             residual += follower_pressure(cavity.pressure, u, v, wall)
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
-                                 iterative=params.linear_solver(2 * c10, dx))
+                                 iterative=params.linear_solver(law.shear_modulus, dx))
         if cavity is not None:
             cavity.install(solver)
 

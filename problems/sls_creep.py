@@ -44,7 +44,7 @@ class Parameters(BarParameters):
             raise ParameterError("stress", f"must be finite and nonzero, got {self.stress!r}")
         # incompressible neo-Hooke in uniaxial tension has no limit point, but a glassy
         # stretch beyond ~3 or a compression below ~0.5 is outside what this bar is for
-        glassy = self.stress / (self.mu_inf + self.mu_v)
+        glassy = self.stress / self.material.glassy_shear_modulus
         if not -1.0 < glassy < 8.0:
             raise ParameterError("stress", f"{self.stress} MPa gives σ/(μ∞+μv) = {glassy:.3g}: "
                                  "outside (−1, 8), the range this benchmark is meant for")

@@ -121,12 +121,13 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         bcs = symmetry_bcs(u.function_space, shell, {"symmetry_x": 0, "symmetry_y": 1,
                                                      "symmetry_z": 2})
         mean_dilatation = MeanDilatation(u, bulk_modulus, dx, bcs) if condensed else None
-        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx, bulk_modulus,
+        law = NeoHooke(c10)
+        residual = (solid_residual(law, family, fields, tests, dx, bulk_modulus,
                                    condensed_pressure=getattr(mean_dilatation, "pressure", None))
                     + follower_pressure(pressure, u, v, ds(shell.tag("cavity_wall"))))
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
-                                 iterative=params.linear_solver(2 * c10, dx),
+                                 iterative=params.linear_solver(law.shear_modulus, dx),
                                  auto_factorisation=auto_factorisation(params.element))
         if mean_dilatation is not None:
             solver.state_hooks.append(mean_dilatation.update)

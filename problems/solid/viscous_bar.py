@@ -210,9 +210,9 @@ class ViscousHistory:
     def _moduli(self) -> tuple[float, float, float]:
         """μ∞, μv and the retardation time as numbers (the material may hold Constants)."""
         number = lambda x: float(np.asarray(getattr(x, "value", x)))
-        mu_inf, mu_v, tau = (number(x) for x in (self.material.mu_inf, self.material.mu_v,
-                                                 self.material.tau))
-        return mu_inf, mu_v, tau * (mu_inf + mu_v) / mu_inf
+        numbers = ve.Viscoelastic(*(number(x) for x in (self.material.mu_inf, self.material.mu_v,
+                                                        self.material.tau)))
+        return numbers.mu_inf, numbers.mu_v, numbers.retardation_time
 
     def update(self) -> float:
         """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
