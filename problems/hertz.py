@@ -243,7 +243,7 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from eyemech.problems.studies._common import stamp
+    from eyemech.problems.run.results import stamp
 
     r = np.concatenate([g[0] for g in gathered])
     p = np.concatenate([g[1] for g in gathered])

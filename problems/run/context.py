@@ -16,6 +16,7 @@ from eyemech.meshes import MeshError
 from eyemech.problems.run import jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
+from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, solvers_created
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
 from eyemech.problems.run.results import (
@@ -25,7 +26,6 @@ from eyemech.problems.run.results import (
     peak_memory_mb,
     write_json_atomic,
 )
-from eyemech.problems.solve.driver import NewtonOptions, SolveFailure, close_solvers, solvers_created
 
 log = logging.getLogger("eyemech")
 

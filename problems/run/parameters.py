@@ -362,7 +362,7 @@ def check_petsc_options(petsc: dict[str, str]) -> None:
     from mpi4py import MPI  # noqa: F401  (loads the MPI library petsc4py links to)
     from petsc4py import PETSc
 
-    from eyemech.problems.solve.driver import NewtonOptions
+    from eyemech.problems.run.newton import NewtonOptions
 
     prefix = "eyemechcheck_"
     values = NewtonOptions(petsc=dict(petsc)).as_petsc()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import datetime
 import json
 import os
 import platform
@@ -62,6 +63,14 @@ def versions() -> dict[str, str]:
 
         out["petsc"] = ".".join(str(v) for v in PETSc.Sys.getVersion())
     return out
+
+
+def stamp() -> str:
+    """One line for a chart footer and a CSV comment: what measured this, where, when."""
+    v = versions()
+    return (f"{datetime.date.today().isoformat()} · {platform.node()} ({platform.machine()}, "
+            f"{os.cpu_count()} cpus) · eyemech {v.get('eyemech', '?')} · "
+            f"DOLFINx {v.get('dolfinx', '?')} · PETSc {v.get('petsc', '?')}")
 
 
 def machine() -> dict[str, Any]:

@@ -18,9 +18,9 @@ from mpi4py import MPI
 from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.faults import abort_if_stranding
+from eyemech.problems.run.newton import SolveFailure
 from eyemech.problems.run.parameters import ParameterError, build
 from eyemech.problems.run.results import OutputFolder, write_text_atomic
-from eyemech.problems.solve.driver import SolveFailure
 
 log = logging.getLogger("eyemech")
 

@@ -4,24 +4,13 @@ the CSV writer, and the quiet run options every study uses."""
 from __future__ import annotations
 
 import csv
-import datetime
-import os
-import platform
 from pathlib import Path
 
 from eyemech.problems.run.context import RunOptions
-from eyemech.problems.run.results import versions
+from eyemech.problems.run.results import stamp
 
 # studies measure quantities, not pictures: no fields, no PNGs from the scenes
 QUIET = RunOptions(fields=False, pictures=False)
-
-
-def stamp() -> str:
-    """One line for a chart footer and a CSV comment: what measured this, where, when."""
-    v = versions()
-    return (f"{datetime.date.today().isoformat()} · {platform.node()} ({platform.machine()}, "
-            f"{os.cpu_count()} cpus) · eyemech {v.get('eyemech', '?')} · "
-            f"DOLFINx {v.get('dolfinx', '?')} · PETSc {v.get('petsc', '?')}")
 
 
 def write_csv(path: Path, rows: list[dict], *notes: str) -> Path:
