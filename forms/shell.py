@@ -339,7 +339,15 @@ def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int
     bulk = (h * (law.pair(q.dE, q.DE) + law.pair(q.E, q.dDE))
             + Db * (law.pair(q.dK, q.DK) + ufl.inner(SK, q.dDK_products)
                     + q.normal_second_variation(q.weighted_U(SK))))
+    edges = _edge_second_variation(u, v, w, material, orientation, degree, penalty_factor)
+    return bulk * dx + edges * dS
 
+
+def _edge_second_variation(u, v, w, material: ShellMaterial, orientation, degree: int,
+                           penalty_factor):
+    """The interior edges' part of :func:`shell_jacobian` (its "Edges" line): Δδe, to be
+    integrated over dS."""
+    Db = material.thickness ** 3 / 12.0
     mesh = ufl.domain.extract_unique_domain(u)
     nu = ufl.FacetNormal(mesh)
     size = ufl.CellDiameter(mesh)
@@ -400,7 +408,7 @@ def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int
              + weight * dD_theta_products - theta * dDM_products
              + p.normal_second_variation(x_plus) + m.normal_second_variation(x_minus)
              + _unit_second_variation(t, f_len, 1.0, y_t, df, Df))
-    return bulk * dx + edges * dS
+    return edges
 
 
 def _varies(value) -> bool:

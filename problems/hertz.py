@@ -175,26 +175,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                         tolerance=params.augmentation_tolerance,
                                         max_updates=params.max_augmentations)
 
-        force_z = resultant_force(plane, u, alpha, ds_contact, multiplier=lam)[2]
-        pressure = contact.contact_pressure(plane, u, alpha, multiplier=lam)
-        X = ufl.SpatialCoordinate(mesh)
-        moment = surface_integral(pressure * (X[0] ** 2 + X[1] ** 2), ds_contact)
-        total = surface_integral(pressure, ds_contact)
-        symmetry = 4.0  # quarter model
-
-        def quantities(depth: float) -> dict[str, float]:
-            p_total = total()
-            radius = float(np.sqrt(2.5 * moment() / p_total)) if p_total > 0 else 0.0
-            force = symmetry * force_z()
-            exact = hertz_force(params, depth)
-            values = {"contact_force": force, "contact_radius": radius,
-                      "max_penetration": penetration(), "indentation": depth,
-                      "hertz_force": exact, "hertz_radius": float(np.sqrt(R * depth))}
-            if exact > 0:
-                values["force_error"] = force / exact - 1.0
-                values["radius_error"] = radius / values["hertz_radius"] - 1.0
-            return values
-
+        quantities = _quantities(params, plane, u, alpha, lam, ds_contact, penetration)
         writer = ctx.field_writer([u])
         writer.write(0.0)
 
@@ -228,6 +209,34 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             with ctx.timings("output"):
                 _picture(penetration, params.penalty_stiffness, ctx, params)
     return ctx.result
+
+
+def _quantities(params: Parameters, plane: contact.Plane, u, alpha, lam, ds_contact,
+                penetration: NodalPenetration):
+    """quantities(depth): the contact force and radius of the whole ball (4 quarters), the
+    largest penetration and Hertz's force and radius at the indentation ``depth``. The
+    radius from the pressure's second moment: a² = (5/2) ∫ p r² / ∫ p for Hertz's p."""
+    force_z = resultant_force(plane, u, alpha, ds_contact, multiplier=lam)[2]
+    pressure = contact.contact_pressure(plane, u, alpha, multiplier=lam)
+    X = ufl.SpatialCoordinate(u.function_space.mesh)
+    moment = surface_integral(pressure * (X[0] ** 2 + X[1] ** 2), ds_contact)
+    total = surface_integral(pressure, ds_contact)
+    symmetry = 4.0  # quarter model
+
+    def quantities(depth: float) -> dict[str, float]:
+        p_total = total()
+        radius = float(np.sqrt(2.5 * moment() / p_total)) if p_total > 0 else 0.0
+        force = symmetry * force_z()
+        exact = hertz_force(params, depth)
+        values = {"contact_force": force, "contact_radius": radius,
+                  "max_penetration": penetration(), "indentation": depth,
+                  "hertz_force": exact, "hertz_radius": float(np.sqrt(params.radius * depth))}
+        if exact > 0:
+            values["force_error"] = force / exact - 1.0
+            values["radius_error"] = radius / values["hertz_radius"] - 1.0
+        return values
+
+    return quantities
 
 
 def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, params: Parameters) -> None:

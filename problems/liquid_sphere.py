@@ -149,20 +149,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         if cavity is not None:
             cavity.install(solver)
 
-        volume_form = dolfinx.fem.form(enclosed_volume(u, wall))
-        x = ufl.SpatialCoordinate(shell.mesh) + u
-        inner_mean = surface_mean(ufl.sqrt(ufl.dot(x, x)), wall)
-
-        def cavity_pressure() -> float:
-            if real:  # the one Real dof is owned by one rank
-                owned = P.function_space.dofmap.index_map.size_local
-                return float(ctx.comm.allreduce(float(np.sum(P.x.array[:owned])), op=MPI.SUM))
-            return cavity.current_pressure()
-
-        def quantities() -> dict[str, float]:
-            octant = assemble_scalar(volume_form, ctx.comm)
-            return {"cavity_pressure": cavity_pressure(), "inner_radius_deformed": inner_mean(),
-                    "cavity_volume": 8.0 * octant}
+        quantities = _quantities(ctx.comm, u, wall, fields[-1] if real else None, cavity)
 
         def apply(load: float, _increment: float) -> None:
             initial_pressure.value = load * params.initial_pressure
@@ -193,6 +180,27 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         q["seconds_per_newton_step"] = solve_seconds / max(1, newton["iterations"])
         _exact(q, params)
     return ctx.result
+
+
+def _quantities(comm: MPI.Comm, u, wall, P, cavity: SubstitutedCavity | None):
+    """The measured quantities of the state: cavity pressure (the Real unknown ``P``, or
+    the substituted cavity's), mean deformed inner radius, cavity volume (8 octants)."""
+    volume_form = dolfinx.fem.form(enclosed_volume(u, wall))
+    x = ufl.SpatialCoordinate(u.function_space.mesh) + u
+    inner_mean = surface_mean(ufl.sqrt(ufl.dot(x, x)), wall)
+
+    def cavity_pressure() -> float:
+        if P is not None:  # the one Real dof is owned by one rank
+            owned = P.function_space.dofmap.index_map.size_local
+            return float(comm.allreduce(float(np.sum(P.x.array[:owned])), op=MPI.SUM))
+        return cavity.current_pressure()
+
+    def quantities() -> dict[str, float]:
+        octant = assemble_scalar(volume_form, comm)
+        return {"cavity_pressure": cavity_pressure(), "inner_radius_deformed": inner_mean(),
+                "cavity_volume": 8.0 * octant}
+
+    return quantities
 
 
 def _exact(q: dict, params: Parameters) -> None:

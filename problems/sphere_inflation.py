@@ -145,30 +145,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     "cavity_volume": assemble_scalar(volume_form, ctx.comm)}
 
         u.name = "displacement"
-        writer = ctx.field_writer([u])
         pressure_field = mean_dilatation.pressure if condensed else fields[1] if len(fields) > 1 else None
-        pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
-        writer_p = ctx.field_writer([view for view, _ in pressure_out])
-        series = ctx.pyvista_series()
-        # pressure on the displacement's nodes, for pyvista (one grid, one space); made only
-        # when fields are written (a function space costs ≈ 0.05 s at h = 1)
-        nodal_pressure = dolfinx.fem.Function(dolfinx.fem.functionspace(
-            shell.mesh, ("Lagrange", family.displacement_degree)), name="pressure") \
-            if ctx.field_dir is not None else None
-
-        def write_state(load: float) -> None:
-            with ctx.timings("output"):
-                for _, update in pressure_out:
-                    update()
-                writer.write(load)
-                writer_p.write(load)
-                if ctx.field_dir is not None:
-                    extra = {}
-                    for view, _ in pressure_out:
-                        nodal_pressure.interpolate(view)
-                        extra["pressure"] = nodal_pressure
-                    series.write(load, gather_grid(u, extra))
-
+        write_state, close_fields = _field_output(ctx, shell, family, u, pressure_field)
         write_state(0.0)
 
         def apply(load: float, _increment: float) -> None:
@@ -190,25 +168,62 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.result.quantities.update(quantities())
             raise
         finally:
-            writer.close()
-            writer_p.close()
-            ctx.result.fields = writer.files + writer_p.files + series.files
+            ctx.result.fields = close_fields()
         ctx.result.quantities.update(quantities())
         ctx.result.quantities["jacobian_nonzeros"] = solver.jacobian_nonzeros()
         ctx.result.quantities["dofs"] = global_dofs(*fields)
-        try:
-            exact = analytic.sphere_inner_radius(params.pressure, params.inner_radius,
-                                                 params.outer_radius, params.c10)
-            ctx.result.quantities["inner_radius_exact"] = exact
-            ctx.result.quantities["inner_radius_error"] = (
-                ctx.result.quantities["inner_radius_deformed"] / exact - 1.0)
-            ctx.result.quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
-        except ValueError:
-            pass
+        _compare_with_exact(ctx.result.quantities, u, shell, params)
         if ctx.pictures:
             with ctx.timings("output"):
                 _picture(u, ctx, params)
     return ctx.result
+
+
+def _field_output(ctx: RunContext, shell, family, u, pressure_field):
+    """(write_state(load), close() -> files): the displacement and the pressure as VTX
+    fields, and both on the displacement's nodes as the pyvista series."""
+    writer = ctx.field_writer([u])
+    pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
+    writer_p = ctx.field_writer([view for view, _ in pressure_out])
+    series = ctx.pyvista_series()
+    # pressure on the displacement's nodes, for pyvista (one grid, one space); made only
+    # when fields are written (a function space costs ≈ 0.05 s at h = 1)
+    nodal_pressure = dolfinx.fem.Function(dolfinx.fem.functionspace(
+        shell.mesh, ("Lagrange", family.displacement_degree)), name="pressure") \
+        if ctx.field_dir is not None else None
+
+    def write_state(load: float) -> None:
+        with ctx.timings("output"):
+            for _, update in pressure_out:
+                update()
+            writer.write(load)
+            writer_p.write(load)
+            if ctx.field_dir is not None:
+                extra = {}
+                for view, _ in pressure_out:
+                    nodal_pressure.interpolate(view)
+                    extra["pressure"] = nodal_pressure
+                series.write(load, gather_grid(u, extra))
+
+    def close() -> list:
+        writer.close()
+        writer_p.close()
+        return writer.files + writer_p.files + series.files
+
+    return write_state, close
+
+
+def _compare_with_exact(quantities: dict, u, shell, params: Parameters) -> None:
+    """The exact inner radius, the relative error of the computed one and the displacement's
+    L² error (none when the pressure exceeds the exact solution's limit point)."""
+    try:
+        exact = analytic.sphere_inner_radius(params.pressure, params.inner_radius,
+                                             params.outer_radius, params.c10)
+        quantities["inner_radius_exact"] = exact
+        quantities["inner_radius_error"] = quantities["inner_radius_deformed"] / exact - 1.0
+        quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
+    except ValueError:
+        pass
 
 
 def _displacement_error(u, shell, params: Parameters, a: float) -> float:
