@@ -128,7 +128,8 @@ if start_file.is_file():
 
     saved = np.load(start_file)
     start = frames[0].copy()
-    start.point_data["displacement"] = saved["displacement"][cKDTree(saved["coordinates"]).query(start.points)[1]]
+    nearest = cKDTree(saved["coordinates"]).query(start.points)[1]
+    start.point_data["displacement"] = saved["displacement"][nearest]
     start.cell_data["surface strain"] = np.full(start.n_cells, np.nan)  # not saved with the state
     entries.insert(0, (0.0, start_file))
     frames.insert(0, start)

@@ -160,8 +160,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         end = steps * dt
         with ctx.timings("time_stepping"):
-            follow_path(solver, apply, Stepping(0.0, end, quantity="time", unit="s", initial_step=1.0 / steps, max_step=1.0 / steps,
-                                                grow=1.0, min_step=1e-3 / steps),
+            follow_path(solver, apply, Stepping(0.0, end, quantity="time", unit="s", initial_step=1.0 / steps,
+                                                max_step=1.0 / steps, grow=1.0, min_step=1e-3 / steps),
                         on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
         times, tip_w = np.asarray(times), np.asarray(tip_w)
         reference = amplitude * oscillator_response(omega, damping, dt, steps, params.scheme)

@@ -101,7 +101,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                     comm=ctx.comm)
         V = dolfinx.fem.functionspace(blocks.mesh, ("Lagrange", params.degree, (3,)))
         u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
-        energy = compressible_neo_hooke(deformation_gradient(u), params.youngs_modulus, params.poisson_ratio) * blocks.dx(QUADRATURE)
+        energy = (compressible_neo_hooke(deformation_gradient(u), params.youngs_modulus, params.poisson_ratio)
+                  * blocks.dx(QUADRATURE))
         load = dolfinx.fem.Constant(blocks.mesh, 0.0)
         residual = ufl.derivative(energy, u, v) + follower_pressure(
             load, u, v, blocks.ds(QUADRATURE)(blocks.tag("top")))

@@ -49,7 +49,8 @@ class Parameters(SceneParameters):
     elements_per_side: int = field(8, "structured elements along each edge of the panel")
     element: ElementName = field("Q2P1", "element family: " + ", ".join(ELEMENTS))
     bulk_modulus: float = field(400942.0, "bulk modulus of the displacement-only P1 family", "MPa")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
+                               "Newton converges from the unloaded state, a failed step is cut)")
 
     RESOLUTION_KEY: ClassVar[str] = "elements_per_side"
 

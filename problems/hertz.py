@@ -185,7 +185,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def converged(record) -> None:
             depth = record.load * params.indentation
             ctx.record_step(step=record.step, load_factor=record.load, newton_iterations=record.iterations,
-                            cuts=record.cuts, **record.counts(), residuals=record.residuals, **quantities(depth))
+                            cuts=record.cuts, **record.counts(), residuals=record.residuals,
+                            **quantities(depth))
             with ctx.timings("output"):
                 writer.write(record.load)
 

@@ -74,7 +74,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     with ctx.timings("time_stepping"):
         folded, history = fast_injection.fold(params, lens, ctx.record_step, frames)
     ctx.result.quantities.update(model=params.model, **fast_injection.quantities(history, params),
-                                 triangles=len(lens.shell.tri), nodes=len(lens.shell.X), dofs=lens.shell.n_dofs)
+                                 triangles=len(lens.shell.tri), nodes=len(lens.shell.X),
+                                 dofs=lens.shell.n_dofs)
     if ctx.out is not None and ctx.rank0:
         fast_injection.save_state(ctx.out / "folded_state.npz", lens, folded)
         ctx.result.fields.append("folded_state.npz")

@@ -102,14 +102,14 @@ PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle: numba kernels, method=newton with jacobian=fresh or "
-                                    "lagged; contact=true: the capsule by nodal penalty; surface_contact=true: ipctk "
-                                    "self-contact on its triangles)")
+                                    "lagged; contact=true: the capsule by nodal penalty; "
+                                    "surface_contact=true: ipctk self-contact on its triangles)")
     surface_contact: bool = field(False, "p1-rotation-free: ipctk self-contact on the P1 triangles (barrier "
                                          "d̂ = self_contact_distance, κ = self_contact_stiffness, CCD-limited "
                                          "updates, intersection check every step)")
-    bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
-                                     "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
-                                     "too soft on alternating-diagonal meshes)")
+    bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient "
+                                     "per edge: consistent on every mesh) | patch (6-node quadratic fit: "
+                                     "2× faster, too soft on alternating-diagonal meshes)")
     method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS))
     jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
     refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
@@ -129,14 +129,16 @@ class Parameters(LensParameters):
     roll_radius: float = field(3.0, "the released lens starts rolled onto a cylinder of this radius", "mm")
     contact: bool = field(False, "release it inside a rigid ellipsoidal capsule (penalty contact)")
     capsule_semi_axes: tuple = field((5.6, 5.6, 2.6), "capsule semi-axes (x, y, z)", "mm")
-    tangent: Tangent = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative of "
-                                     "the residual: the same matrix, twice the compile and assembly time)")
+    tangent: Tangent = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative "
+                                     "of the residual: the same matrix, twice the compile and assembly time)")
     native_kernels: bool = field(False, "compile the shell kernels with -O3 -march=native (≈ 20 % faster "
-                                        "Jacobian here; the JIT cache must then not be shared between CPU types)")
+                                        "Jacobian here; the JIT cache must then not be shared between CPU "
+                                        "types)")
     repeats: int = field(1, "runs of the same steps (the state is reset); steps/s is the best of them")
-    time_stepping: Literal["fixed", "adaptive"] = field("fixed", "fixed (Δt = time_step: the paper's step, at which the speed is measured) | "
-                                        "adaptive (the deformation-only release over steps × time_step with Δt "
-                                        "chosen by the time-error estimate: docs/iol.md §1)")
+    time_stepping: Literal["fixed", "adaptive"] = field(
+        "fixed", "fixed (Δt = time_step: the paper's step, at which the speed is measured) | "
+                 "adaptive (the deformation-only release over steps × time_step with Δt "
+                 "chosen by the time-error estimate: docs/iol.md §1)")
     time_tolerance: float = field(0.01, "time_stepping=adaptive: allowed estimated displacement error at the "
                                         "end of the release", "mm")
 
@@ -152,16 +154,16 @@ class Parameters(LensParameters):
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
         if self.model == "p1-rotation-free":
             if self.method != "newton" or self.jacobian not in ("fresh", "lagged"):
-                raise ParameterError("method", "model=p1-rotation-free runs method=newton with jacobian=fresh "
-                                     "or lagged (the other methods are the P2 model's)")
+                raise ParameterError("method", "model=p1-rotation-free runs method=newton with "
+                                     "jacobian=fresh or lagged (the other methods are the P2 model's)")
             if self.jacobian == "lagged" and not 0.0 < self.stall < 1.0:
                 raise ParameterError("stall", "model=p1-rotation-free, jacobian=lagged: a contraction factor "
                                      "between 0 and 1")
             if self.scheme != "backward-euler":
                 raise ParameterError("scheme", "model=p1-rotation-free integrates with backward-euler only")
         elif self.surface_contact:
-            raise ParameterError("surface_contact", "the P1 surface's self-contact is model=p1-rotation-free's "
-                                 "(the P2 lens' is iol-injection's)")
+            raise ParameterError("surface_contact", "the P1 surface's self-contact is "
+                                 "model=p1-rotation-free's (the P2 lens' is iol-injection's)")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
             raise ParameterError("capsule_semi_axes", "three positive semi-axes, mm")
         if self.roll_radius < 0.5 * self.overall_length / np.pi:
@@ -461,8 +463,9 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
             return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None,
                            self_contact=params.surface_contact, obstacles=obstacles)
         except RuntimeError as err:  # Newton did not converge within max_iterations
-            raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
-                                 f"from the released roll (Newton: {err}); take a smaller time_step") from err
+            raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = "
+                                 f"{params.time_step:g} s from the released roll (Newton: {err}); take a "
+                                 "smaller time_step") from err
 
     with ctx.timings("form_compilation"):
         timed(1)
@@ -473,7 +476,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     steps = params.steps
     history = best["history"]
     ctx.result.quantities.update(
-        model=params.model, bending=params.bending, method=params.method, jacobian=params.jacobian, steps=steps, repeats=len(runs),
+        model=params.model, bending=params.bending, method=params.method, jacobian=params.jacobian,
+        steps=steps, repeats=len(runs),
         steps_per_second=steps / best["wall"], steps_per_second_cpu=steps / min(r["cpu"] for r in runs),
         steps_per_second_all=[steps / r["wall"] for r in runs],
         cpu_seconds_per_step={k: v / steps for k, v in best["phases_cpu"].items()},
@@ -486,9 +490,10 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         ctx.result.quantities.update(max_penetration_mm=max(history["penetration"], default=0.0),
                                      capsule_semi_axes_mm=obstacles["capsule"].semi_axes.tolist())
     if params.surface_contact:
+        closest = history["min_distance"] if np.isfinite(history["min_distance"]) \
+            else None  # None: no pair came within d̂
         ctx.result.quantities.update(intersecting_steps=history["intersecting"],
-                                     min_self_distance_mm=history["min_distance"] if np.isfinite(history["min_distance"])
-                                     else None)  # None: no pair came within d̂
+                                     min_self_distance_mm=closest)
 
 
 def _lens(params: Parameters) -> LensShell:

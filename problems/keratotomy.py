@@ -318,8 +318,8 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters,
         accept(step.step, step.load, step.increment, step.iterations, step.cuts, step.residuals,
                body.history.time_error(), step.counts())
 
-    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=1.0,
-                                        max_step=1.0, min_step=1e-6, stops=outputs),
+    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, quantity="time", unit="s",
+                                        initial_step=1.0, max_step=1.0, min_step=1e-6, stops=outputs),
                 on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet,
                 checkpoints=ctx.checkpoints)
     return series, summary

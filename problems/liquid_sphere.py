@@ -73,7 +73,8 @@ class Parameters(SceneParameters, SolverChoice):
     element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
     cavity_formulation: Literal["real", "substituted"] = field(
         "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
+                               "Newton converges from the unloaded state, a failed step is cut)")
     cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid")
 
     def validate(self) -> None:

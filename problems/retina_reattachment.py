@@ -99,9 +99,12 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", params.degree, (3,)))
         u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
         dx = caps.dx(QUADRATURE)
-        energy = (compressible_neo_hooke(deformation_gradient(u), params.soft_modulus, params.poisson_ratio) * dx(caps.tag("soft"))
-                  + compressible_neo_hooke(deformation_gradient(u), params.stiff_modulus, params.poisson_ratio)
-                  * dx(caps.tag("stiff")))
+
+        def energy_density(youngs_modulus: float):
+            return compressible_neo_hooke(deformation_gradient(u), youngs_modulus, params.poisson_ratio)
+
+        energy = (energy_density(params.soft_modulus) * dx(caps.tag("soft"))
+                  + energy_density(params.stiff_modulus) * dx(caps.tag("stiff")))
         pressure = dolfinx.fem.Constant(mesh, 0.0)
         residual = ufl.derivative(energy, u, v) + follower_pressure(
             pressure, u, v, caps.ds(QUADRATURE)(caps.tag("pressure")))
@@ -127,8 +130,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def converged(record) -> None:
             contact.search()
             ctx.record_step(step=record.step, load_factor=record.load, newton_iterations=record.iterations,
-                            cuts=record.cuts, **record.counts(), residuals=record.residuals, min_gap=contact.min_gap(),
-                            **contact.summary())
+                            cuts=record.cuts, **record.counts(), residuals=record.residuals,
+                            min_gap=contact.min_gap(), **contact.summary())
             with ctx.timings("output"):
                 writer.write(record.load)
 

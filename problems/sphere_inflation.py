@@ -68,7 +68,8 @@ class Parameters(SceneParameters, SolverChoice):
         "mixed", "Q1P0's DG0 pressure: mixed (an unknown per cell, exactly incompressible) or "
                  "condensed (eliminated cell by cell, p = K (J̄ − 1): the mean-dilatation method, "
                  "O(μ/K) from mixed; docs/hyperelastic.md)")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
+                               "Newton converges from the unloaded state, a failed step is cut)")
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")

@@ -302,13 +302,15 @@ def _push(body: Applanation, ctx: RunContext, params: Parameters, top: float) ->
                                "while the applanator advanced (the cap buckles)")
         visited.append((step.load, radius))
         ctx.record_step(stage="applanation", depth_mm=step.load, contact_radius_mm=radius,
-                        force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts, **step.counts())
+                        force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts,
+                        **step.counts())
         if radius >= target:
             raise Reached
 
     guess = params.anterior_radius - math.sqrt(params.anterior_radius**2 - target**2)  # sagitta
     try:
-        follow_path(body.solver, apply, Stepping(end=params.max_depth, quantity="applanator depth", unit="mm", initial_step=0.5 * guess / params.max_depth,
+        follow_path(body.solver, apply, Stepping(end=params.max_depth, quantity="applanator depth", unit="mm",
+                                                 initial_step=0.5 * guess / params.max_depth,
                                                  max_step=0.5 * guess / params.max_depth, min_step=1e-5),
                     on_converged=converged, label="applanation", quiet=ctx.options.quiet)
     except Reached:

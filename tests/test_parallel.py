@@ -106,7 +106,8 @@ def _refused(folder: Path, name: str, ranks: int) -> bool:
     scene = folder / name
     code = (scene / "exit_code").read_text().strip()
     stderr = (scene / "rank0.stderr").read_text()
-    assert code == "2" and why in stderr, f"{name} on {ranks} ranks: exit {code}, not refused:\n{stderr[-2000:]}"
+    assert code == "2" and why in stderr, \
+        f"{name} on {ranks} ranks: exit {code}, not refused:\n{stderr[-2000:]}"
     return True
 
 

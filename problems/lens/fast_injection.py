@@ -150,7 +150,8 @@ def self_contact(lens: FastLens, params) -> SurfaceSelfContact | None:
         return None
     require_ipctk()
     return SurfaceSelfContact(lens.shell.X, lens.shell.tri, params.self_contact_distance,
-                              params.self_contact_stiffness, friction=params.friction, slip=params.friction_slip)
+                              params.self_contact_stiffness, friction=params.friction,
+                              slip=params.friction_slip)
 
 
 def save_state(path: Path, lens: FastLens, u: np.ndarray) -> None:
@@ -190,8 +191,8 @@ def p2_displacement(lens: FastLens, u: np.ndarray, nodes: np.ndarray) -> np.ndar
 
     shell = lens.shell
     U = np.asarray(u, dtype=float).reshape(-1, 3)
-    patch_nodes, _, _, _, _, _, fits = patch_operators(shell.X, shell.tri, shell.opposite, shell.boundary_kind,
-                                                       shell.material.poisson_ratio)
+    patch_nodes, _, _, _, _, _, fits = patch_operators(shell.X, shell.tri, shell.opposite,
+                                                       shell.boundary_kind, shell.material.poisson_ratio)
     n_tri = len(shell.tri)
     patch = U[patch_nodes]  # (triangles, 6, 3); a boundary slot's row is a condition with 0 right side
     patch[:, 3:][shell.opposite < 0] = 0.0
@@ -218,8 +219,8 @@ def p2_displacement(lens: FastLens, u: np.ndarray, nodes: np.ndarray) -> np.ndar
     values = np.vstack([U, total])
     distance, index = cKDTree(points).query(np.asarray(nodes, dtype=float))
     if np.max(distance, initial=0.0) > 1e-8:
-        raise ParameterError("fold_seed", f"the P2 lens' nodes are not the P1 lens' vertices and edge midpoints "
-                             f"({np.max(distance):.3g} mm apart)")
+        raise ParameterError("fold_seed", f"the P2 lens' nodes are not the P1 lens' vertices and edge "
+                             f"midpoints ({np.max(distance):.3g} mm apart)")
     return values[index]
 
 
@@ -387,7 +388,8 @@ class Injection:
                  and record.time >= last_time + self.params.frame_interval - 1e-9)
                 or step == 1 or record.time >= self.end - 1e-9):
             self.last_frame = (record.time, step)
-            self.frames.write(record.time, self.dyn.u, f"iol-injection (P1)  t = {record.time:.2f} s", self.drawn)
+            self.frames.write(record.time, self.dyn.u, f"iol-injection (P1)  t = {record.time:.2f} s",
+                              self.drawn)
 
     def run(self) -> InjectionHistory:
         steps = int(np.ceil(self.end / self.params.time_step - 1e-9))
@@ -410,6 +412,8 @@ class Injection:
                  optic_normal_z=float(optic["normal"][2]), optic_flipped=bool(optic["normal"][2] < 0.0),
                  optic_flatness=optic["flatness"], optic_unrolled=bool(optic["flatness"] > 0.9),
                  final_decentration_mm=float(np.hypot(*(center - self.capsule.center)[:2])),
-                 final_optic_center=center.tolist(), end_time_s=self.history.time[-1] if self.history.time else 0.0,
-                 triangles=len(self.lens.shell.tri), nodes=len(self.lens.shell.X), dofs=self.lens.shell.n_dofs)
+                 final_optic_center=center.tolist(),
+                 end_time_s=self.history.time[-1] if self.history.time else 0.0,
+                 triangles=len(self.lens.shell.tri), nodes=len(self.lens.shell.X),
+                 dofs=self.lens.shell.n_dofs)
         return q

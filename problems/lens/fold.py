@@ -150,8 +150,9 @@ def fold(params: FoldParameters, ctx: RunContext, shell: LensShell, frames_dir: 
 
     start = time.perf_counter()
     with ctx.timings("time_stepping"):
-        follow_path(solver, apply, Stepping(0.0, params.fold_time, quantity="time", unit="s", initial_step=1.0 / steps,
-                                            max_step=1.0 / steps, grow=2.0, min_step=1e-3 / steps,
+        follow_path(solver, apply, Stepping(0.0, params.fold_time, quantity="time", unit="s",
+                                            initial_step=1.0 / steps, max_step=1.0 / steps, grow=2.0,
+                                            min_step=1e-3 / steps,
                                             easy_iterations=EASY_ITERATIONS),
                     on_converged=converged, label="iol-fold", quiet=ctx.options.quiet)
     history["wall"] = time.perf_counter() - start
@@ -172,4 +173,5 @@ def blocked_dofs(dofs: np.ndarray) -> np.ndarray:
 def self_contact_kind(params: LensParameters) -> str:
     if not params.self_contact:
         return "not applied"
-    return f"ipctk barrier (d̂ = {params.self_contact_distance} mm), CCD-limited steps, friction μ = {params.friction}"
+    return (f"ipctk barrier (d̂ = {params.self_contact_distance} mm), CCD-limited steps, "
+            f"friction μ = {params.friction}")

@@ -40,8 +40,9 @@ class LensParameters(SceneParameters):
     optic_diameter: float = field(6.0, "optic diameter", "mm")
     overall_length: float = field(13.0, "diameter of the circle enclosing the haptics", "mm")
     mesh_size: float = field(0.6, "triangle size in the optic (0.6: 752 triangles, the paper 743)", "mm")
-    resolution: Literal["paper", "coarse"] = field("paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) or "
-                                     "'coarse' (every size × 2: 250 triangles, a quick run)")
+    resolution: Literal["paper", "coarse"] = field(
+        "paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) or "
+                 "'coarse' (every size × 2: 250 triangles, a quick run)")
     degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
     penalty_factor: float = field(1.0, "α in the shell's edge penalty α p(p+1) D / h")
     bore_radius: float = field(1.25, "cartridge bore radius (loading chamber)", "mm")
@@ -55,7 +56,8 @@ class LensParameters(SceneParameters):
     self_contact_distance: float = field(0.05, "barrier reach d̂: mid-surfaces closer than this repel", "mm")
     self_contact_stiffness: float = field(1.0, "barrier stiffness κ (Π = κ Σ b(d², d̂²); at d = d̂/2 a pair "
                                                "pushes with ≈ 4.3 κ d̂³)", "N/mm³")
-    friction: float = field(0.2, "Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion; 0 = none)")
+    friction: float = field(0.2, "Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion; "
+                                 "0 = none)")
     friction_slip: float = field(1e-3, "slip per step below which friction is regularised (viscous)", "mm")
 
     def validate(self) -> None:
@@ -349,7 +351,8 @@ def render_frame(shell: LensShell, path: Path, title: str, obstacles: dict,
     render_grid(grid.warp_by_vector(shell.u.name), path, title, obstacles, bounds)
 
 
-def render_grid(deformed, path: Path, title: str, obstacles: dict, bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
+def render_grid(deformed, path: Path, title: str, obstacles: dict,
+                bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
     """``render_frame``'s picture of a deformed lens surface (a pyvista dataset in its deformed
     position; the P1 scenes draw their triangles with it)."""
     import pyvista

@@ -192,8 +192,8 @@ def check_cell_count(params: SceneParameters) -> None:
         sized = f"an element size of {size:.3g} mm" if isinstance(size, (int, float)) and size > 0 \
             else f"{key}={getattr(params, key)!r}"
         raise ParameterError(key, f"{sized} gives about {int(cells):,} cells (estimated before "
-                             f"meshing), more than the limit of {limit:,}: coarsen the mesh with {key}, or raise "
-                             f"the limit with {override}")
+                             f"meshing), more than the limit of {limit:,}: coarsen the mesh with {key}, "
+                             f"or raise the limit with {override}")
 
 
 def check_types(params: SceneParameters) -> None:

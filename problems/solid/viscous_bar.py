@@ -380,8 +380,8 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
 
     explicit = params.time_scheme == "forward-euler"
     fraction = params.dt / params.t_end
-    stepping = Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=fraction, max_step=fraction,
-                        min_step=fraction / 64, max_cuts=0 if explicit else 6,
+    stepping = Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=fraction,
+                        max_step=fraction, min_step=fraction / 64, max_cuts=0 if explicit else 6,
                         stops=time_stops(params, extra_stops))
 
     def apply(t: float, increment: float) -> None:
