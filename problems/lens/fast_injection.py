@@ -46,6 +46,7 @@ from eyemech.problems.lens.rotation_free import Dynamics, FastLens, MeshInputErr
 from eyemech.problems.lens.surface_contact import NodalObstacles, SurfaceSelfContact
 from eyemech.problems.lens.time_error import TimeErrorTally, rotation_free_step_error
 from eyemech.problems.run.parameters import ParameterError
+from eyemech.problems.solve.stepping import StepController
 
 RTOL, ATOL = 1e-6, 1e-9  # lens_newton's: relative, and N (shell forces ~1e-4 N)
 MAX_ITERATIONS = 25
@@ -67,10 +68,14 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
           on_converged: Callable[[StepRecord], None], stops: tuple[float, ...] = (),
           min_fraction: float = 1e-3, time_error: TimeErrorTally | None = None) -> None:
     """Backward-Euler steps from t = 0 to ``end`` (landing on each of ``stops``): ``apply(t, Δt)``
-    sets the step ending at t, then ``dyn.step()``; a step that fails is undone and halved."""
-    t, dt, cuts = 0.0, time_step, 0
+    sets the step ending at t, then ``dyn.step()``; a step that fails is undone and halved (down
+    to ``min_fraction`` of ``time_step``), an easy one's successor doubled (up to ``time_step``)."""
+    t = 0.0
+    steps = StepController(time_step, largest=time_step, smallest=min_fraction * time_step,
+                           cut_factor=0.5, max_cuts=None, grow_factor=2.0,
+                           easy_effort=EASY_ITERATIONS, grow_after_cut=True)
     while t < end - 1e-9 * time_step:
-        target = min(t + dt, end)
+        target = min(t + steps.step, end)
         for stop in stops:
             if t + 1e-9 * time_step < stop < target - 1e-9 * time_step:
                 target = stop
@@ -82,18 +87,14 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
             iterations = dyn.step()
         except RuntimeError as err:
             dyn.restore_state(saved)
-            cuts += 1
-            dt = 0.5 * h
-            if dt < min_fraction * time_step:
-                raise StepFailure(f"Δt cut to {dt:.3g} s at t = {t:.4g} s ({err})") from err
+            if not steps.cut(attempted=h):
+                raise StepFailure(f"Δt cut to {steps.step:.3g} s at t = {t:.4g} s ({err})") from err
             continue
         t = target
         if time_error is not None:
             time_error.add(rotation_free_step_error(dyn))
-        on_converged(StepRecord(t, h, iterations, cuts))
-        cuts = 0
-        if iterations <= EASY_ITERATIONS:
-            dt = min(2.0 * dt, time_step)
+        on_converged(StepRecord(t, h, iterations, steps.cuts))
+        steps.accept(iterations)
 
 
 def fast_lens(ctx, params) -> FastLens:

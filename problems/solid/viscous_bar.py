@@ -60,6 +60,7 @@ from eyemech.problems.solve.driver import (
     follow_path,
 )
 from eyemech.problems.solve.scalars import assemble_scalar
+from eyemech.problems.solve.stepping import StepController
 
 LOADED_FACE = 1  # facet tag of x = L
 
@@ -428,26 +429,27 @@ def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: Adap
     t_end, tol = steps.t_end, steps.tolerance
     retardation = history.retardation_time()
     stops = sorted({t for t in steps.stops if 0 < t < t_end} | {t_end})
-    t, dt, step, cuts = 0.0, min(steps.first_dt, t_end), 0, 0
+    t, step = 0.0, 0
+    # a failed Newton solve halves the step (at most 6 times in a row); the error
+    # estimate proposes every other length
+    controller = StepController(min(steps.first_dt, t_end), cut_factor=0.5, max_cuts=6,
+                                easy_effort=None)
     resumed = checkpoints.enter_path(label) if checkpoints is not None else None
     if resumed is not None:
         if "skip" in resumed:  # finished before the checkpoint: its state comes later
             checkpoints.leave_path([])
             return
-        t, dt, step = resumed["value"], resumed["increment"], resumed["step"]
+        t, controller.step, step = resumed["value"], resumed["increment"], resumed["step"]
     fresh = True
     while t < t_end * (1 - 1e-12):
         if fresh:  # a new step: its start state and the work counted from here
             if step >= steps.max_steps:
-                raise TooManySteps(step, t, dt, steps.max_steps)
+                raise TooManySteps(step, t, controller.step, steps.max_steps)
             state, counts_before = solver.save_state(), solver.counts.copy()
             if checkpoints is not None:
                 checkpoints.watch_step(solver)
             fresh = False
-        next_stop = next(s for s in stops if s > t * (1 + 1e-12) + 1e-300)
-        target = min(t + dt, next_stop)
-        if next_stop - target < 1e-3 * dt:  # no sliver before a stop
-            target = next_stop
+        target = controller.target(t, next(s for s in stops if s > t * (1 + 1e-12) + 1e-300))
         h = target - t
         history.dt.value = h
         apply_load(target)
@@ -455,9 +457,7 @@ def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: Adap
         if not converged:
             residuals, reason = list(solver.residual_history), solver.reason()
             solver.restore_state(state)
-            cuts += 1
-            dt = 0.5 * h
-            if cuts > 6:
+            if not controller.cut(attempted=h):
                 history.dt.value = 0.0
                 apply_load(t)
                 raise SolveFailure(step + 1, target, t, residuals, reason)
@@ -468,19 +468,20 @@ def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: Adap
         ratio = np.sqrt(allowed / relative) if relative > 0 else np.inf
         if ratio < 1.0:
             solver.restore_state(state)
-            summary["rejected_steps"] += 1
-            dt = h * max(0.2, 0.9 * ratio)
+            controller.reject(h * max(0.2, 0.9 * ratio))
+            summary["rejected_steps"] += 1  # kept in the checkpoints: a resume continues it
             continue
         step += 1
         work = StepRecord.work(solver.counts - counts_before)
+        cuts = controller.cuts
         record = StepRecord(step, target, h, iterations, cuts, list(solver.residual_history),
                             solver.linear_iterations, **work)
         accept(step, target, h, iterations, cuts, record.residuals, errors, record.counts())
-        t, cuts, fresh = target, 0, True
-        dt = h * min(2.0, max(0.2, 0.9 * ratio))
+        t, fresh = target, True
+        controller.accept(next_step=h * min(2.0, max(0.2, 0.9 * ratio)))
         if checkpoints is not None:
-            checkpoints.step_done({"label": label, "step": step, "value": t, "increment": dt,
-                                   "records": []})
+            checkpoints.step_done({"label": label, "step": step, "value": t,
+                                   "increment": controller.step, "records": []})
     if checkpoints is not None:
         checkpoints.leave_path([])
 
