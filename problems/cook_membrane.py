@@ -26,7 +26,7 @@ from eyemech.forms import NeoHooke
 from eyemech.meshes.cook import TIP, cook_membrane
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import gather_grid, render_png
-from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.residual import solid_residual
 from eyemech.problems.solid.spaces import (
@@ -44,12 +44,12 @@ REFERENCE_TIP_DISPLACEMENT = 6.9  # mm, converged value of the references above
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    shear_modulus: float = field(80.1938, "shear modulus μ = 2 c10 (neo-Hooke)", "MPa")
-    load: float = field(100.0, "total shear force on the right edge per unit thickness", "N/mm")
-    elements_per_side: int = field(8, "structured elements along each edge of the panel")
-    element: ElementName = field("Q2P1", "element family: " + ", ".join(ELEMENTS))
-    bulk_modulus: float = field(400942.0, "bulk modulus of the displacement-only P1 family", "MPa")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+    shear_modulus: float = field(80.1938, "shear modulus μ = 2 c10 (neo-Hooke)", "MPa", group=PHYSICS)
+    load: float = field(100.0, "total shear force on the right edge per unit thickness", "N/mm", group=PHYSICS)
+    elements_per_side: int = field(8, "structured elements along each edge of the panel", group=GEOMETRY)
+    element: ElementName = field("Q2P1", "element family: " + ", ".join(ELEMENTS), group=GEOMETRY)
+    bulk_modulus: float = field(400942.0, "bulk modulus of the displacement-only P1 family", "MPa", group=PHYSICS)
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)", group=SOLVER)
 
     RESOLUTION_KEY: ClassVar[str] = "elements_per_side"
 

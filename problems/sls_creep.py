@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.viscous_bar import (
     BarParameters,
@@ -34,9 +34,9 @@ from eyemech.problems.solve.driver import NonlinearSolver
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(BarParameters):
-    stress: float = field(0.003, "axial Cauchy stress applied at t = 0 and held", "MPa")
-    t_end: float = field(800.0, "end time (4 retardation times at the defaults)", "s")
-    dt: float = field(2.0, "time step (fixed mode; the first step in adaptive mode)", "s")
+    stress: float = field(0.003, "axial Cauchy stress applied at t = 0 and held", "MPa", group=PHYSICS)
+    t_end: float = field(800.0, "end time (4 retardation times at the defaults)", "s", group=PHYSICS)
+    dt: float = field(2.0, "time step (fixed mode; the first step in adaptive mode)", "s", group=SOLVER)
 
     def validate(self) -> None:
         super().validate()

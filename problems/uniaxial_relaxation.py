@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import PHYSICS, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.viscous_bar import (
     BarParameters,
@@ -34,8 +34,8 @@ from eyemech.problems.solve.driver import NonlinearSolver
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(BarParameters):
-    stretch: float = field(1.2, "axial stretch λ reached at ramp_time and then held")
-    ramp_time: float = field(10.0, "duration of the linear stretch ramp (0: a step at t = 0)", "s")
+    stretch: float = field(1.2, "axial stretch λ reached at ramp_time and then held", group=PHYSICS)
+    ramp_time: float = field(10.0, "duration of the linear stretch ramp (0: a step at t = 0)", "s", group=PHYSICS)
 
     def validate(self) -> None:
         super().validate()
