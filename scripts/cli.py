@@ -360,13 +360,33 @@ def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
 
 
 def _summary(result, out: Path, say) -> None:
+    """The result's scalar quantities; a staged scene's as a table, a column per stage
+    (``after_<stage>`` groups), then the quantities that belong to no stage."""
+    from eyemech.problems.run.results import stage_groups
+
     say(f"{result.scene}: {result.status} in {result.timings.get('total', 0):.1f} s "
         f"on {result.mpi_size} rank(s); results in {out}/results.json")
+    stages = stage_groups(result.quantities)
+    staged: list[str] = []
+    for group in stages.values():
+        staged += [k for k, v in group.items() if _scalar(v) and k not in staged]
+    if stages:
+        say(f"  {'by stage':36s}" + "".join(f"{name.replace('_', ' '):>16s}" for name in stages))
+        for key in staged:
+            say(f"  {key:36s}" + "".join(f"{_shown(group.get(key, '—')):>16s}"
+                                         for group in stages.values()))
+        say(f"  at the end of the run (after {list(stages)[-1].removeprefix('after_')}):")
     for key, value in result.quantities.items():
-        if isinstance(value, float):
-            say(f"  {key:32s} {value:.6g}")
-        elif isinstance(value, (int, bool, str)):
-            say(f"  {key:32s} {value}")
+        if _scalar(value) and key not in staged:
+            say(f"  {key:36s} {_shown(value)}")
+
+
+def _scalar(value) -> bool:
+    return isinstance(value, (int, float, bool, str))
+
+
+def _shown(value) -> str:
+    return f"{value + 0.0:.6g}" if isinstance(value, float) else str(value)  # -0.0 as 0
 
 
 def _sweep(scene, overrides, args, options, comm, say) -> int:

@@ -19,7 +19,7 @@ from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.parameters import ParameterError, build
-from eyemech.problems.run.results import OutputFolder, write_text_atomic
+from eyemech.problems.run.results import OutputFolder, stage_groups, write_text_atomic
 from eyemech.problems.solve.driver import SolveFailure
 
 log = logging.getLogger("eyemech")
@@ -141,7 +141,13 @@ def _case_timings(timings: dict[str, float]) -> dict[str, float | None]:
 
 
 def _scalars(quantities: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in quantities.items() if isinstance(v, (int, float, bool, str))}
+    """A case's CSV columns: its scalar quantities (a staged scene's are its last
+    stage's), then one column group per stage, ``after_<stage>.<quantity>``."""
+    row = {k: v for k, v in quantities.items() if isinstance(v, (int, float, bool, str))}
+    for stage, group in stage_groups(quantities).items():
+        row.update({f"{stage}.{k}": v for k, v in group.items()
+                    if isinstance(v, (int, float, bool, str))})
+    return row
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
