@@ -19,6 +19,7 @@ from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.parameters import ParameterError, build
+from eyemech.problems.run.progress import case_ended, case_started
 from eyemech.problems.run.results import OutputFolder, stage_groups, write_text_atomic
 from eyemech.problems.solve.driver import SolveFailure
 
@@ -81,6 +82,8 @@ def _run_cases(scene, all_cases, grid, out: Path, ranks_per_case: int,
                 rows.append({**row, **previous})
             continue
         params = build(scene.parameters, overrides)
+        quiet = sub.rank != 0 or (options.quiet if options is not None else True)
+        started = case_started(index, len(all_cases), {k: overrides[k] for k in grid}, quiet)
         try:
             result = scene.run(params, comm=sub, out=case_dir,
                                options=_case_options(options, case_dir, resume))
@@ -93,6 +96,7 @@ def _run_cases(scene, all_cases, grid, out: Path, ranks_per_case: int,
         except Exception as err:  # one case's error must not stop the others ...
             abort_if_stranding(sub, err)  # ... unless the case's other ranks wait for this one
             row.update(status="error", error="".join(traceback.format_exception_only(err)).strip())
+        case_ended(index, len(all_cases), row["status"], started, quiet)
         if sub.rank == 0:
             rows.append(row)
     sub.Free()
