@@ -144,10 +144,10 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     "cavity_volume": ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form))}
 
         u.name = "displacement"
-        writer = ctx.field_writer([u])
+        writer = ctx.field_writer([u], pvd=False)  # VTX on request; state.pvd below
         pressure_field = mean_dilatation.pressure if condensed else fields[1] if len(fields) > 1 else None
         pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
-        writer_p = ctx.field_writer([view for view, _ in pressure_out])
+        writer_p = ctx.field_writer([view for view, _ in pressure_out], pvd=False)
         series = ctx.pyvista_series()
         # pressure on the displacement's nodes, for pyvista (one grid, one space); made only
         # when fields are written (a function space costs ≈ 0.05 s at h = 1)

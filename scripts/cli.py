@@ -53,7 +53,11 @@ def _parser() -> argparse.ArgumentParser:
                             "Jacobians only), or auto: the scene's choice, LU unless LDLᵀ was "
                             "measured to pay (docs/atlas/peer-comparison.md)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
-        p.add_argument("--no-fields", action="store_true", help="do not write VTX fields")
+        p.add_argument("--no-fields", action="store_true",
+                       help="do not write fields (.vtu + .pvd, or .bp with --vtx)")
+        p.add_argument("--vtx", action="store_true",
+                       help="write the fields as ADIOS2 VTX (.bp, in parallel, for ParaView "
+                            "with ADIOS2) instead of .vtu + .pvd (pyvista and ParaView)")
         p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
         p.add_argument("--checkpoint-every", default="10m", metavar="N|Tm",
                        help="write a checkpoint every N steps or T minutes (10m; 0 = only on "
@@ -76,6 +80,10 @@ def _parser() -> argparse.ArgumentParser:
     p_sweep.add_argument("--ranks-per-case", type=int, default=1)
     p_sweep.add_argument("--resume", action="store_true", help="skip cases already finished")
     p_sweep.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p_sweep.add_argument("--fields", action="store_true",
+                         help="write each case's fields (off by default in a sweep)")
+    p_sweep.add_argument("--pictures", action="store_true",
+                         help="render each case's PNG pictures (off by default in a sweep)")
     p_study = sub.add_parser("study", help="accuracy-vs-cost and stability studies (CSV + PNG)")
     p_study.add_argument("name", help="study name, or 'all' (see 'eyemech study list')")
     p_study.add_argument("--out", help="output folder (default docs/studies; with --quick "
@@ -306,7 +314,12 @@ def _options(args):
     # `run --resume DIR` names the folder; `sweep --resume` (a flag) resumes case by case
     resume = Path(args.resume) if args.command == "run" and args.resume else None
     checkpoint = CheckpointOptions(every_steps=steps, every_minutes=minutes, resume=resume)
-    return RunOptions(quiet=args.quiet, fields=not args.no_fields, pictures=not args.no_pictures,
+    # a sweep writes fields and pictures only when asked (a case's are megabytes); a run
+    # writes them unless told not to
+    sweep = args.command == "sweep"
+    fields = args.fields and not args.no_fields if sweep else not args.no_fields
+    pictures = args.pictures and not args.no_pictures if sweep else not args.no_pictures
+    return RunOptions(quiet=args.quiet, fields=fields, pictures=pictures, vtx=args.vtx,
                       newton=newton, checkpoint=checkpoint)
 
 

@@ -1,5 +1,8 @@
-"""Fields for ParaView/pyvista (ADIOS2 VTX, one file per element family) and PNG
-pictures rendered off-screen by pyvista on rank 0 from data gathered from all ranks."""
+"""Fields and pictures. By default a run's fields are gathered to rank 0 and written as
+``.vtu`` files indexed by a ``.pvd`` series, which pyvista (``pv.get_reader``) and ParaView
+both read; ADIOS2 VTX (``.bp``, written in parallel, for ParaView with ADIOS2) only on
+request (``--vtx``: the project's pyvista cannot read it). PNG pictures are rendered
+off-screen by pyvista on rank 0 from the gathered grid."""
 
 from __future__ import annotations
 
@@ -15,12 +18,16 @@ from mpi4py import MPI
 
 
 class FieldWriter:
-    """Time series of functions; functions that share an element share a file."""
+    """Time series of functions. With ``vtx``, ADIOS2 VTX files (functions that share an
+    element share a file); otherwise, when ``pvd``, a gathered ``<stem>.pvd`` series per
+    element (``<stem>_<names>.pvd`` when there are several) with the functions as point
+    data; neither: nothing (a scene that writes its own series passes ``pvd=False``)."""
 
     def __init__(self, out: Path | None, comm: MPI.Comm, functions: Sequence[dolfinx.fem.Function],
-                 stem: str = "fields"):
+                 stem: str = "fields", vtx: bool = True, pvd: bool = True):
         self.files: list[str] = []
         self._writers = []
+        self._series: list[tuple[list, PyvistaSeries]] = []
         self.comm = comm
         if out is None:
             return
@@ -28,15 +35,22 @@ class FieldWriter:
         for function in functions:
             key = function.function_space.element.signature
             groups.setdefault(key, []).append(function)
-        for index, group in enumerate(groups.values()):
-            name = f"{stem}_{'_'.join(f.name for f in group)}.bp"
-            path = Path(out) / name
-            self._writers.append(dolfinx.io.VTXWriter(comm, str(path), group, engine="BP4"))
-            self.files.append(name)
+        for group in groups.values():
+            names = "_".join(f.name for f in group)
+            if vtx:
+                name = f"{stem}_{names}.bp"
+                self._writers.append(dolfinx.io.VTXWriter(comm, str(Path(out) / name), group,
+                                                          engine="BP4"))
+                self.files.append(name)
+            elif pvd:
+                series_stem = stem if len(groups) == 1 else f"{stem}_{names}"
+                self._series.append((group, PyvistaSeries(out, comm, stem=series_stem)))
 
     def write(self, time: float) -> None:
         for writer in self._writers:
             writer.write(time)
+        for group, series in self._series:  # collective: every rank gathers
+            series.write(time, gather_grid(group[0], {f.name: f for f in group[1:]}))
 
     def close(self, error: BaseException | None = None) -> None:
         """Collective. Called in a ``finally`` (or ``__exit__``) while an exception raised
@@ -48,12 +62,35 @@ class FieldWriter:
         for writer in self._writers:
             writer.close()
         self._writers = []
+        for _, series in self._series:
+            self.files += [f for f in series.files if f not in self.files]
+        self._series = []
 
     def __enter__(self):
         return self
 
     def __exit__(self, kind, error, tb):
         self.close(error)
+
+
+def region_data(cell_tags, cells: int) -> np.ndarray:
+    """Each owned cell's region tag (0 where untagged), for ``gather_grid``'s ``cell_data``
+    as ``"tissue"``; :func:`add_legend` names the tags."""
+    tags = np.zeros(cells, dtype=np.int32)
+    if cell_tags is not None:
+        owned = cell_tags.indices < cells
+        tags[cell_tags.indices[owned]] = cell_tags.values[owned]
+    return tags
+
+
+def add_legend(grid, names: dict[str, tuple[int, int]], dim: int, key: str = "tissue") -> None:
+    """The names of ``key``'s tags as field data (``<key>_names``, ``<key>_tags``, same
+    order), saved in the ``.vtu``: ``grid.field_data["tissue_names"]``."""
+    if grid is None:
+        return
+    regions = sorted((tag, name) for name, (d, tag) in names.items() if d == dim)
+    grid.field_data[f"{key}_tags"] = np.array([tag for tag, _ in regions], dtype=np.int32)
+    grid.field_data[f"{key}_names"] = np.array([name for _, name in regions])
 
 
 def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,
@@ -162,8 +199,9 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
 
 class PyvistaSeries:
     """Converged states as ``.vtu`` files plus a ``.pvd`` index, written by rank 0 from
-    the gathered grid: what notebooks read with ``pyvista.read`` (the VTX ``.bp`` files
-    are for ParaView and parallel I/O; VTK's PyPI wheel cannot read them)."""
+    the gathered grid: what ParaView opens and notebooks read with
+    ``pv.get_reader(path)`` (``reader.set_active_time_value(reader.time_values[-1])`` for
+    the last state: ``pyvista.read`` gives the first)."""
 
     def __init__(self, out: Path | None, comm: MPI.Comm, stem: str = "state"):
         self.out, self.comm, self.stem = (Path(out) if out else None), comm, stem
