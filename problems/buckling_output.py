@@ -37,7 +37,7 @@ class Writer:
                                   slice(None), [tuple(e) for e in saved]))
 
     def state(self, load: float, stage: int, picture: bool = False) -> None:
-        if not (self.vtx.files or self.pictures):
+        if self.ctx.field_dir is None and not self.pictures:  # --no-fields --no-pictures
             return
         with self.ctx.timings("output"):
             self.vtx.write(load)
