@@ -55,3 +55,29 @@ def test_notebook_executes_and_shows_the_runs_numbers(path, tmp_path, monkeypatc
         expected = lookup(json.loads(Path(file).read_text()), key)
         assert math.isclose(value, expected, rel_tol=1e-9, abs_tol=1e-12), \
             f"{Path(file).parent.name}/{Path(file).name} {key}: shown {value}, the run's {expected}"
+
+
+def test_sweep_comparison_reads_another_scenes_sweep(tmp_path, monkeypatch):
+    """The sweep notebook takes its grid keys and quantities from the sweep's files: a
+    retina-reattachment sweep (no sphere key anywhere) is charted and checked alike."""
+    import subprocess
+    import sys
+
+    import jupytext
+    import nbformat
+    from nbclient import NotebookClient
+
+    sweep = tmp_path / "sweep"
+    subprocess.run([str(Path(sys.executable).parent / "eyemech"), "sweep", "retina-reattachment",
+                    "--grid", "pressure=1e-5,2e-5", "--out", str(sweep), "--quiet", "--fields"],
+                   check=True, capture_output=True, timeout=900)
+    notebook = jupytext.read(Path(__file__).parents[1] / "notebooks" / "sweep_comparison.py")
+    notebook.cells.append(nbformat.v4.new_code_cell(REPORT))
+    monkeypatch.setenv("EYEMECH_SWEEP_DIR", str(sweep))
+    NotebookClient(notebook, timeout=900, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()
+    report = "".join(o.get("text", "") for o in notebook.cells[-1].outputs)
+    shown = json.loads(report.split("SHOWN ", 1)[1])
+    assert {Path(f).parent.name for f, _, _ in shown} == {"case_0000", "case_0001"}
+    for file, key, value in shown:
+        assert math.isclose(value, lookup(json.loads(Path(file).read_text()), key), rel_tol=1e-9)
