@@ -9,7 +9,8 @@
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
 failed (the last converged state and results.json with status "failed" are kept),
-4 a sweep ended but some of its cases failed (sweep.csv says which), 130 / 143
+4 a sweep or study ended but some of its cases failed (sweep.csv or the study's
+table says which), 130 / 143
 stopped by SIGINT / SIGTERM after writing a checkpoint (128 + the signal number;
 continue with ``eyemech run NAME --resume DIR``), 1 an unexpected error (under MPI
 on one rank: its traceback, then MPI_Abort ends the job).
@@ -256,16 +257,27 @@ def _study(args, comm, say) -> int:
     for name in chosen:
         if name not in known:
             raise KeyError(f"unknown study '{name}'; known: {', '.join(sorted(known))}")
+    from eyemech.problems.studies import record
+
     out = Path(args.out or ("results/studies-quick" if args.quick else "docs/studies"))
     began = time.perf_counter()
+    failed = []
     for name in chosen:
         start = time.perf_counter()
-        files = known[name].run(out=out, quick=args.quick, comm=comm)
+        with record(known[name], args.quick) as done:
+            files = known[name].run(out=out, quick=args.quick, comm=comm)
         say(f"{name}: wrote {', '.join(str(f) for f in files)} "
             f"({time.perf_counter() - start:.0f} s)")
+        # rank 0 writes the tables: it alone knows the failed cases
+        done.failed = comm.bcast(done.failed if comm.rank == 0 else None, root=0)
+        if done.failed:
+            failed.append(name)
+            say(f"eyemech: study {name}: {len(done.failed)} of {done.cases} cases failed: "
+                f"{'; '.join(done.failed)}", file=sys.stderr)
     if len(chosen) > 1:
-        say(f"{len(chosen)} studies in {time.perf_counter() - began:.0f} s")
-    return 0
+        say(f"{len(chosen)} studies in {time.perf_counter() - began:.0f} s"
+            + (f"; cases failed in {', '.join(failed)}" if failed else ""))
+    return EXIT_CASES_FAILED if failed else 0
 
 
 def parameter_tables(scenes: dict) -> str:

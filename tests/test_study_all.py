@@ -1,10 +1,12 @@
-"""``eyemech study all --quick`` (issue 9): every registered study runs on coarse
-settings and writes at least one CSV and one PNG, each stamped with the machine,
-versions and date (CSV: a ``# `` comment line; PNG: the ``Comment`` text chunk that
+"""``eyemech study all --quick``: every registered study runs on coarse settings, every
+case of it runs (exit 0: a failed case exits 4), and it writes at least one CSV and one
+PNG, each stamped with the machine, versions and date (CSV: its ``<stem>.meta.json``
+sidecar, the CSV itself a plain table; PNG: the ``Comment`` text chunk that
 :func:`_common.save_chart` writes beside the visible footer)."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -12,7 +14,7 @@ from pathlib import Path
 from PIL import Image
 
 from eyemech.problems.studies import studies
-from eyemech.problems.studies._common import stamp
+from eyemech.problems.studies._common import sidecar, stamp
 
 
 def test_study_all_quick_writes_stamped_csv_and_png(tmp_path):
@@ -30,6 +32,9 @@ def test_study_all_quick_writes_stamped_csv_and_png(tmp_path):
         pngs = [f for f in files if f.suffix == ".png"]
         assert csvs and pngs, f"{name} wrote {files}"
         for table in csvs:
-            assert expected_stamp in table.read_text(), f"{table} has no stamp"
+            assert not table.read_text().startswith("#"), f"{table} starts with a comment line"
+            meta = json.loads(sidecar(table).read_text())
+            assert expected_stamp in meta["made"], f"{table} has no stamp"
+            assert meta["study"] == name and meta["quick"] is True and meta["settings_hash"]
         for chart in pngs:
             assert expected_stamp in Image.open(chart).text.get("Comment", ""), f"{chart} has no stamp"
