@@ -11,7 +11,6 @@ import math
 from pathlib import Path
 
 import pytest
-
 from test_results_schema import check_results
 
 NOTEBOOKS = sorted((Path(__file__).parents[1] / "notebooks").glob("*.py"))

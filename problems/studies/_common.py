@@ -62,16 +62,27 @@ def write_csv(path: Path, rows: list[dict], *notes: str) -> Path:
     return path
 
 
+def with_units(rows: list[dict], parameters: type) -> list[dict]:
+    """The rows with each column that is a parameter of ``parameters`` (a scene's dataclass)
+    named with its unit: ``indentation`` -> ``indentation_mm``."""
+    units = {f.name: f.metadata.get("unit", "") for f in dataclasses.fields(parameters)}
+    named = {k: f"{k}_{units[k]}" for k in units if units[k] and units[k] not in ("deg",)
+             and not k.endswith(f"_{units[k]}")}
+    named.update({k: f"{k}_deg" for k in units if units[k] == "deg" and not k.endswith("_deg")})
+    return [{named.get(k, k): v for k, v in row.items()} for row in rows]
+
+
 def _count_cases(study, path: Path, rows: list[dict]) -> None:
     from eyemech.problems.studies import FAILED
 
     cases = [r for r in rows if "status" in r]
     study.cases += len(cases)
     for number, row in enumerate(cases, start=1):
-        label = ", ".join(f"{k}={row[k]}" for k in list(row)[:4] if k != "status")
+        label = ", ".join(f"{k}={row[k]}" for k in [k for k in row if k not in ("status", "error")][:3])
         if row["status"] in FAILED:
             study.failed.append(f"{path.stem} {label}")
-        print(f"{study.name}: {path.name} case {number}/{len(cases)} ({label}): {row['status']}",
+        why = f" ({str(row['error'])[:160]})" if row.get("error") else ""
+        print(f"{study.name}: {path.name} case {number}/{len(cases)} ({label}): {row['status']}{why}",
               file=sys.stderr, flush=True)
 
 
