@@ -140,6 +140,9 @@ def _boundary_conditions(V, panel):
 CORNER = (0.0, 12.0, 34.0, 46.0, -1.0, 2.0)  # the clamped top corner: steepest pressure
 
 
+PRESSURE = "pressure p (MPa)"  # the colour bar's title
+
+
 def pressure_picture(u, p, path: Path, title: str, clim=None, bounds=None) -> Path | None:
     """The pressure on the deformed panel seen from +z (rank 0 writes it), or on the
     part of it inside the reference ``bounds`` box. Constant pressures are drawn per
@@ -151,19 +154,19 @@ def pressure_picture(u, p, path: Path, title: str, clim=None, bounds=None) -> Pa
         shown = dolfinx.fem.Function(P1, name="displacement")
         shown.interpolate(u)
         n_cells = mesh.topology.index_map(3).size_local
-        grid = gather_grid(shown, cell_data={"p": p.x.array[:n_cells]})
+        grid = gather_grid(shown, cell_data={PRESSURE: p.x.array[:n_cells]})
     else:
         DG = dolfinx.fem.functionspace(mesh, ("DG", 1, (3,)))
         shown = dolfinx.fem.Function(DG, name="displacement")
         shown.interpolate(u)
-        scalar = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 1)), name="p")
+        scalar = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 1)), name=PRESSURE)
         scalar.interpolate(dolfinx.fem.Expression(p, scalar.function_space.element.interpolation_points))
-        grid = gather_grid(shown, point_data={"p": scalar})
+        grid = gather_grid(shown, point_data={PRESSURE: scalar})
     if grid is None:
         return None
     if bounds is not None:
         grid = grid.clip_box(bounds, invert=False)
-    render_png(grid, path, scalars="p", warp="displacement", title=title, camera="xy",
+    render_png(grid, path, scalars=PRESSURE, warp="displacement", title=title, camera="xy",
                clim=clim, show_undeformed=False, cmap="coolwarm")
     return path
 

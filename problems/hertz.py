@@ -48,6 +48,7 @@ from eyemech.problems.contact.rigid import (
     surface_integral,
 )
 from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import picture_metadata
 from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
@@ -264,7 +265,8 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
     fig.text(0.01, 0.01, stamp(), fontsize=5, color="grey")
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     path = ctx.out / "hertz.png"
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, metadata=picture_metadata(ctx.result.scene, ctx.result.parameters,
+                                                         ax.get_title()))
     plt.close(fig)
     ctx.result.pictures.append(path.name)
 

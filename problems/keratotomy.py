@@ -380,7 +380,8 @@ def _picture(ctx: RunContext, body: Cornea, params: Parameters) -> None:
     path = ctx.out / "cornea.png"
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.3, -1.0, 1.4),
                title=f"{params.incisions} incisions, OZ {params.optical_zone:g} mm, "
-                     f"t = {params.t_end / 3600:g} h")
+                     f"t = {params.t_end / 3600:g} h",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

@@ -179,12 +179,13 @@ def _picture(u, ctx: RunContext, params: Parameters) -> None:
     grid = gather_grid(u)
     if grid is None:
         return
-    grid.point_data["|u| (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+    grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
     path = ctx.out / "retina-reattachment.png"
     # seen across the symmetry plane y = 0: the section shows the closed gap
-    render_png(grid, path, scalars="|u| (mm)", warp="displacement", camera=(0.0, -1.0, 0.0),
+    render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.0, -1.0, 0.0),
                show_undeformed=False,
-               title=f"retina-reattachment: gap {params.gap:g} mm closed by p = {params.pressure:g} MPa")
+               title=f"retina-reattachment: gap {params.gap:g} mm closed by p = {params.pressure:g} MPa",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

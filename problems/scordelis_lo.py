@@ -90,7 +90,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                      dofs=shell.dofs())
         if ctx.pictures:
             with ctx.timings("output"):
-                picture(shell.u, ctx, "scordelis-lo", "-u_z", lambda d: -d[:, 2], scale=10.0)
+                picture(shell.u, ctx, "scordelis-lo", "-u_z (mm)", lambda d: -d[:, 2], scale=10.0)
     return ctx.result
 
 

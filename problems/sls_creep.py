@@ -20,6 +20,7 @@ from mpi4py import MPI
 
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import picture_metadata
 from eyemech.problems.run.parameters import PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.viscous_bar import (
@@ -94,9 +95,11 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 def _picture(ctx: RunContext, params: Parameters, times, strains) -> None:
     path = ctx.out / "axial_strain.png"
     sls = reference.sls_creep_strain(times, params.stress, params.mu_inf, params.mu_v, params.tau)
-    plot_history(path, times, strains, sls, "axial strain λ − 1",
-                 f"creep at σ = {params.stress:g} MPa, τc = {params.material.retardation_time:g} s, "
-                 f"{_steps(params)}", reference_label="standard linear solid (small strain)")
+    title = (f"creep at σ = {params.stress:g} MPa, τc = {params.material.retardation_time:g} s, "
+             f"{_steps(params)}")
+    plot_history(path, times, strains, sls, "axial strain λ − 1 (1)", title,
+                 reference_label="standard linear solid (small strain)",
+                 metadata=picture_metadata(ctx.result.scene, ctx.result.parameters, title))
     ctx.result.pictures.append(path.name)
 
 

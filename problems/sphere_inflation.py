@@ -236,7 +236,8 @@ def _picture(u, ctx: RunContext, params: Parameters) -> None:
     path = ctx.out / "deformed.png"
     # seen from the open side: the symmetry planes show the wall and the cavity
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(-1.0, -1.3, 0.8),
-               title=f"sphere-inflation, p = {params.pressure:g} MPa")
+               title=f"sphere-inflation, p = {params.pressure:g} MPa",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

@@ -392,8 +392,31 @@ def _picture(ctx: RunContext, body: Applanation, params: Parameters) -> None:
     q = ctx.result.quantities
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.0, -1.0, 0.35),
                title=f"applanated to {q['contact_diameter_mm']:.2f} mm: reading "
-                     f"{q['iop_reading_mmHg']:.1f} mmHg (true {params.iop_mmHg:g})")
+                     f"{q['iop_reading_mmHg']:.1f} mmHg (true {params.iop_mmHg:g}); prism blue, "
+                     f"flattened disc red",
+               extras=_tonometer(grid, q["contact_diameter_mm"]),
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
+
+
+# Goldmann's prism: a flat face 7 mm across (its tip); drawn 0.4 mm thick, see-through
+PRISM_DIAMETER, PRISM_DRAWN_THICKNESS = 7.0, 0.4
+
+
+def _tonometer(grid, disc_diameter: float) -> list:
+    """The prism's flat face on the deformed apex (translucent blue) and the rim of the
+    flattened disc of the reading (red), as extras for :func:`render_png`."""
+    import pyvista
+
+    apex = float((grid.points[:, 2] + grid.point_data["displacement"][:, 2]).max())
+    prism = pyvista.Cylinder(center=(0.0, 0.0, apex + PRISM_DRAWN_THICKNESS / 2), direction=(0, 0, 1),
+                             radius=PRISM_DIAMETER / 2, height=PRISM_DRAWN_THICKNESS, resolution=60)
+    angle = np.linspace(0.0, 2.0 * np.pi, 121)
+    rim = np.column_stack([disc_diameter / 2 * np.cos(angle), disc_diameter / 2 * np.sin(angle),
+                           np.full_like(angle, apex + 0.01)])
+    disc = pyvista.lines_from_points(rim)
+    return [(prism, {"color": "lightsteelblue", "opacity": 0.3}),
+            (disc, {"color": "red", "line_width": 6, "label": "flattened disc"})]
 
 
 SCENE = Scene(name="tonometry", kind="scene", parameters=Parameters, run=run,

@@ -20,6 +20,7 @@ from mpi4py import MPI
 
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.output import picture_metadata
 from eyemech.problems.run.parameters import PHYSICS, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.viscous_bar import (
@@ -104,10 +105,11 @@ def point_reference(params: Parameters, times) -> np.ndarray:
 
 def _picture(ctx: RunContext, params: Parameters, times, stresses) -> None:
     path = ctx.out / "cauchy_stress.png"
+    title = (f"uniaxial relaxation, λ = {params.stretch:g}, τ = {params.tau:g} s, "
+             f"{_steps(params)} ({params.time_scheme})")
     plot_history(path, times, stresses, point_reference(params, times), "axial Cauchy stress (MPa)",
-                 f"uniaxial relaxation, λ = {params.stretch:g}, τ = {params.tau:g} s, "
-                 f"{_steps(params)} ({params.time_scheme})",
-                 reference_label="same law at one point (scipy)")
+                 title, reference_label="same law at one point (scipy)",
+                 metadata=picture_metadata(ctx.result.scene, ctx.result.parameters, title))
     ctx.result.pictures.append(path.name)
 
 

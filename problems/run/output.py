@@ -171,18 +171,33 @@ def quiet_vtk() -> None:
 
 def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None = None,
                title: str = "", camera: str | Sequence = "iso", clim=None,
-               show_undeformed: bool = True, cmap: str = "viridis") -> None:
-    """Off-screen pyvista picture of ``grid`` (rank 0 only)."""
+               show_undeformed: bool = True, cmap: str = "viridis", extras: Sequence = (),
+               scene: str = "", parameters: dict | None = None) -> None:
+    """Off-screen pyvista picture of ``grid`` (rank 0 only), coloured by ``scalars``: a
+    name with its unit in brackets ("displacement (mm)"), the colour bar's title. A field
+    that is nowhere negative (a magnitude) gets a bar from 0 to its largest value.
+    ``extras``: (pyvista dataset, add_mesh keywords) pairs drawn as well (an instrument).
+    ``scene`` and ``parameters`` are written into the PNG (:func:`tag_picture`)."""
     import pyvista
 
+    if scalars is not None and not scalars.rstrip().endswith(")"):
+        raise ValueError(f"colour bar '{scalars}' names no unit: write it as 'name (unit)' "
+                         "('(1)' for a ratio)")
     pyvista.OFF_SCREEN = True
     quiet_vtk()
     plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
     shown = grid.warp_by_vector(warp, factor=1.0) if warp else grid
     if show_undeformed and warp:
         plotter.add_mesh(grid, style="wireframe", color="grey", opacity=0.25)
+    if clim is None and scalars is not None:
+        values = np.asarray(grid[scalars], dtype=float)
+        values = np.linalg.norm(values, axis=1) if values.ndim > 1 else values
+        if values.size and np.nanmin(values) >= 0.0:
+            clim = (0.0, float(np.nanmax(values)) or 1.0)
     plotter.add_mesh(shown, scalars=scalars, show_edges=True, cmap=cmap, clim=clim,
-                     scalar_bar_args={"title": scalars or ""})
+                     scalar_bar_args={"title": scalars or "", "fmt": "%.3g", "n_labels": 5})
+    for dataset, keywords in extras:
+        plotter.add_mesh(dataset, **keywords)
     if title:
         plotter.add_text(title, font_size=12)
     if camera == "iso":
@@ -194,7 +209,47 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
     tmp = Path(path).with_suffix(".tmp.png")
     plotter.screenshot(str(tmp))
     plotter.close()
+    if scene:
+        tag_picture(tmp, scene, parameters or {}, title)
     os.replace(tmp, path)
+
+
+PICTURE_KEY = "eyemech"
+
+
+def tag_picture(path: Path, scene: str, parameters: dict, caption: str) -> None:
+    """Write the scene, its parameters and the caption into the PNG as a text chunk
+    (``eyemech``), so that a picture in the docs can be checked against the defaults
+    (:func:`picture_record`; tests/test_pictures.py)."""
+    import json
+
+    from PIL import Image, PngImagePlugin
+
+    info = PngImagePlugin.PngInfo()
+    info.add_text(PICTURE_KEY, json.dumps({"scene": scene, "parameters": parameters,
+                                           "caption": caption}, default=str))
+    with Image.open(path) as image:
+        image.load()
+        image.save(path, pnginfo=info)
+
+
+def picture_metadata(scene: str, parameters: dict, caption: str) -> dict[str, str]:
+    """The same record for matplotlib's ``savefig(..., metadata=...)``."""
+    import json
+
+    return {PICTURE_KEY: json.dumps({"scene": scene, "parameters": parameters,
+                                     "caption": caption}, default=str)}
+
+
+def picture_record(path: Path) -> dict | None:
+    """What :func:`tag_picture` wrote into a PNG, or None."""
+    import json
+
+    from PIL import Image
+
+    with Image.open(path) as image:
+        text = image.text.get(PICTURE_KEY)
+    return json.loads(text) if text else None
 
 
 class PyvistaSeries:

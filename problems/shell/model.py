@@ -340,5 +340,6 @@ def picture(u: dolfinx.fem.Function, ctx: RunContext, title: str, label: str,
     grid.point_data["shown"] = displacement * scale
     path = Path(ctx.out) / name
     suffix = f" (displacement × {scale:.3g})" if not np.isclose(scale, 1.0) else ""
-    render_png(grid, path, scalars=label, warp="shown", title=title + suffix, camera=camera)
+    render_png(grid, path, scalars=label, warp="shown", title=title + suffix, camera=camera,
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)

@@ -496,7 +496,7 @@ def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
 
 
 def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
-                 reference_label: str = "reference") -> None:
+                 reference_label: str = "reference", metadata: dict | None = None) -> None:
     """A small PNG of a quantity over time, with its reference when there is one."""
     import matplotlib
 
@@ -513,5 +513,5 @@ def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, metadata=metadata)
     plt.close(fig)
