@@ -1,9 +1,11 @@
 """``eyemech``: list, run and sweep scenes (design brief §4).
 
     eyemech list [-v]
-    eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
+    eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json] [--vtx]
                      [--checkpoint-every N|Tm] [--resume DIR]
+    eyemech run NAME --help          (the scene's parameters by group, with units and defaults)
     eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R] [--resume]
+                       [--fields] [--pictures]
     eyemech study NAME|all|list [--quick] [--out DIR]
     eyemech bench NAME [--set KEY=VALUE ...] [--out docs/bench]
 
