@@ -59,8 +59,8 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--no-fields", action="store_true",
                        help="do not write fields (.vtu + .pvd, or .bp with --vtx)")
         p.add_argument("--vtx", action="store_true",
-                       help="write the fields as ADIOS2 VTX (.bp, in parallel, for ParaView "
-                            "with ADIOS2) instead of .vtu + .pvd (pyvista and ParaView)")
+                       help="also write the fields as ADIOS2 VTX (.bp, in parallel, for "
+                            "ParaView with ADIOS2) beside the .vtu + .pvd (pyvista and ParaView)")
         p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
         p.add_argument("--checkpoint-every", default="10m", metavar="N|Tm",
                        help="write a checkpoint every N steps or T minutes (10m; 0 = only on "

@@ -36,7 +36,7 @@ class RunOptions:
 
     quiet: bool = True            # no progress bar
     fields: bool = True           # write fields (.vtu + .pvd)
-    vtx: bool = False             # write them as ADIOS2 VTX (.bp) instead (ParaView with ADIOS2)
+    vtx: bool = False             # write them as ADIOS2 VTX (.bp) too (ParaView with ADIOS2)
     pictures: bool = True         # write PNG pictures (pyvista, rank 0)
     newton: NewtonOptions = dataclasses.field(default_factory=NewtonOptions)
     checkpoint: CheckpointOptions = dataclasses.field(default_factory=CheckpointOptions)
@@ -143,7 +143,7 @@ class RunContext:
 
     def field_writer(self, functions: list, stem: str = "fields", pvd: bool = True) -> FieldWriter:
         """``functions`` as a ``.pvd`` series (``pvd=False``: a scene with a series of its
-        own), or as ADIOS2 VTX under ``--vtx``; a no-op writer under ``--no-fields``."""
+        own), and as ADIOS2 VTX under ``--vtx``; a no-op writer under ``--no-fields``."""
         return FieldWriter(self.field_dir, self.comm, functions, stem=stem, vtx=self.options.vtx,
                            pvd=pvd)
 

@@ -1,7 +1,7 @@
 """Fields and pictures. By default a run's fields are gathered to rank 0 and written as
 ``.vtu`` files indexed by a ``.pvd`` series, which pyvista (``pv.get_reader``) and ParaView
 both read; ADIOS2 VTX (``.bp``, written in parallel, for ParaView with ADIOS2) only on
-request (``--vtx``: the project's pyvista cannot read it). PNG pictures are rendered
+request, as well (``--vtx``: the project's pyvista cannot read it). PNG pictures are rendered
 off-screen by pyvista on rank 0 from the gathered grid."""
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from mpi4py import MPI
 
 
 class FieldWriter:
-    """Time series of functions. With ``vtx``, ADIOS2 VTX files (functions that share an
-    element share a file); otherwise, when ``pvd``, a gathered ``<stem>.pvd`` series per
-    element (``<stem>_<names>.pvd`` when there are several) with the functions as point
-    data; neither: nothing (a scene that writes its own series passes ``pvd=False``)."""
+    """Time series of functions: when ``pvd``, a gathered ``<stem>.pvd`` series per element
+    (``<stem>_<names>.pvd`` when there are several) with the functions as point data (a
+    scene that writes its own series passes ``pvd=False``); with ``vtx`` also ADIOS2 VTX
+    files (functions that share an element share a file)."""
 
     def __init__(self, out: Path | None, comm: MPI.Comm, functions: Sequence[dolfinx.fem.Function],
                  stem: str = "fields", vtx: bool = True, pvd: bool = True):
@@ -42,7 +42,7 @@ class FieldWriter:
                 self._writers.append(dolfinx.io.VTXWriter(comm, str(Path(out) / name), group,
                                                           engine="BP4"))
                 self.files.append(name)
-            elif pvd:
+            if pvd:
                 series_stem = stem if len(groups) == 1 else f"{stem}_{names}"
                 self._series.append((group, PyvistaSeries(out, comm, stem=series_stem)))
 
