@@ -34,7 +34,7 @@ def _cases():
         yield pytest.param(name, id=name, marks=marks)
 
 
-@pytest.mark.parametrize("name", _cases())
+@pytest.mark.parametrize("name", list(_cases()))
 def test_study_quick_runs_every_case_and_writes_stamped_csv_and_png(name, tmp_path):
     done = subprocess.run([str(EYEMECH), "study", name, "--quick", "--out", str(tmp_path)],
                           capture_output=True, text=True, timeout=1200)

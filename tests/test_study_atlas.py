@@ -49,7 +49,7 @@ def differences(made: dict, now: dict) -> list[str]:
     return out
 
 
-@pytest.mark.parametrize("table", _cases())
+@pytest.mark.parametrize("table", list(_cases()))
 def test_a_committed_table_was_made_with_the_codes_settings(table):
     assert not table.read_text().startswith("#"), "metadata belong in the sidecar"
     meta = json.loads(sidecar(table).read_text())
