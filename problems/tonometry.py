@@ -385,7 +385,7 @@ def _picture(ctx: RunContext, body: Applanation, params: Parameters) -> None:
     if grid is None:
         return
     # the applanated cornea for notebooks (pyvista cannot read VTX .bp)
-    series = PyvistaSeries(ctx.out, ctx.comm)
+    series = PyvistaSeries(ctx.field_dir, ctx.comm)  # none under --no-fields
     series.write(ctx.result.quantities["applanation_depth_mm"], grid)
     ctx.result.fields.extend(series.files)
     path = ctx.out / "tonometry.png"
