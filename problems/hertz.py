@@ -48,7 +48,8 @@ from eyemech.problems.contact.rigid import (
     surface_integral,
 )
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.output import picture_metadata
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
 from eyemech.problems.solve.augmentation import Augmentation
@@ -61,29 +62,34 @@ CONTACT_QUADRATURE = {"quadrature_degree": 6}
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    radius: float = field(1.0, "radius of the ball", "mm")
-    youngs_modulus: float = field(1.0, "Young's modulus E", "MPa")
-    poisson_ratio: float = field(0.3, "Poisson's ratio ν", "")
-    indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm")
-    penalty: float = field(30.0, "penalty factor: α = penalty · E / mesh_size", "")
-    resolution: float = field(2.6, "cells per contact radius a = √(R d) in the contact zone", "")
-    far_resolution: float = field(4.0, "cells per ball radius away from the contact zone", "")
-    mesh_size: float = field(0.0, "element size in the contact zone; 0 = √(R d) / resolution", "mm")
-    far_size: float = field(0.0, "element size away from the contact zone; 0 = radius / far_resolution", "mm")
-    max_cells: int = field(100_000, "refuse a mesh estimated above this many cells (before meshing)")
-    initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm")
-    load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
+    radius: float = field(1.0, "radius of the ball", "mm", group=GEOMETRY)
+    youngs_modulus: float = field(1.0, "Young's modulus E", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.3, "Poisson's ratio ν", "", group=PHYSICS)
+    indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm",
+                               group=PHYSICS)
+    penalty: float = field(30.0, "penalty factor: α = penalty · E / mesh_size", "", group=SOLVER)
+    resolution: float = field(2.6, "cells per contact radius a = √(R d) in the contact zone", "",
+                              group=GEOMETRY)
+    far_resolution: float = field(4.0, "cells per ball radius away from the contact zone", "", group=GEOMETRY)
+    mesh_size: float = field(0.0, "element size in the contact zone; 0 = √(R d) / resolution", "mm",
+                             group=GEOMETRY)
+    far_size: float = field(0.0, "element size away from the contact zone; 0 = radius / far_resolution", "mm",
+                            group=GEOMETRY)
+    max_cells: int = field(100_000, "refuse a mesh estimated above this many cells (before meshing)",
+                           group=GEOMETRY)
+    initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm", group=GEOMETRY)
+    load_steps: int = field(2, "initial number of load steps (cut and grown as needed)", group=SOLVER)
     contact_method: Literal["penalty", "augmented-lagrangian"] = field(
         "penalty", "penalty: p = α⟨−g⟩; augmented-lagrangian: p = ⟨λ − α g⟩ with multipliers λ at "
         "the ball's surface nodes, updated after every converged load step (Uzawa) until they "
         "change by less than augmentation_tolerance: at factor 3 the penetration 460× below the "
         "penalty's, the force 0.24 % above factor 300's (the nodal constraint against the "
-        "penalty's Gauss points; docs/contact.md §4b)")
+        "penalty's Gauss points; docs/contact.md §4b)", group=SOLVER)
     augmentation_tolerance: float = field(
         0.01, "augmented-lagrangian: a step is done when its multipliers change by at most this "
-        "fraction (‖λ_new − λ‖/‖λ_new‖)")
+        "fraction (‖λ_new − λ‖/‖λ_new‖)", group=SOLVER)
     max_augmentations: int = field(20, "augmented-lagrangian: multiplier updates per load step "
-                                   "at most (the step is then accepted)")
+                                   "at most (the step is then accepted)", group=SOLVER)
 
     def validate(self) -> None:
         self.require_positive("radius", "youngs_modulus", "indentation", "penalty", "resolution",
@@ -274,7 +280,8 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
     fig.text(0.01, 0.01, stamp(), fontsize=5, color="grey")
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     path = ctx.out / "hertz.png"
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, metadata=picture_metadata(ctx.result.scene, ctx.result.parameters,
+                                                         ax.get_title()))
     plt.close(fig)
     ctx.result.pictures.append(path.name)
 

@@ -15,7 +15,7 @@ from eyemech.problems.lens.fold import FoldParameters, fold, self_contact_kind
 from eyemech.problems.lens.model import LensShell, save_state, write_animation
 from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import field
+from eyemech.problems.run.parameters import GEOMETRY, field
 from eyemech.problems.run.scene import Scene
 
 
@@ -25,7 +25,8 @@ class Parameters(FoldParameters):
 
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle of iol-speed: the same roll, chamber and ipctk self-contact on "
-                                    "its vertices and triangles, the same pictures and .vtu frames)")
+                                    "its vertices and triangles, the same pictures and .vtu frames)",
+                         group=GEOMETRY)
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,

@@ -53,7 +53,7 @@ from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
 from eyemech.problems.lens.time_error import step_error
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
@@ -64,44 +64,53 @@ class Parameters(FoldParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle of iol-speed: the same walls, plunger, fluid, friction and "
                                     "ipctk self-contact on its vertices and triangles, the same pictures and "
-                                    ".vtu frames)")
-    folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)")
+                                    ".vtu frames)", group=GEOMETRY)
+    folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)", group=SOLVER)
     fold_seed: Literal["p2", "p1"] = field(
         "p2", "model=p2-c0ip with folded_state='': the model that folds the lens (p1: the rotation-free P1 "
               "fold, seconds instead of minutes, its vertices and the patch quadratics at the edge midpoints "
-              "as the P2 lens' folded state; docs/iol.md §4b)")
-    plunger_speed: float = field(40.0, "plunger speed", "mm/s")
-    plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
-    settle_time: float = field(0.2, "time after the plunger stops", "s")
-    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
-    linearised: bool = field(False, "one linearised implicit solve per step (SOFA style) instead of Newton")
+              "as the P2 lens' folded state; docs/iol.md §4b)", group=SOLVER)
+    plunger_speed: float = field(40.0, "plunger speed", "mm/s", group=PHYSICS)
+    plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm",
+                                     group=PHYSICS)
+    settle_time: float = field(0.2, "time after the plunger stops", "s", group=PHYSICS)
+    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES), group=SOLVER)
+    linearised: bool = field(False, "one linearised implicit solve per step (SOFA style) instead of Newton",
+                             group=SOLVER)
     jacobian_lag: int = field(1, "reuse the Jacobian and its factorisation for this many Newton "
-                                 "iterations, across steps (1 = full Newton)")
+                                 "iterations, across steps (1 = full Newton)", group=SOLVER)
     contact: bool = field(True, "rigid contact on; false: the folded lens unfolds in free space "
-                                "(the deformation-only speed)")
-    frames_every: int = field(1, "at least this many steps between two frames (PNG + .vtu)")
+                                "(the deformation-only speed)", group=PHYSICS)
+    frames_every: int = field(1, "at least this many steps between two frames (PNG + .vtu)", group=SOLVER)
     frame_interval: float = field(0.01, "a frame (PNG + .vtu) each time the simulated time has advanced this "
-                                        "much since the last one (0: every frames_every steps)", "s")
+                                        "much since the last one (0: every frames_every steps)", "s",
+                                  group=SOLVER)
     fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
                                       "fluid, which the plunger drives through the bore (false: relative to "
-                                      "rest: a drag that crushes the trailing haptic, docs/iol.md)")
+                                      "rest: a drag that crushes the trailing haptic, docs/iol.md)",
+                                group=PHYSICS)
     plunger_engages: Literal["optic", "lens"] = field(
         "optic", "what the plunger head pushes: 'optic' (the trailing haptic lies beside the plunger tip, "
-                 "as loading instructions ask) or 'lens' (every node: the trailing haptic is crushed)")
-    jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm")
+                 "as loading instructions ask) or 'lens' (every node: the trailing haptic is crushed)",
+        group=PHYSICS)
+    jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm",
+                              group=PHYSICS)
     fold_cache: bool = field(True, "with folded_state='': reuse a fold made earlier with the same lens and "
                                    "fold parameters and the same code, from the user's cache folder "
-                                   "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold")
+                                   "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold",
+                             group=SOLVER)
     capsule_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the capsular bag (lagged, "
-                                         "smoothed over friction_slip; 0 = frictionless)")
+                                         "smoothed over friction_slip; 0 = frictionless)", group=PHYSICS)
     cartridge_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the cartridge bore and "
-                                           "nozzle (0: a coated cartridge lubricated by viscoelastic)")
+                                           "nozzle (0: a coated cartridge lubricated by viscoelastic)",
+                                      group=PHYSICS)
     injector_twist: float = field(0.0, "the surgeon turns the injector about its axis by this angle during "
                                        "the push, in step with the plunger's travel (right-handed about the "
                                        "push direction); the round bore drags the lens round only through "
-                                       "cartridge_friction", "deg")
+                                       "cartridge_friction", "deg", group=PHYSICS)
     start_ramp: float = field(0.0, "the plunger (and the fluid it drives) accelerates from rest to "
-                                    "plunger_speed over this time, linearly (0 = a jump to full speed)", "s")
+                                    "plunger_speed over this time, linearly (0 = a jump to full speed)", "s",
+                              group=PHYSICS)
 
     def validate(self) -> None:
         layout = InjectorLayout()

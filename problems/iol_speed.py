@@ -86,7 +86,7 @@ from eyemech.problems.lens.time_error import (
     validate_adaptive,
 )
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
 
@@ -103,44 +103,56 @@ class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle: numba kernels, method=newton with jacobian=fresh or "
                                     "lagged; contact=true: the capsule by nodal penalty; "
-                                    "surface_contact=true: ipctk self-contact on its triangles)")
+                                    "surface_contact=true: ipctk self-contact on its triangles)",
+                         group=GEOMETRY)
     surface_contact: bool = field(False, "p1-rotation-free: ipctk self-contact on the P1 triangles (barrier "
                                          "d̂ = self_contact_distance, κ = self_contact_stiffness, CCD-limited "
-                                         "updates, intersection check every step)")
+                                         "updates, intersection check every step)", group=PHYSICS)
     bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient "
                                      "per edge: consistent on every mesh) | patch (6-node quadratic fit: "
-                                     "2× faster, too soft on alternating-diagonal meshes)")
-    method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS))
-    jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
-    refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
+                                     "2× faster, too soft on alternating-diagonal meshes)", group=GEOMETRY)
+    method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS), group=SOLVER)
+    jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS),
+                                   group=SOLVER)
+    refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps",
+                         group=SOLVER)
     stall: float = field(0.5, "lagged Newton: a new Jacobian when an iteration reduces the residual "
                               "by less than this factor (p1-rotation-free: fresh factors at every "
-                              "step's start, kept within the step while this holds)")
-    krylov_rtol: float = field(1e-3, "matrix-free: GMRES relative tolerance per Newton iteration")
-    krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed")
-    steps: int = field(30, "time steps per run")
-    time_step: float = field(0.01, "Δt (the paper: 0.01 s)", "s")
-    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
-    rtol: float = field(1e-6, "Newton: relative residual reduction per step")
-    atol: float = field(1e-11, "Newton: absolute residual (shell forces are ~1e-4 N; round-off ~1e-13)", "N")
-    max_iterations: int = field(25, "Newton iterations per step before the run is declared failed")
-    quadrature_degree: int = field(0, "quadrature degree of the shell integrals (0: 2 × degree)")
-    mesh_scale: float = field(1.0, "all lens mesh sizes (optic, haptic, junction) times this")
-    roll_radius: float = field(3.0, "the released lens starts rolled onto a cylinder of this radius", "mm")
-    contact: bool = field(False, "release it inside a rigid ellipsoidal capsule (penalty contact)")
-    capsule_semi_axes: tuple = field((5.6, 5.6, 2.6), "capsule semi-axes (x, y, z)", "mm")
+                              "step's start, kept within the step while this holds)", group=SOLVER)
+    krylov_rtol: float = field(1e-3, "matrix-free: GMRES relative tolerance per Newton iteration",
+                               group=SOLVER)
+    krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed",
+                               group=SOLVER)
+    steps: int = field(30, "time steps per run", group=SOLVER)
+    time_step: float = field(0.01, "Δt (the paper: 0.01 s)", "s", group=SOLVER)
+    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES), group=SOLVER)
+    rtol: float = field(1e-6, "Newton: relative residual reduction per step", group=SOLVER)
+    atol: float = field(1e-11, "Newton: absolute residual (shell forces are ~1e-4 N; round-off ~1e-13)", "N",
+                        group=SOLVER)
+    max_iterations: int = field(25, "Newton iterations per step before the run is declared failed",
+                                group=SOLVER)
+    quadrature_degree: int = field(0, "quadrature degree of the shell integrals (0: 2 × degree)",
+                                   group=GEOMETRY)
+    mesh_scale: float = field(1.0, "all lens mesh sizes (optic, haptic, junction) times this", group=GEOMETRY)
+    roll_radius: float = field(3.0, "the released lens starts rolled onto a cylinder of this radius", "mm",
+                               group=PHYSICS)
+    contact: bool = field(False, "release it inside a rigid ellipsoidal capsule (penalty contact)",
+                          group=PHYSICS)
+    capsule_semi_axes: tuple = field((5.6, 5.6, 2.6), "capsule semi-axes (x, y, z)", "mm", group=GEOMETRY)
     tangent: Tangent = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative "
-                                     "of the residual: the same matrix, twice the compile and assembly time)")
+                                     "of the residual: the same matrix, twice the compile and assembly time)",
+                             group=SOLVER)
     native_kernels: bool = field(False, "compile the shell kernels with -O3 -march=native (≈ 20 % faster "
                                         "Jacobian here; the JIT cache must then not be shared between CPU "
-                                        "types)")
-    repeats: int = field(1, "runs of the same steps (the state is reset); steps/s is the best of them")
+                                        "types)", group=SOLVER)
+    repeats: int = field(1, "runs of the same steps (the state is reset); steps/s is the best of them",
+                         group=SOLVER)
     time_stepping: Literal["fixed", "adaptive"] = field(
         "fixed", "fixed (Δt = time_step: the paper's step, at which the speed is measured) | "
                  "adaptive (the deformation-only release over steps × time_step with Δt "
-                 "chosen by the time-error estimate: docs/iol.md §1)")
+                 "chosen by the time-error estimate: docs/iol.md §1)", group=SOLVER)
     time_tolerance: float = field(0.01, "time_stepping=adaptive: allowed estimated displacement error at the "
-                                        "end of the release", "mm")
+                                        "end of the release", "mm", group=SOLVER)
 
     def validate(self) -> None:
         super().validate()

@@ -31,7 +31,7 @@ from eyemech.forms import (
 from eyemech.meshes import spherical_shell
 from eyemech.problems.reference import analytic
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.cavity import (
     SubstitutedCavity,
@@ -58,24 +58,27 @@ SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
     RESOLUTION_KEY: ClassVar[str] = "cells_across_wall"
-    inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm")
-    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
-    c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa")
+    inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm", group=GEOMETRY)
+    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm", group=GEOMETRY)
+    c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa", group=PHYSICS)
     bulk_modulus: float = field(0.2, "liquid bulk modulus K (seed 002 uses 2083.3 for the "
                                 "vitreous; the default is soft so the wall and liquid share the load)",
-                                "MPa")
+                                "MPa", group=PHYSICS)
     initial_pressure: float = field(0.002, "liquid pressure P_ini at the stress-free cavity volume",
-                                    "MPa")
-    external_pressure: float = field(0.05, "external pressure on the outer surface (follower)", "MPa")
+                                    "MPa", group=PHYSICS)
+    external_pressure: float = field(0.05, "external pressure on the outer surface (follower)", "MPa",
+                                     group=PHYSICS)
     cells_across_wall: float = field(1.0, "elements across the wall thickness (outer − inner radius); "
-                                   "sets the element size unless mesh_size is given")
-    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
-    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
+                                   "sets the element size unless mesh_size is given", group=GEOMETRY)
+    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm",
+                             group=GEOMETRY)
+    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS), group=GEOMETRY)
     cavity_formulation: Literal["real", "substituted"] = field(
-        "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)")
+        "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)", group=SOLVER)
     load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
-                               "Newton converges from the unloaded state, a failed step is cut)")
-    cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid")
+                               "Newton converges from the unloaded state, a failed step is cut)",
+                            group=SOLVER)
+    cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid", group=GEOMETRY)
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
@@ -90,7 +93,8 @@ class Parameters(SceneParameters, SolverChoice):
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius})")
         if self.element_size > self.outer_radius:
-            raise ParameterError("mesh_size", "is larger than the sphere")
+            raise ParameterError(self.resolution_key(), f"gives an element size of "
+                                 f"{self.element_size:.3g} mm, larger than the sphere")
         for key in ("initial_pressure", "external_pressure"):
             if not np.isfinite(getattr(self, key)):
                 raise ParameterError(key, "must be finite")

@@ -26,7 +26,7 @@ from eyemech.problems.run.output import (
     gather_grid,
     render_png,
 )
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.mean_dilatation import MeanDilatation
 from eyemech.problems.solid.residual import solid_residual
@@ -53,23 +53,25 @@ from eyemech.problems.solve.scalars import assemble_scalar
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
     RESOLUTION_KEY: ClassVar[str] = "cells_across_wall"
-    inner_radius: float = field(10.0, "inner radius of the unloaded sphere", "mm")
-    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
-    c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa")
-    pressure: float = field(0.01, "internal pressure (follower load)", "MPa")
+    inner_radius: float = field(10.0, "inner radius of the unloaded sphere", "mm", group=GEOMETRY)
+    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm", group=GEOMETRY)
+    c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa", group=PHYSICS)
+    pressure: float = field(0.01, "internal pressure (follower load)", "MPa", group=PHYSICS)
     cells_across_wall: float = field(2.0, "elements across the wall thickness (outer − inner radius); "
-                                   "sets the element size unless mesh_size is given")
-    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
-    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
+                                   "sets the element size unless mesh_size is given", group=GEOMETRY)
+    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm",
+                             group=GEOMETRY)
+    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS), group=GEOMETRY)
     bulk_modulus: float = field(100.0, "bulk modulus of the displacement-only P1 family "
                                 "(U = K/4 (J² − 1 − 2 ln J)) and of Q1P0 with dg0_pressure = condensed "
-                                "(U = K/2 (J̄ − 1)²); unused by the mixed families", "MPa")
+                                "(U = K/2 (J̄ − 1)²); unused by the mixed families", "MPa", group=PHYSICS)
     dg0_pressure: Literal["mixed", "condensed"] = field(
         "mixed", "Q1P0's DG0 pressure: mixed (an unknown per cell, exactly incompressible) or "
                  "condensed (eliminated cell by cell, p = K (J̄ − 1): the mean-dilatation method, "
-                 "O(μ/K) from mixed; docs/hyperelastic.md)")
+                 "O(μ/K) from mixed; docs/hyperelastic.md)", group=GEOMETRY)
     load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
-                               "Newton converges from the unloaded state, a failed step is cut)")
+                               "Newton converges from the unloaded state, a failed step is cut)",
+                            group=SOLVER)
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
@@ -81,7 +83,8 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius}), "
                                  f"got {self.outer_radius}")
         if self.element_size > self.outer_radius:
-            raise ParameterError("mesh_size", "is larger than the sphere")
+            raise ParameterError(self.resolution_key(), f"gives an element size of "
+                                 f"{self.element_size:.3g} mm, larger than the sphere")
         if not np.isfinite(self.pressure):
             raise ParameterError("pressure", "must be finite")
 
@@ -183,9 +186,9 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 def _field_output(ctx: RunContext, shell, family, u, pressure_field):
     """(write_state(load), close() -> files): the displacement and the pressure as VTX
     fields, and both on the displacement's nodes as the pyvista series."""
-    writer = ctx.field_writer([u])
+    writer = ctx.field_writer([u], pvd=False)  # VTX on request; state.pvd below
     pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
-    writer_p = ctx.field_writer([view for view, _ in pressure_out])
+    writer_p = ctx.field_writer([view for view, _ in pressure_out], pvd=False)
     series = ctx.pyvista_series()
     # pressure on the displacement's nodes, for pyvista (one grid, one space); made only
     # when fields are written (a function space costs ≈ 0.05 s at h = 1)
@@ -251,7 +254,8 @@ def _picture(u, ctx: RunContext, params: Parameters) -> None:
     path = ctx.out / "deformed.png"
     # seen from the open side: the symmetry planes show the wall and the cavity
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(-1.0, -1.3, 0.8),
-               title=f"sphere-inflation, p = {params.pressure:g} MPa")
+               title=f"sphere-inflation, p = {params.pressure:g} MPa",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

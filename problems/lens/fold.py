@@ -40,17 +40,17 @@ from eyemech.problems.lens.model import (
 from eyemech.problems.lens.time_error import TimeErrorTally, step_error
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.output import PyvistaSeries
-from eyemech.problems.run.parameters import field
+from eyemech.problems.run.parameters import PHYSICS, SOLVER, field
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.time_integration import ImplicitDynamics
 
 
 @dataclasses.dataclass(frozen=True)
 class FoldParameters(LensParameters):
-    fold_time: float = field(0.4, "pseudo time of the folding", "s")
-    time_step: float = field(0.01, "time step", "s")
-    fold_damping: float = field(2.0e4, "mass-proportional damping while folding", "1/s")
-    frames: int = field(10, "PNG frames of the folding")
+    fold_time: float = field(0.4, "pseudo time of the folding", "s", group=PHYSICS)
+    time_step: float = field(0.01, "time step", "s", group=SOLVER)
+    fold_damping: float = field(2.0e4, "mass-proportional damping while folding", "1/s", group=SOLVER)
+    frames: int = field(10, "PNG frames of the folding", group=SOLVER)
 
     def validate(self) -> None:
         LensParameters.validate(self)

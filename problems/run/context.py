@@ -35,7 +35,8 @@ class RunOptions:
     """How to run, as opposed to what to model (the scene's parameters)."""
 
     quiet: bool = True            # no progress bar
-    fields: bool = True           # write VTX fields
+    fields: bool = True           # write fields (.vtu + .pvd)
+    vtx: bool = False             # write them as ADIOS2 VTX (.bp) too (ParaView with ADIOS2)
     pictures: bool = True         # write PNG pictures (pyvista, rank 0)
     newton: NewtonOptions = dataclasses.field(default_factory=NewtonOptions)
     checkpoint: CheckpointOptions = dataclasses.field(default_factory=CheckpointOptions)
@@ -140,9 +141,11 @@ class RunContext:
         """Whether PNG pictures are drawn (an output folder and no ``--no-pictures``)."""
         return self.options.pictures and self.out is not None
 
-    def field_writer(self, functions: list, stem: str = "fields") -> FieldWriter:
-        """ADIOS2 VTX output of ``functions`` (a no-op writer under ``--no-fields``)."""
-        return FieldWriter(self.field_dir, self.comm, functions, stem=stem)
+    def field_writer(self, functions: list, stem: str = "fields", pvd: bool = True) -> FieldWriter:
+        """``functions`` as a ``.pvd`` series (``pvd=False``: a scene with a series of its
+        own), and as ADIOS2 VTX under ``--vtx``; a no-op writer under ``--no-fields``."""
+        return FieldWriter(self.field_dir, self.comm, functions, stem=stem, vtx=self.options.vtx,
+                           pvd=pvd)
 
     def pyvista_series(self, stem: str = "state") -> PyvistaSeries:
         """``<stem>.pvd`` + one gathered ``.vtu`` per frame for pyvista (no-op under ``--no-fields``)."""

@@ -50,7 +50,7 @@ from mpi4py import MPI
 from eyemech.forms import viscoelastic as ve
 from eyemech.forms.kinematics import deformation_gradient, without_variables
 from eyemech.problems.run.context import RunContext
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.solid.spaces import ELEMENTS, mixed_displacement_pressure
 from eyemech.problems.solve.driver import (
     NonlinearSolver,
@@ -67,21 +67,25 @@ LOADED_FACE = 1  # facet tag of x = L
 
 @dataclasses.dataclass(frozen=True)
 class BarParameters(SceneParameters):
-    mu_inf: float = field(0.05, "equilibrium shear modulus μ∞ (Ψ∞ = μ∞/2 (tr C̄ − 3))", "MPa")
-    mu_v: float = field(0.05, "viscous-branch shear modulus μv (Ψv = μv/2 (tr(C̄ Cv⁻¹) − 3))", "MPa")
-    tau: float = field(100.0, "relaxation time τ of the evolution τ Ċv = C̄ − ⅓ tr(C̄ Cv⁻¹) Cv", "s")
-    t_end: float = field(300.0, "end time", "s")
-    dt: float = field(1.0, "time step (fixed mode; the first step in adaptive mode)", "s")
+    mu_inf: float = field(0.05, "equilibrium shear modulus μ∞ (Ψ∞ = μ∞/2 (tr C̄ − 3))", "MPa", group=PHYSICS)
+    mu_v: float = field(0.05, "viscous-branch shear modulus μv (Ψv = μv/2 (tr(C̄ Cv⁻¹) − 3))", "MPa",
+                        group=PHYSICS)
+    tau: float = field(100.0, "relaxation time τ of the evolution τ Ċv = C̄ − ⅓ tr(C̄ Cv⁻¹) Cv", "s",
+                       group=PHYSICS)
+    t_end: float = field(300.0, "end time", "s", group=PHYSICS)
+    dt: float = field(1.0, "time step (fixed mode; the first step in adaptive mode)", "s", group=SOLVER)
     time_stepping: Literal["adaptive", "fixed"] = field(
-        "adaptive", "adaptive: steps from a local error estimate of Cv; fixed: every step dt")
+        "adaptive", "adaptive: steps from a local error estimate of Cv; fixed: every step dt", group=SOLVER)
     time_tolerance: float = field(1e-2, "adaptive mode: allowed relative stress error from the time "
-                                        "steps (embedded BE/FE estimate, module viscous_bar)")
-    max_steps: int = field(20000, "most time steps a run may take (adaptive or fixed)")
+                                        "steps (embedded BE/FE estimate, module viscous_bar)", group=SOLVER)
+    max_steps: int = field(20000, "most time steps a run may take (adaptive or fixed)", group=SOLVER)
     time_scheme: Literal["backward-euler", "forward-euler"] = field(
-        "backward-euler", "integration of the evolution law (forward Euler: stability study only)")
-    element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)")
-    mesh_divisions: int = field(1, "elements (hexahedra; ×6 tetrahedra) along each edge of the cube")
-    length: float = field(1.0, "edge of the cube", "mm")
+        "backward-euler", "integration of the evolution law (forward Euler: stability study only)",
+        group=SOLVER)
+    element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)", group=GEOMETRY)
+    mesh_divisions: int = field(1, "elements (hexahedra; ×6 tetrahedra) along each edge of the cube",
+                                group=GEOMETRY)
+    length: float = field(1.0, "edge of the cube", "mm", group=GEOMETRY)
 
     RESOLUTION_KEY: ClassVar[str] = "mesh_divisions"
 
@@ -497,7 +501,7 @@ def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
 
 
 def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
-                 reference_label: str = "reference") -> None:
+                 reference_label: str = "reference", metadata: dict | None = None) -> None:
     """A small PNG of a quantity over time, with its reference when there is one."""
     import matplotlib
 
@@ -514,5 +518,5 @@ def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, metadata=metadata)
     plt.close(fig)

@@ -40,7 +40,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
-import sys
 import time
 from typing import TYPE_CHECKING, Callable, Literal, Sequence
 
@@ -618,6 +617,7 @@ class Stepping:
     # states of the stage linearly in the path value ("none": from the last converged state)
     predictor: Literal["none", "secant"] = "none"
     stops: tuple[float, ...] = ()  # values the path must land on exactly (outputs, stages)
+    stage_names: tuple[str, ...] = ()  # the stages' names, in order (progress lines, bar)
     # the largest step of each stage (the intervals between the stops, in order), as a
     # fraction of the span like max_step; () = max_step everywhere
     stage_max_steps: tuple[float, ...] = ()
@@ -784,7 +784,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         value, controller.step, step = resumed["value"], resumed["increment"], resumed["step"]
         records = [StepRecord(**r) for r in resumed["records"]]
         apply(value, records[-1].increment if records else 0.0)
-    bar = _progress(solver, label, quiet)
+    bar = _progress(solver, label, quiet, stepping, records)
     if stepping.predictor == "none":
         predictor = None
     elif predictor is None:
@@ -929,21 +929,10 @@ class SecantPredictor:
                                    for a, b in zip(self.previous, x1)])
 
 
-class _NoBar:
-    n = 0.0
+def _progress(solver: NonlinearSolver, label: str, quiet: bool, stepping: Stepping,
+              records: list[StepRecord]):
+    """The bar on a terminal, a line per step off it, Newton iterations under -v
+    (problems/run/progress.py); ``update`` after each step, ``records[-1]`` its record."""
+    from eyemech.problems.run.progress import path_progress
 
-    def update(self, _):
-        pass
-
-    def close(self):
-        pass
-
-
-def _progress(solver: NonlinearSolver, label: str, quiet: bool):
-    comm = solver.problem.A.comm.tompi4py()
-    if quiet or comm.rank != 0 or not sys.stderr.isatty():
-        return _NoBar()
-    from tqdm import tqdm
-
-    return tqdm(total=1.0, desc=label or "path", unit="", leave=False,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
+    return path_progress(solver, label, quiet, stepping, records)
