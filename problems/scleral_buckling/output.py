@@ -8,7 +8,9 @@ from __future__ import annotations
 import math
 
 from eyemech.problems.run.output import (
+    add_legend,
     gather_grid,
+    region_data,
     render_png,
 )
 
@@ -24,7 +26,7 @@ class Writer:
         stem = "fields" if resumed is None else f"fields_from_{resumed.name}"
         self.earlier = sorted(p.name for p in folder.glob("fields*.bp")) \
             if resumed is not None and folder is not None else []
-        self.vtx = ctx.field_writer([model.u], stem=stem)
+        self.vtx = ctx.field_writer([model.u], stem=stem, pvd=False)  # VTX on request
         self.series = ctx.pyvista_series()
         self.pictures = ctx.pictures
         ctx.checkpoints.value("pyvista_series", lambda: self.series.entries,
@@ -34,7 +36,7 @@ class Writer:
     def state(self, load: float, stage: int, name: str = "reference", picture: bool = False) -> None:
         """The state at path value ``load``, stage number ``stage`` (0: before any), named
         ``name`` in its pictures (drawn when ``picture``)."""
-        if not (self.vtx.files or self.pictures):
+        if self.ctx.field_dir is None and not self.pictures:  # --no-fields --no-pictures
             return
         with self.ctx.timings("output"):
             self.vtx.write(load)
@@ -45,7 +47,9 @@ class Writer:
             dofmap = tissues.von_mises.field.function_space.dofmap.list[:cells, 0]
             grid = gather_grid(self.model.u, cell_data={
                 "von_mises": tissues.von_mises.field.x.array[dofmap],
-                "c": tissues.stiffness.x.array[dofmap]})
+                "c": tissues.stiffness.x.array[dofmap],
+                "tissue": region_data(self.model.eye.cell_tags, cells)})
+            add_legend(grid, self.model.eye.names, mesh.topology.dim)
             self.series.write(load, grid)
             if picture and self.pictures:
                 # the outline reads distributed unknowns (collective): every rank computes

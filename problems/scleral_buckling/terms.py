@@ -61,22 +61,28 @@ class Tissues(Term):
         self.von_mises = CellField(von_mises(cauchy_stress(self.law, deformation_gradient(body.u))),
                                    body.mesh, "von_mises")
 
+    def law_of(self, tissue: str):
+        """One tissue's law, its coefficients as numbers."""
+        c = self.params.stiffness()[tissue]
+        stiffening = self.params.stiffening() if self.params.material == "calibrated" else {}
+        return Yeoh(c, stiffening[tissue]) if tissue in stiffening else NeoHooke(c)
+
     @property
     def shear_modulus(self):
-        """μ per cell at small strain (2c: the law's c10), the iterative solver's
-        pressure-mass weight and the condensed pressure's bulk modulus's scale."""
-        return 2 * self.stiffness
+        """μ per cell at small strain (the law's), the iterative solver's pressure-mass
+        weight and the scale of the condensed pressure's bulk modulus."""
+        return self.law.shear_modulus
 
     def youngs_modulus(self, tissue: str) -> float:
-        """One tissue's small-strain Young's modulus, E = 3μ = 6c (incompressible): the
+        """One tissue's small-strain Young's modulus (the law's, incompressible): the
         contacts' penalties are scaled from it."""
-        return 6.0 * self.params.stiffness()[tissue]
+        return self.law_of(tissue).youngs_modulus
 
     def residual(self, tests):
         body = self.body
         if self.pressure is None:
             self.mean_dilatation = MeanDilatation(
-                body.u, self.params.condensed_bulk_ratio * 2 * self.stiffness, body.dx, body.bcs,
+                body.u, self.params.condensed_bulk_ratio * self.shear_modulus, body.dx, body.bcs,
                 block_spaces=body.block_spaces)
             self.pressure = self.mean_dilatation.pressure
         condensed = getattr(self.mean_dilatation, "pressure", None)
