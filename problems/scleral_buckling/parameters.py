@@ -50,6 +50,8 @@ class EyeParameters(SceneParameters):
                              "mm", group=GEOMETRY)
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
                                    "meshing; the paper resolution has 8,150)", group=GEOMETRY)
+    element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)",
+                                             group=GEOMETRY)
     coat_layers: int = field(
         2, "hexahedra through the sclera (1-8; the cornea has 2 more); more do not relieve "
            "Q1P0's bending locking, which is in-plane (ΔAL +0.3-0.5 % with 4 or 6): "

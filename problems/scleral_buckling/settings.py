@@ -1,5 +1,5 @@
-"""The scleral-buckling scene's numerical settings, apart from its physics: the element
-and its pressure, the contact's enforcement, Newton's budget and the path follower's
+"""The scleral-buckling scene's numerical settings, apart from its physics: Q1P0's
+pressure, the contact's enforcement, Newton's budget and the path follower's
 step sizes (group "solver and stepping" in ``eyemech list -v`` and docs/parameters.md).
 Each choice is measured in docs/scleral_buckling.md where its help says."""
 
@@ -14,7 +14,6 @@ from eyemech.problems.solve.linear_solvers import SolverChoice
 
 @dataclasses.dataclass(frozen=True)
 class NumericalSettings(SolverChoice):
-    element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)", group=SOLVER)
     dg0_pressure: Literal["mixed", "condensed"] = field(
         "mixed", "Q1P0's DG0 pressure: mixed (an unknown per cell, exactly incompressible) or "
                  "condensed (eliminated cell by cell, p = bulk_modulus (J̄ − 1): the mean-dilatation "
@@ -191,7 +190,7 @@ class NumericalSettings(SolverChoice):
         self._validate_solver()
 
     def _validate_discretisation(self) -> None:
-        """The element and its pressure."""
+        """Q1P0's pressure."""
         if not self.condensed_bulk_ratio > 0:
             raise ParameterError("condensed_bulk_ratio", f"{self.condensed_bulk_ratio}: must be > 0")
         if self.dg0_pressure == "condensed" and (self.element != "Q1P0" or self.solver != "direct"):
