@@ -21,8 +21,26 @@ COARSE = dict(resolution="coarse")
 
 
 @pytest.fixture(scope="module")
-def coarse():
-    return sb.run(sb.Parameters(**COARSE), options=RunOptions(fields=False, pictures=False))
+def coarse_folder(tmp_path_factory):
+    return tmp_path_factory.mktemp("coarse_eye")
+
+
+@pytest.fixture(scope="module")
+def coarse(coarse_folder):
+    """The coarse eye as a user runs it: pictures and fields on (their writer makes
+    collective calls; tests/test_parallel.py runs the same on 2 ranks)."""
+    return sb.run(sb.Parameters(**COARSE), out=coarse_folder, options=RunOptions())
+
+
+def test_the_coarse_eye_draws_every_stage_and_writes_its_fields(coarse, coarse_folder):
+    """Each stage's two pictures (von Mises, section through the tear) and the fields'
+    series, one frame per converged step, are in the run's folder and its record."""
+    stages = sorted({s["stage"] for s in coarse.steps})
+    assert len(coarse.pictures) == 2 * len(stages)
+    assert all((coarse_folder / name).stat().st_size > 10_000 for name in coarse.pictures)
+    assert "state.pvd" in coarse.fields
+    frames = list(coarse_folder.glob("state_*.vtu"))
+    assert len(frames) >= len(coarse.steps)
 
 
 def stage(result, number):

@@ -46,7 +46,7 @@ class Writer:
             cells = mesh.topology.index_map(3).size_local
             dofmap = tissues.von_mises.field.function_space.dofmap.list[:cells, 0]
             grid = gather_grid(self.model.u, cell_data={
-                "von_mises": tissues.von_mises.field.x.array[dofmap],
+                "von_mises (MPa)": tissues.von_mises.field.x.array[dofmap],
                 "c": tissues.stiffness.x.array[dofmap],
                 "tissue": region_data(self.model.eye.cell_tags, cells)})
             add_legend(grid, self.model.eye.names, mesh.topology.dim)
@@ -61,7 +61,7 @@ class Writer:
     def _pictures(self, grid, stage: int, name: str, outline) -> None:
         out = self.ctx.out
         whole = out / f"step{stage}_{name}_von_mises.png"
-        render_png(grid, whole, scalars="von_mises", warp="displacement", camera=(0.6, 1.0, 0.35),
+        render_png(grid, whole, scalars="von_mises (MPa)", warp="displacement", camera=(0.6, 1.0, 0.35),
                    title=f"step {stage} ({name}): von Mises stress (MPa)", show_undeformed=False,
                    cmap="inferno")
         section = out / f"step{stage}_{name}_section.png"
