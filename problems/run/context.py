@@ -25,7 +25,8 @@ from eyemech.problems.run.results import (
     peak_memory_mb,
     write_json_atomic,
 )
-from eyemech.problems.solve.driver import NewtonOptions, SolveFailure, close_solvers, solvers_created
+from eyemech.problems.solve.driver import NewtonOptions, SolveFailure, close_solvers, hold_solvers
+from eyemech.problems.solve.petsc_lifetime import next_object_id, release_run_objects
 
 log = logging.getLogger("eyemech")
 
@@ -67,7 +68,10 @@ class RunContext:
         # the folder is made, checked and locked (all ranks raise alike when it cannot be)
         self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
             else None
-        self._solvers_before = solvers_created()
+        # the run's parallel solvers are kept until it closes them, and its other parallel
+        # PETSc objects destroyed as it ends (problems/solve/petsc_lifetime.py)
+        self._solvers_before = hold_solvers()
+        self._first_petsc_object = next_object_id()
 
     def __enter__(self) -> "RunContext":
         return self
@@ -76,7 +80,8 @@ class RunContext:
         # an exception on this rank alone: the other ranks wait in a collective call
         abort_if_stranding(self.comm, error)
         # every rank is here (or the error was this rank's alone and the job is ended)
-        close_solvers(created_after=self._solvers_before)
+        release_run_objects(self.comm, self._first_petsc_object,
+                            lambda: close_solvers(created_after=self._solvers_before))
         self.checkpoints.restore_signal_handlers()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"

@@ -260,6 +260,9 @@ class _Problem(dolfinx.fem.petsc.NonlinearProblem):
 
 # the solvers not closed yet, by serial; held weakly (a dropped solver is freed as usual)
 _OPEN_SOLVERS: weakref.WeakValueDictionary[int, "NonlinearSolver"] = weakref.WeakValueDictionary()
+# the parallel solvers an open run holds until it closes them (:func:`hold_solvers`)
+_HELD_SOLVERS: dict[int, "NonlinearSolver"] = {}
+_runs_holding = 0
 
 
 def solvers_created() -> int:
@@ -267,13 +270,33 @@ def solvers_created() -> int:
     return NonlinearSolver._count
 
 
+def hold_solvers() -> int:
+    """From now until the matching :func:`close_solvers`, a solver on more than one rank
+    is kept when its last reference is dropped, so that the run closes it; returns
+    :func:`solvers_created`.
+
+    A parallel PETSc object that Python frees goes to PETSc's garbage on its
+    communicator (petsc4py cannot destroy it at once: destroying is collective, and the
+    collector frees at a different moment on each rank). Nothing cleans that garbage up,
+    so it keeps its communicators for the rest of the process: a 2-rank keratotomy run,
+    whose solvers are locals of a function that returns before the run ends, kept 14
+    (its two solvers' matrices, vectors and MUMPS instances) and a sweep of such runs
+    stopped at MPICH's limit (tests/test_solver_lifetime.py)."""
+    global _runs_holding
+    _runs_holding += 1
+    return solvers_created()
+
+
 def close_solvers(created_after: int) -> None:
-    """Close every open solver created after the ``created_after``-th (collective: the
-    same solvers on every rank of their communicators, see :meth:`NonlinearSolver.close`)."""
+    """Close every open solver created after the ``created_after``-th and end a
+    :func:`hold_solvers` (collective: the same solvers on every rank of their
+    communicators, see :meth:`NonlinearSolver.close`)."""
+    global _runs_holding
     for serial in sorted(serial for serial in list(_OPEN_SOLVERS) if serial > created_after):
         solver = _OPEN_SOLVERS.get(serial)
         if solver is not None:
             solver.close()
+    _runs_holding = max(0, _runs_holding - 1)
 
 
 class FactorisationCounter:
@@ -324,12 +347,17 @@ class NonlinearSolver:
         NonlinearSolver._count += 1
         self.serial = NonlinearSolver._count  # the order of creation, alike on every rank
         self.closed = False  # :meth:`close` destroyed the PETSc objects
-        _OPEN_SOLVERS[self.serial] = self
+        self.stale: StaleFactorisation | None = None
         prefix = f"eyemech{self.serial}_"
         start = time.perf_counter()
         self.problem = _Problem(
             residual, self.unknowns if blocked else self.unknowns[0], bcs=list(bcs), J=jacobian,
             petsc_options_prefix=prefix, kind=(matrix_kind or "mpi") if blocked else matrix_kind)
+        # registered once its PETSc objects exist: a set-up that fails after this point
+        # leaves them to the run's close
+        _OPEN_SOLVERS[self.serial] = self
+        if _runs_holding and self.unknowns[0].function_space.mesh.comm.size > 1:
+            _HELD_SOLVERS[self.serial] = self
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
@@ -363,7 +391,6 @@ class NonlinearSolver:
         self._set_options(prefix)
         if iterative is not None:
             iterative.install(self)
-        self.stale: StaleFactorisation | None = None
         if self.options.linear_reuse == "krylov":
             if iterative is not None:
                 raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
@@ -420,6 +447,7 @@ class NonlinearSolver:
             if obj is not None:
                 obj.destroy()
         _OPEN_SOLVERS.pop(self.serial, None)
+        _HELD_SOLVERS.pop(self.serial, None)
 
     def _wrap_callbacks(self) -> None:
         b, self._assemble_residual = self.snes.getFunction()
