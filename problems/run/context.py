@@ -26,7 +26,7 @@ from eyemech.problems.run.results import (
     write_json_atomic,
 )
 from eyemech.problems.solve.driver import NewtonOptions, SolveFailure, close_solvers, hold_solvers
-from eyemech.problems.solve.petsc_lifetime import next_object_id, release_run_objects
+from eyemech.problems.solve.petsc_lifetime import release_run_objects, start_run
 
 log = logging.getLogger("eyemech")
 
@@ -71,7 +71,7 @@ class RunContext:
         # the run's parallel solvers are kept until it closes them, and its other parallel
         # PETSc objects destroyed as it ends (problems/solve/petsc_lifetime.py)
         self._solvers_before = hold_solvers()
-        self._first_petsc_object = next_object_id()
+        self._first_petsc_object = start_run(self.comm)  # last: it freezes the collector
 
     def __enter__(self) -> "RunContext":
         return self
