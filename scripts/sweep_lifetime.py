@@ -85,18 +85,24 @@ def measure(scene: str, cases: int, vary: str, sets: list[str], out: Path,
     if comm.rank == 0 and (out / "sweep.csv").exists():
         with (out / "sweep.csv").open() as table:
             ok = sum(1 for row in csv.DictReader(table) if row.get("status") == "ok")
+    memory_after = comm.allreduce(resident_mb(), op=MPI.MAX)
+    peak = comm.allreduce(max(peak_resident_mb(), resident_mb()), op=MPI.MAX)
     return {"scene": scene, "cases": cases, "ok_cases": comm.bcast(ok), "exit_code": code,
             "ranks": comm.size, "ranks_per_case": ranks_per_case, "grid": key,
             "settings": sets, "free_communicators_before": before,
             "free_communicators_after": after,
             "resident_mb_before": round(memory_before, 1),
-            "resident_mb_after": round(comm.allreduce(resident_mb(), op=MPI.MAX), 1),
-            "peak_resident_mb": round(comm.allreduce(peak_resident_mb(), op=MPI.MAX), 1),
+            "resident_mb_after": round(memory_after, 1), "peak_resident_mb": round(peak, 1),
             "wall_s": round(wall, 1), "seconds_per_case": round(wall / cases, 3)}
 
 
 def record(path: Path, row: dict, load: str) -> None:
     """Append ``row`` to the Markdown table in ``path`` (its header when new)."""
+    title = ("# Benchmark: a long sweep process\n\n`make bench-sweep` (scripts/sweep_lifetime.py): "
+             "`eyemech sweep` of many cases in one process; MPI communicators still free "
+             "(fewest over the ranks; MPICH has 2,048 a process) and resident memory (most "
+             "over the ranks) before and after the sweep (docs/parallel.md, \"Long "
+             "processes\"). Wall times on a shared machine: see the load.\n\n")
     header = ("| date | machine | load (1 min) | scene | settings | cases (ok) | ranks (per case) "
               "| free communicators before → after | resident MB before → after (peak) "
               "| wall s (per case) |\n|---|---|---|---|---|---|---|---|---|---|\n")
@@ -108,7 +114,7 @@ def record(path: Path, row: dict, load: str) -> None:
             f"({row['peak_resident_mb']:.0f}) | {row['wall_s']:.0f} ({row['seconds_per_case']:.2f}) |\n")
     new = not path.exists()
     with path.open("a") as table:
-        table.write(header if new else "")
+        table.write(title + header if new else "")
         table.write(line)
 
 
