@@ -6,7 +6,7 @@ collector cannot follow them: a callback bound to the solver that owns the SNES 
 cycle that is never freed (problems/solve/callbacks.py). On more than one rank petsc4py
 parks a PETSc object Python drops in PETSc's garbage until a collective clean-up: the
 run contract keeps its solvers to its end and releases its PETSc objects there
-(problems/solve/petsc_lifetime.py). Whatever is kept holds MPI communicators, and MPICH
+(problems/run/petsc_lifetime.py). Whatever is kept holds MPI communicators, and MPICH
 has 2,048 a process: a process that runs out aborts (exit status 15 after "Too many
 communicators", no pytest summary) or crashes in DOLFINx or MUMPS (docs/parallel.md,
 "Long processes").
@@ -61,6 +61,7 @@ def test_a_run_closes_its_solvers_as_it_ends():
     same point: destroying a MUMPS factorisation is collective, and Python's collector
     would free a solver kept in a cycle at a different moment on each rank."""
     from eyemech.problems import sphere_inflation
+    from eyemech.problems.run import newton
     from eyemech.problems.run.context import RunOptions
     from eyemech.problems.solve import driver
 
@@ -68,7 +69,7 @@ def test_a_run_closes_its_solvers_as_it_ends():
     sphere_inflation.run(sphere_inflation.Parameters(),
                          options=RunOptions(fields=False, pictures=False))
     assert driver.solvers_created() > before, "the run made no solver"
-    assert not [serial for serial in driver._OPEN_SOLVERS if serial > before]
+    assert not [serial for serial in newton._OPEN_SOLVERS if serial > before]
 
 
 # keratotomy at parallel_cases' coarse size: its two solvers are locals of a function
@@ -86,7 +87,7 @@ def test_runs_on_two_ranks_give_back_their_communicators(scene, runs, sets):
     communicator it took (tests/lifetime_runs.py). ``petsc-objects`` leaves what scenes
     leave: a solver dropped before the run ends, a matrix held to its end, a vector
     dropped mid-run. Measured without the run contract's release
-    (problems/solve/petsc_lifetime.py): 8 communicators kept a run, and 14 a coarse
+    (problems/run/petsc_lifetime.py): 8 communicators kept a run, and 14 a coarse
     keratotomy run."""
     script = Path(__file__).parent / "lifetime_runs.py"
     command = [str(Path(sys.executable).parent / "mpiexec"), "-n", "2", sys.executable,

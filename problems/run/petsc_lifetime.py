@@ -12,7 +12,7 @@ next ``MPI_Comm_dup`` fails (docs/parallel.md, "Long processes").
 
 The run contract (``RunContext``) calls :func:`start_run` as a run starts and
 :func:`release_run_objects` as it ends, on every rank at the same point. The run's solvers
-are kept to its end (``driver.hold_solvers``) and closed there; the objects parked on the
+are kept to its end (``newton.hold_solvers``) and closed there; the objects parked on the
 communicators of the objects the run still holds are destroyed by PETSc's clean-up; the
 objects it still holds (a time integrator's mass matrix, a contact term's matrix) are
 destroyed in the order PETSc made them, the same order on every rank. An object that a
