@@ -20,6 +20,7 @@ import argparse
 import csv
 import datetime
 import json
+import os
 import platform
 import resource
 import sys
@@ -103,10 +104,12 @@ def record(path: Path, row: dict, load: str) -> None:
              "(fewest over the ranks; MPICH has 2,048 a process) and resident memory (most "
              "over the ranks) before and after the sweep (docs/parallel.md, \"Long "
              "processes\"). Wall times on a shared machine: see the load.\n\n")
-    header = ("| date | machine | load (1 min) | scene | settings | cases (ok) | ranks (per case) "
+    header = ("| date | machine | load (1 min at start; 1 / 5 / 15 min at end) | scene | settings "
+              "| cases (ok) | ranks (per case) "
               "| free communicators before → after | resident MB before → after (peak) "
               "| wall s (per case) |\n|---|---|---|---|---|---|---|---|---|---|\n")
-    line = (f"| {datetime.date.today()} | {platform.node()} ({platform.machine()}) | {load} "
+    line = (f"| {datetime.date.today()} | {platform.node()} ({platform.machine()}, {os.cpu_count()} cpus) "
+            f"| {load} "
             f"| {row['scene']} | {' '.join(row['settings'])}, {row['grid']} varied "
             f"| {row['cases']} ({row['ok_cases']}) | {row['ranks']} ({row['ranks_per_case']}) "
             f"| {row['free_communicators_before']} → {row['free_communicators_after']} "
@@ -128,9 +131,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ranks-per-case", type=int, default=MPI.COMM_WORLD.size)
     parser.add_argument("--record", type=Path, help="append a Markdown row to this file")
     args = parser.parse_args(argv)
-    load = f"{Path('/proc/loadavg').read_text().split()[0]}"
+    load_start = Path("/proc/loadavg").read_text().split()[0]
     row = measure(args.scene, args.cases, args.vary, args.sets, args.out, args.ranks_per_case)
     if MPI.COMM_WORLD.rank == 0:
+        # the 1-minute load as the sweep starts; the 1-, 5- and 15-minute loads as it ends
+        load = f"{load_start}; {' / '.join(Path('/proc/loadavg').read_text().split()[:3])}"
         row["load"] = load
         print(json.dumps(row), flush=True)
         if args.record is not None:
