@@ -35,8 +35,9 @@ run: $(STAMP)
 # `make test TEST_GROUPS=tests/test_cli.py` runs one file). A process that keeps MPI
 # communicators runs out of MPICH's 2,048 and then aborts or crashes (docs/parallel.md,
 # "Long processes"): a test module that keeps more than a few fails (tests/conftest.py).
-# TEST_LOG records the test that started last, the communicators and memory after each
-# module, and Python's traceback on a fatal signal; its end is printed when a process fails.
+# TEST_LOG records each test as it starts (with the free communicators then), the free
+# communicators and memory after each module, and Python's traceback on a fatal signal;
+# its end is printed when a process fails.
 TEST_GROUPS ?= tests
 TEST_LOG    ?= $(CURDIR)/test-process.log
 

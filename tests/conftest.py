@@ -94,11 +94,12 @@ def free_communicators() -> int:
 class ProcessLog:
     """What is left of a test process that ends abruptly, in the file that
     ``EYEMECH_TEST_LOG`` names (``make test`` sets it and prints its end when the suite
-    fails): the test that started last, the free communicators and the resident memory
-    after each module, and Python's traceback of every thread on a fatal signal
-    (faulthandler). pytest captures file descriptors 1 and 2 while a test runs, and an
-    abrupt end loses what the test printed there (an MPI_Abort's message, PETSc's "Caught
-    signal" block)."""
+    fails): the test that started last and the free communicators then, the free
+    communicators and the resident memory after each module, and Python's traceback of
+    every thread on a fatal signal (faulthandler; a crash that overwrote Python's memory
+    leaves it incomplete, docs/parallel.md, "Long processes"). pytest captures file
+    descriptors 1 and 2 while a test runs, and an abrupt end loses what the test printed
+    there (an MPI_Abort's message, PETSc's "Caught signal" block)."""
 
     def __init__(self, path: str | None):
         self.file = open(path, "a", buffering=1) if path else None  # noqa: SIM115
@@ -132,7 +133,10 @@ def pytest_sessionstart(session):
 
 
 def pytest_runtest_logstart(nodeid, location):
-    _TEST_LOG.write(f"start {nodeid}")
+    # the free communicators as each test starts (20 ms): the last line of a process
+    # that ran out says so, even where the crash leaves faulthandler no readable frames
+    if _TEST_LOG.file is not None:
+        _TEST_LOG.write(f"start {nodeid} ({free_communicators()} communicators free)")
 
 
 def pytest_sessionfinish(session, exitstatus):
