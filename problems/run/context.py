@@ -16,9 +16,10 @@ from eyemech.meshes import MeshError
 from eyemech.problems.run import jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding
-from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, solvers_created
+from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, hold_solvers
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
+from eyemech.problems.run.petsc_lifetime import release_run_objects, start_run
 from eyemech.problems.run.results import (
     OutputFolder,
     Result,
@@ -68,7 +69,10 @@ class RunContext:
         # the folder is made, checked and locked (all ranks raise alike when it cannot be)
         self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
             else None
-        self._solvers_before = solvers_created()
+        # the run's parallel solvers are kept until it closes them, and its other parallel
+        # PETSc objects destroyed as it ends (problems/run/petsc_lifetime.py)
+        self._solvers_before = hold_solvers()
+        self._first_petsc_object = start_run(self.comm)  # last: it freezes the collector
 
     def __enter__(self) -> "RunContext":
         return self
@@ -77,7 +81,8 @@ class RunContext:
         # an exception on this rank alone: the other ranks wait in a collective call
         abort_if_stranding(self.comm, error)
         # every rank is here (or the error was this rank's alone and the job is ended)
-        close_solvers(created_after=self._solvers_before)
+        release_run_objects(self.comm, self._first_petsc_object,
+                            lambda: close_solvers(created_after=self._solvers_before))
         self.checkpoints.restore_signal_handlers()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"

@@ -56,6 +56,7 @@ from eyemech.problems.run.newton import (  # noqa: F401  (scenes import these fr
     SolveFailure,
     close_solvers,
     forget_solver,
+    hold_solver,
     register_solver,
     solvers_created,
 )
@@ -150,11 +151,14 @@ class NonlinearSolver:
         blocked = isinstance(residual, (list, tuple))
         self.serial = register_solver(self)  # the order of creation, alike on every rank
         self.closed = False  # :meth:`close` destroyed the PETSc objects
+        self.stale: StaleFactorisation | None = None
         prefix = f"eyemech{self.serial}_"
         start = time.perf_counter()
         self.problem = _Problem(
             residual, self.unknowns if blocked else self.unknowns[0], bcs=list(bcs), J=jacobian,
             petsc_options_prefix=prefix, kind=(matrix_kind or "mpi") if blocked else matrix_kind)
+        if self.unknowns[0].function_space.mesh.comm.size > 1:
+            hold_solver(self)
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
@@ -188,7 +192,6 @@ class NonlinearSolver:
         self._set_options(prefix)
         if iterative is not None:
             iterative.install(self)
-        self.stale: StaleFactorisation | None = None
         if self.options.linear_reuse == "krylov":
             if iterative is not None:
                 raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
@@ -240,7 +243,10 @@ class NonlinearSolver:
         self.closed = True
         if self.stale is not None:
             self.stale.free()
-        problem = self.problem
+        problem = getattr(self, "problem", None)  # None: its set-up failed before PETSc's objects
+        if problem is None:
+            forget_solver(self.serial)
+            return
         for obj in (problem.solver, problem.A, problem.P_mat, problem.b, problem.x):
             if obj is not None:
                 obj.destroy()
