@@ -26,7 +26,7 @@ STALE = {
     "eye_calibration.csv", "eye_model_reduction.csv", "iol_flip.csv", "iol_speed.csv",
     "iol_stability.csv", "keratotomy_magnitude.csv", "keratotomy_salz.csv", "newton_failure.csv",
     "pressure_checkerboard.csv", "sphere_inflation_convergence.csv", "tonometry_convergence.csv",
-    "tonometry_sweep.csv", "viscoelastic_stability.csv", "volumetric_locking.csv",
+    "tonometry_sweep.csv", "volumetric_locking.csv",
 }
 
 
