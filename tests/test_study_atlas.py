@@ -25,8 +25,7 @@ STALE = {
     "contact_penalty.csv", "cook_membrane_convergence.csv", "cornea_model_reduction.csv",
     "eye_calibration.csv", "eye_model_reduction.csv", "iol_flip.csv", "iol_speed.csv",
     "iol_stability.csv", "keratotomy_magnitude.csv", "keratotomy_salz.csv",
-    "pressure_checkerboard.csv", "sphere_inflation_convergence.csv", "tonometry_convergence.csv",
-    "tonometry_sweep.csv", "volumetric_locking.csv",
+    "sphere_inflation_convergence.csv", "tonometry_convergence.csv", "tonometry_sweep.csv",
 }
 
 
