@@ -24,7 +24,7 @@ STALE = {
     "buckling_planning.csv", "buckling_sweep.csv", "cavity_formulations.csv",
     "contact_penalty.csv", "cook_membrane_convergence.csv", "cornea_model_reduction.csv",
     "eye_calibration.csv", "eye_model_reduction.csv", "iol_flip.csv", "iol_speed.csv",
-    "iol_stability.csv", "keratotomy_magnitude.csv", "keratotomy_salz.csv",
+    "iol_stability.csv", "keratotomy_magnitude.csv",
     "sphere_inflation_convergence.csv", "tonometry_convergence.csv", "tonometry_sweep.csv",
 }
 
