@@ -57,7 +57,7 @@ __all__ = ["BENCHMARK", "CALIBRATED_C20_SCLERA", "CORNEA_TO_SCLERA", "DIOPTRES_P
 BENCHMARK = {"resolution": "paper", "settle": False}
 
 # what this scene's checkpoints hold: one written with another state is refused
-STATE_LAYOUT = "terms-and-stages-1"
+STATE_LAYOUT = "terms-and-stages-2"
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,

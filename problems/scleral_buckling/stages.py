@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Callable, Literal
 
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.scleral_buckling.parameters import Parameters
+from eyemech.problems.scleral_buckling.venting import PressureHistory
 from eyemech.problems.solve.augmentation import Augmentation
 from eyemech.problems.solve.driver import NewtonSettings, Stepping, StepRecord, follow_stages
 
@@ -237,6 +238,7 @@ class Operation:
         stages = operation(params) if stages is None else stages
         self.stages = [_Bound(stage, k + 1, self) for k, stage in enumerate(stages)]
         self.results: dict[str, dict] = {}  # the measurements at each stage's end
+        self.pressures = PressureHistory(params.iop_limit_mmHg)
         self.reports: dict = {}             # what the last switches reported
         self.augmentation = None
         multipliers = model.multipliers()
@@ -271,6 +273,8 @@ class Operation:
     def converged(self, record: StepRecord, stage: _Bound, ends: bool) -> None:
         values = self.model.measure() | self.reports
         self.reports = {}
+        values |= self.pressures.passed(stage.number, record.load - (stage.number - 1),
+                                        values["iop_mmHg"], values.get("vented_volume_uL", 0.0))
         self.ctx.record_step(step=record.step, load=record.load, stage=stage.number,
                              newton_iterations=record.iterations, cuts=record.cuts,
                              **record.counts(), krylov_iterations=record.linear_iterations,
@@ -284,6 +288,7 @@ class Operation:
     def register(self, checkpoints) -> None:
         checkpoints.value("stage_results", lambda: self.results,
                           lambda saved: setattr(self, "results", dict(saved)))
+        checkpoints.value("pressure_history", self.pressures.state, self.pressures.restore)
         if self.augmentation is not None:
             # the run's totals in the summary count the updates before the checkpoint too
             checkpoints.value("augmentation_counts", self._augmentation_counts,
