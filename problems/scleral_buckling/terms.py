@@ -15,20 +15,20 @@ from mpi4py import MPI
 from eyemech.forms import (
     NeoHooke,
     Yeoh,
+    axis_volumes,
     cauchy_stress,
     deformation_gradient,
-    axis_volumes,
     enclosed_volume,
     follower_pressure,
     von_mises,
 )
+from eyemech.forms.cavity import held_liquid
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.eye import zonule_pairs
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.scleral_buckling.body import Body, cell_field
 from eyemech.problems.scleral_buckling.parameters import Parameters
-from eyemech.forms.cavity import held_liquid
 from eyemech.problems.scleral_buckling.venting import venting_route
 from eyemech.problems.solid.cavity import VentedCavity, check_closed
 from eyemech.problems.solid.mean_dilatation import MeanDilatation
