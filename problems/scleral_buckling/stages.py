@@ -149,7 +149,8 @@ def operation(params: Parameters) -> list[Stage]:
               end=(close_the_liquid, tie_the_buckle, place_the_buckle,
                    record_the_eye_before_surgery),
               largest_step=largest),
-        # the buckle moves radially inward by ``indentation`` against the closed liquid;
+        # the buckle moves radially inward by ``indentation`` against the closed liquid
+        # (vented at ``iop_limit_mmHg`` with ``venting``, here and in suturing);
         # full Newton steps (a failed solve repeated with bt: plain Newton can cycle
         # between two active sets) or bt, which in the first stage would only cost
         # iterations (12-14 per step instead of 3-4)
