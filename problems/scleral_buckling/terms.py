@@ -118,7 +118,6 @@ class CavityLiquid(Term):
         self.body = body
         mesh = body.mesh
         self.iop = params.iop_mmHg * MMHG
-        self.limit_mmHg = params.iop_limit_mmHg
         self.pressure_target = dolfinx.fem.Constant(mesh, 0.0)
         self.acute_pressure = dolfinx.fem.Constant(mesh, self.iop)  # when the liquid is released
         self.initial_volume = dolfinx.fem.Constant(mesh, 1.0)
