@@ -140,8 +140,7 @@ def test_bad_buckles_are_refused(overrides, key):
     ("indentation=12", "indentation"),           # deeper than the sclera's 11.5 mm radius
 ])
 def test_bad_buckle_exits_2(tmp_path, setting, key):
-    # one clear error naming the parameter, before any solve (drainage without a
-    # detachment: tests/test_tear_closure.py)
+    # one clear error naming the parameter, before any solve (drainage: tests/test_drainage.py)
     code, _, err = run_cli("run", "scleral-buckling", "--set", setting, "--out", str(tmp_path))
     assert code == 2
     assert key in err

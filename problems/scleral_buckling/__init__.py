@@ -22,7 +22,7 @@ each):
 The model (:mod:`.model`) is a sum of terms (:mod:`.terms`, :mod:`.buckle_terms`): the
 tissues (neo-Hooke per tissue, paper Table 1, or the calibrated Yeoh coats), the cavity's
 liquid, the buckle's contact, the tie under its footprint, the tire's row, the sutures,
-the subretinal drainage, the lens' zonules and the retina's contact with the choroid. The
+the lens' zonules and the retina's contact with the choroid. The
 eye is held at the end of the optic-nerve stub; the symmetry plane x = 0 passes through
 the tear. Its parameters: :mod:`.parameters` (physics and geometry) and :mod:`.settings`
 (solver and stepping); its reference: docs/scleral_buckling.md.

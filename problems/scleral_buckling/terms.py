@@ -1,6 +1,6 @@
 """The eye's own terms: its tissues, the liquid in its cavity, the lens' zonules and the
-retina's contact with the choroid (the drainage is :mod:`.drainage`'s, the buckle's terms
-:mod:`.buckle_terms`' and :mod:`.suture_terms`'). Each is a
+retina's contact with the choroid (the buckle's terms are :mod:`.buckle_terms`' and
+:mod:`.suture_terms`'). Each is a
 :class:`~eyemech.problems.solve.terms.Term`: its residual, what it adds node by node,
 its checkpoint state, its measurements, its controls."""
 
