@@ -504,10 +504,41 @@ BUDGET_EYE = {"resolution": "coarse", "settle": False}
 
 
 @pytest.fixture(scope="module")
-def budget_eye():
-    """The coarse eye with the scene's defaults (one run shared by the tests below)."""
+def budget_eye_and_log():
+    """The coarse eye with the scene's defaults, and PETSc's log events over its run."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
-    return scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE), options=options)
+    with PetscLog() as log:
+        result = scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE), options=options)
+    return result, log
+
+
+@pytest.fixture(scope="module")
+def budget_eye(budget_eye_and_log):
+    """The coarse eye with the scene's defaults (one run shared by the tests below)."""
+    return budget_eye_and_log[0]
+
+
+def assert_eye_counts_are_petscs(result, log: PetscLog) -> None:
+    """The eye's totals against PETSc's log events over its run, and the sum over its steps
+    against the totals. With modified Newton an iteration on a kept Jacobian is a linear
+    solve and a Jacobian request (``SNESJacobianEval``) but no assembly and no
+    factorisation: Jacobians assembled = numeric factorisations ≤ requests."""
+    data = result.as_json()
+    counts, events, steps = data["solver_counts"], log.counts, data["steps"]
+    assert counts["newton_solves"] == events["SNESSolve"]
+    assert counts["newton_iterations_all"] == events["KSPSolve"] == events["SNESJacobianEval"]
+    assert counts["factorisations"] == events["MatLUFactorNum"] + events["MatCholFctrNum"]
+    assert counts["symbolic_factorisations"] == \
+        events["MatLUFactorSym"] + events["MatCholFctrSym"]
+    assert counts["jacobians"] <= events["SNESJacobianEval"]
+    for key in STEP_KEYS:
+        assert counts["newton_solves" if key == "attempts" else key] == \
+            sum(s[key] for s in steps), key
+
+
+def test_the_coarse_eyes_counts_are_petscs(budget_eye_and_log):
+    """The default coarse eye (no settling): every count as PETSc's log counts it."""
+    assert_eye_counts_are_petscs(*budget_eye_and_log)
 
 
 def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factorisations(
@@ -521,8 +552,10 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
     factorisations (measured: 50 in 20 load steps against 177 in 24; 0.28, so the bound
     leaves room for the solver's counts to move)."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
-    reference = scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE, **REFERENCE_METHOD),
-                                     options=options)
+    with PetscLog() as log:
+        reference = scleral_buckling.run(
+            scleral_buckling.Parameters(**BUDGET_EYE, **REFERENCE_METHOD), options=options)
+    assert_eye_counts_are_petscs(reference, log)
     budget = budget_eye
     assert_same_eye(reference, budget, rim_gap_tolerance=0.01)
     ref_counts = reference.as_json()["solver_counts"]
