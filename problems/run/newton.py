@@ -22,6 +22,8 @@ class SolveFailure(RuntimeError):
     its attempts' work), which the run contract adds to the run's ``steps``; None where
     the raiser keeps no such record."""
 
+    failed_step: dict[str, Any] | None = None  # also for a subclass with an __init__ of its own
+
     def __init__(self, step: int, load: float, last_converged: float, residuals: list[float],
                  reason: str, quantity: str = "load factor", unit: str = "", *,
                  failed_step: dict[str, Any] | None = None):
