@@ -30,6 +30,10 @@ FRICTIONLESS_SLIP_STIFFNESS = 0.003
 # sizes 36 (coarse) to 11 (paper) times that; more would only add cells
 MAX_COAT_LAYERS = 8
 
+# a segmental tire's second suture meridian, as a fraction of its half arc: inside the tire's
+# end by a fifth of the half arc, so that the bite (1 mm grip) stays on the tire
+SEGMENTAL_SUTURE_SPREAD = 0.8
+
 # the keys a buckle's placement problem names (forms/buckle.py, BuckleShape.placement_problem)
 PLACEMENT_KEYS = {"position": "buckle_position", "length": "tire_length"}
 
@@ -145,9 +149,12 @@ class EyeParameters(SceneParameters):
     suture_force: float = field(0.2, "pull on each suture at the end of step 3", "N", group=PHYSICS)
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm",
     group=GEOMETRY)
-    suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
-                                               "suture meridians, degrees from the tear", "deg",
-                                               group=GEOMETRY)
+    suture_azimuths: tuple[float, ...] = field(
+        (), "suture meridians, degrees from the tear (0–180: the half eye). Empty (the "
+        "default): across the buckle chosen, 0, 90 and 180 with a band all round, 0 and "
+        f"{SEGMENTAL_SUTURE_SPREAD:g} of the tire's half arc on a segmental tire (0 and 36 on "
+        "the default 90° tire), 0 on a radial tire (Parameters.suture_meridians)", "deg",
+        group=GEOMETRY)
     suture_model: Literal["loop", "bites"] = field(
         "loop", "loop: a suture is a loop over the tire; its tension pulls the bites and pushes "
         "the tire in, whose radial travel in steps 3-4 balances the sclera's contact force "
@@ -237,11 +244,12 @@ class Parameters(NumericalSettings, EyeParameters):
                                  f"({self.buckle_clearance} mm); it must be >= 0")
         self._validate_orientation()
         shape = self.buckle_shape()
-        if self.suture_azimuths and any(shape.element_at(a) is None for a in self.suture_azimuths):
+        meridians = self.suture_meridians()
+        if any(shape.element_at(a) is None for a in meridians):
             raise ParameterError("suture_azimuths", "a suture lies off the segmental tire (its arc "
                                  f"is ±{self.tire_arc_deg / 2:g} degrees about the tear): "
                                  "nothing to hold there")
-        widest = max((shape.element_at(a)[0] for a in self.suture_azimuths),
+        widest = max((shape.element_at(a)[0] for a in meridians),
                      default=shape.footprint)
         if self.suture_width < widest:
             raise ParameterError("suture_width", f"{self.suture_width} mm is narrower than the buckle "
@@ -259,7 +267,7 @@ class Parameters(NumericalSettings, EyeParameters):
         if problem is not None:
             what, message = problem
             raise ParameterError(PLACEMENT_KEYS[what], message)
-        if any(not 0 <= a <= 180 for a in self.suture_azimuths) or not self.suture_azimuths:
+        if any(not 0 <= a <= 180 for a in meridians):
             raise ParameterError("suture_azimuths", "need angles in [0, 180] degrees (the half eye)")
 
     def _validate_orientation(self) -> None:
@@ -273,7 +281,7 @@ class Parameters(NumericalSettings, EyeParameters):
             if self.tire_arc_deg != 90.0:
                 raise ParameterError("tire_arc_deg", "sets a circumferential tire's arc; a radial "
                                      "tire's extent is tire_length")
-            if tuple(self.suture_azimuths) != (0.0,):
+            if tuple(self.suture_meridians()) != (0.0,):
                 raise ParameterError("suture_azimuths", "a radial tire lies on the tear's meridian: "
                                      "its sutures cross it there (suture_azimuths=0)")
         elif self.tire_length != 12.0:
@@ -315,6 +323,18 @@ class Parameters(NumericalSettings, EyeParameters):
                            retina_thickness=self.retina_thickness, lens=self.lens,
                            tear_radius=self.tear_radius,
                            lens_diameter=self.lens_diameter, lens_thickness=self.lens_thickness)
+
+    def suture_meridians(self) -> tuple[float, ...]:
+        """The sutures' meridians (degrees from the tear): ``suture_azimuths`` when set, else
+        across the buckle chosen -- a band all round is sewn at 0, 90 and 180 degrees; a
+        segmental tire at 0 and within its end; a radial tire on the tear's meridian."""
+        if self.suture_azimuths:
+            return tuple(float(a) for a in self.suture_azimuths)
+        if self.buckle != "segmental":
+            return (0.0, 90.0, 180.0)
+        if self.tire_orientation == "radial":
+            return (0.0,)
+        return (0.0, round(SEGMENTAL_SUTURE_SPREAD * min(self.tire_arc_deg, 360.0) / 2, 6))
 
     def buckle_shape(self) -> BuckleShape:
         return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,
