@@ -168,8 +168,9 @@ def test_the_coarse_eye_repeats_its_recorded_numbers(coarse):
 def test_a_checkpoint_of_another_state_layout_is_refused(tmp_path):
     """A coarse eye's checkpoint (after step 3) whose scene state has another layout (other
     terms' names, no ``state_layout``: tests/data/scleral_buckling_checkpoint_before_terms,
-    its rank file recompressed) is refused with exit code 2 and a message that says so,
-    before anything is meshed; the folder is left as it was."""
+    its rank file recompressed, its parameters all known to this version) is refused with
+    exit code 2 and a message that says so, before anything is meshed; the folder is left
+    as it was."""
     folder = tmp_path / "run"
     shutil.copytree(DATA / "scleral_buckling_checkpoint_before_terms", folder)
     before = sorted(p.relative_to(folder) for p in folder.rglob("*"))

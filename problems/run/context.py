@@ -89,6 +89,8 @@ class RunContext:
             self.result.message = str(error)
         elif isinstance(error, SolveFailure):
             self.result.status = "failed"
+            if error.failed_step is not None:  # its work is in the totals: the steps sum to them
+                self.result.steps.append(error.failed_step)
             kept = f" Converged steps are in {self.out}: {', '.join(self.result.fields)}." \
                 if self.out is not None and self.result.fields else ""
             self.result.message = str(error) + kept

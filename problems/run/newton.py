@@ -16,11 +16,19 @@ FACTORISATIONS = ("auto", "lu", "ldlt")
 
 
 class SolveFailure(RuntimeError):
-    """Newton failed and step cutting is exhausted; the last converged state is kept."""
+    """Newton failed and step cutting is exhausted; the last converged state is kept.
+
+    ``failed_step``: the failed step as ``results.json`` records a step (status ``failed``,
+    its attempts' work), which the run contract adds to the run's ``steps``; None where
+    the raiser keeps no such record."""
+
+    failed_step: dict[str, Any] | None = None  # also for a subclass with an __init__ of its own
 
     def __init__(self, step: int, load: float, last_converged: float, residuals: list[float],
-                 reason: str, quantity: str = "load factor", unit: str = ""):
+                 reason: str, quantity: str = "load factor", unit: str = "", *,
+                 failed_step: dict[str, Any] | None = None):
         self.step, self.load, self.last_converged = step, load, last_converged
+        self.failed_step = failed_step
         self.residuals, self.reason = residuals, reason
         self.quantity, self.unit = quantity, unit
         history = ", ".join(f"{r:.3e}" for r in residuals) or "none"

@@ -7,7 +7,6 @@ mixed DG0 unknown; condensed: none), the cavity's pressure and the tire's radial
     R = R_tissues(u, p)              incompressible tissues (:class:`~.terms.Tissues`)
       + ∫ P J F⁻ᵀN·v dA + P's row    the vitreous (:class:`~.terms.CavityLiquid`)
       + δΠ_buckle                    penalty contact with the rigid buckle
-      + R_drainage                   subretinal drainage and its pseudo-time drag
       + δΠ_tie                       the sclera tied under the buckle's footprint
       + R_sutures                    suture forces at the bites (lagged directions)
       + r_δ                          the tire's travel: pinned or balanced
@@ -30,7 +29,6 @@ from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.scleral_buckling.body import Body
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, BuckleTie, RigidBuckle
-from eyemech.problems.scleral_buckling.drainage import Drainage
 from eyemech.problems.scleral_buckling.measures import Optics, RetinaGaps
 from eyemech.problems.scleral_buckling.parameters import Parameters
 from eyemech.problems.scleral_buckling.suture_terms import Sutures, TireRow
@@ -66,7 +64,6 @@ class BucklingModel:
         self.tissues = Tissues(body, params)
         self.liquid = CavityLiquid(body, params)
         self.buckle = RigidBuckle(body, params)
-        self.drainage = Drainage(body, params, self.liquid.iop)
         # the buckle's penalty α = factor · E_sclera / h
         penalty = params.penalty_factor * self.tissues.youngs_modulus("sclera") / body.element_size
         self.contact = BuckleContact(body, params, self.buckle, penalty)
@@ -80,7 +77,7 @@ class BucklingModel:
         self.zonules = Zonules(body, params) if params.lens else None
         self.retina = RetinaContact(body, params, self.gaps, self.tissues.youngs_modulus("retina")) \
             if params.retina_contact and self.gaps.detached else None
-        self.terms = [term for term in (self.tissues, self.liquid, self.contact, self.drainage,
+        self.terms = [term for term in (self.tissues, self.liquid, self.contact,
                                         self.tie, self.sutures, self.tire, self.buckle,
                                         self.zonules, self.retina) if term is not None]
         self.solver = self._solver(total_residual(self.terms, tests))
@@ -162,7 +159,7 @@ class BucklingModel:
             if part is not None:
                 out |= part.measure()
         out |= self.optics.changes(optics, volume, iop) | self.tie.measure() | self.optics.lengths(optics)
-        for part in (self.buckle, self.contact, self.tire, self.drainage, self.liquid, self.gaps,
+        for part in (self.buckle, self.contact, self.tire, self.liquid, self.gaps,
                      self.tissues, self.sutures):
             out |= part.measure()
         return out

@@ -30,6 +30,10 @@ FRICTIONLESS_SLIP_STIFFNESS = 0.003
 # sizes 36 (coarse) to 11 (paper) times that; more would only add cells
 MAX_COAT_LAYERS = 8
 
+# a segmental tire's second suture meridian, as a fraction of its half arc: inside the tire's
+# end by a fifth of the half arc, so that the bite (1 mm grip) stays on the tire
+SEGMENTAL_SUTURE_SPREAD = 0.8
+
 # the keys a buckle's placement problem names (forms/buckle.py, BuckleShape.placement_problem)
 PLACEMENT_KEYS = {"position": "buckle_position", "length": "tire_length"}
 
@@ -58,6 +62,16 @@ class EyeParameters(SceneParameters):
            "docs/scleral_buckling.md, Q2P1 and Q1P0 at equal accuracy", group=GEOMETRY)
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg", group=PHYSICS)
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa", group=PHYSICS)
+    iop_limit_mmHg: float = field(
+        79.0, "the IOP at which the central retinal artery closes: 48-110 mmHg, mean 79 "
+        "(Gardner et al., Ophthalmology 1993). With venting the IOP is held at it in steps 2-3; "
+        "every stage reports the fraction of its load spent above it; at least iop_mmHg",
+        "mmHg", group=PHYSICS)
+    venting: bool = field(
+        True, "steps 2-3: the surgeon vents the eye (paracentesis, subretinal drainage): the "
+        "liquid is held until the IOP reaches iop_limit_mmHg, then the IOP stays there and the "
+        "liquid the wall displaces leaves; false: the liquid's volume is conserved (the paper's "
+        "law) and the IOP may pass the limit (docs/scleral_buckling.md, Venting)", group=PHYSICS)
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa", group=PHYSICS)
     c_sclera: float = field(0.0833, "neo-Hooke c of the sclera", "MPa", group=PHYSICS)
     c_ciliary_body: float = field(0.01, "neo-Hooke c of the ciliary body", "MPa", group=PHYSICS)
@@ -135,21 +149,22 @@ class EyeParameters(SceneParameters):
     suture_force: float = field(0.2, "pull on each suture at the end of step 3", "N", group=PHYSICS)
     suture_bite_radius: float = field(1.0, "radius over which a suture grips the sclera", "mm",
     group=GEOMETRY)
-    suture_azimuths: tuple[float, ...] = field((0.0, 90.0, 180.0),
-                                               "suture meridians, degrees from the tear", "deg",
-                                               group=GEOMETRY)
+    suture_azimuths: tuple[float, ...] = field(
+        (), "suture meridians, degrees from the tear (0–180: the half eye). Empty (the "
+        "default): across the buckle chosen, 0, 90 and 180 with a band all round, 0 and "
+        f"{SEGMENTAL_SUTURE_SPREAD:g} of the tire's half arc on a segmental tire (0 and 36 on "
+        "the default 90° tire), 0 on a radial tire (Parameters.suture_meridians)", "deg",
+        group=GEOMETRY)
     suture_model: Literal["loop", "bites"] = field(
         "loop", "loop: a suture is a loop over the tire; its tension pulls the bites and pushes "
         "the tire in, whose radial travel in steps 3-4 balances the sclera's contact force "
         "(the band keeps its prescribed travel); bites: the pull acts on the bites only and "
         "the tire keeps the band's travel", group=PHYSICS)
     drainage: Literal["none", "external"] = field(
-        "none", "external: the subretinal fluid is drained in step 4 (with the settled state): "
-        "the subretinal faces lose the liquid pressure, the vitreous pressure presses the "
-        "detached retina onto the choroid; the retina's snap onto the choroid is followed in "
-        "pseudo-time (drainage_drag_step), then solved once without the drag; where that "
-        "fails (the coarse and default eyes) the dragged state is kept and its drag traction "
-        "reported (docs/scleral_buckling.md, Subretinal drainage)", group=PHYSICS)
+        "none", "external (the subretinal fluid drained in step 4) is refused: the drained "
+        "retina pressed on the choroid reaches no equilibrium in this model (it drifts "
+        "along the choroid's facets; docs/scleral_buckling.md, Subretinal drainage)",
+        group=PHYSICS)
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm", group=GEOMETRY)
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm", group=GEOMETRY)
@@ -187,6 +202,12 @@ class Parameters(NumericalSettings, EyeParameters):
                               "augmentation_tolerance", "max_augmentations",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
+        self.require_positive("iop_limit_mmHg")
+        if self.iop_limit_mmHg < self.iop_mmHg:
+            raise ParameterError("iop_limit_mmHg", f"{self.iop_limit_mmHg:g} mmHg is below the "
+                                 f"pre-operative IOP (iop_mmHg = {self.iop_mmHg:g} mmHg): the "
+                                 "artery would be closed before surgery; the limit must be at "
+                                 "least iop_mmHg")
 
     def _validate_material(self) -> None:
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
@@ -207,14 +228,13 @@ class Parameters(NumericalSettings, EyeParameters):
                                  "lie in (0, 360] degrees")
 
     def _validate_drainage(self) -> None:
-        if self.drainage != "none" and self.detachment_height == 0:
-            raise ParameterError("drainage", "there is no subretinal fluid to drain: the retina "
-                                 "is attached (detachment_height = 0)")
-        if self.drainage_drag_step <= 0:
-            raise ParameterError("drainage_drag_step", "must be positive")
-        if self.drainage != "none" and not self.settle:
-            raise ParameterError("drainage", "drainage acts in step 4 (the settled state, where "
-                                 "the liquid volume is free): it needs settle = true")
+        if self.drainage != "none":
+            raise ParameterError("drainage", f"{self.drainage} is refused: the drained retina "
+                                 "pressed on the choroid reaches no equilibrium in this model "
+                                 "(a pseudo-time drag of 8 mmHg, half the IOP, is left after "
+                                 "80 and after 300 solves on the coarse eye, and the default "
+                                 "mesh's run fails at 70 % of the drainage; "
+                                 "docs/scleral_buckling.md, Subretinal drainage)")
 
     def _validate_buckle(self) -> None:
         """The buckle's kind and orientation, its sutures, its travel and its place on the
@@ -224,11 +244,12 @@ class Parameters(NumericalSettings, EyeParameters):
                                  f"({self.buckle_clearance} mm); it must be >= 0")
         self._validate_orientation()
         shape = self.buckle_shape()
-        if self.suture_azimuths and any(shape.element_at(a) is None for a in self.suture_azimuths):
+        meridians = self.suture_meridians()
+        if any(shape.element_at(a) is None for a in meridians):
             raise ParameterError("suture_azimuths", "a suture lies off the segmental tire (its arc "
                                  f"is ±{self.tire_arc_deg / 2:g} degrees about the tear): "
                                  "nothing to hold there")
-        widest = max((shape.element_at(a)[0] for a in self.suture_azimuths),
+        widest = max((shape.element_at(a)[0] for a in meridians),
                      default=shape.footprint)
         if self.suture_width < widest:
             raise ParameterError("suture_width", f"{self.suture_width} mm is narrower than the buckle "
@@ -246,7 +267,7 @@ class Parameters(NumericalSettings, EyeParameters):
         if problem is not None:
             what, message = problem
             raise ParameterError(PLACEMENT_KEYS[what], message)
-        if any(not 0 <= a <= 180 for a in self.suture_azimuths) or not self.suture_azimuths:
+        if any(not 0 <= a <= 180 for a in meridians):
             raise ParameterError("suture_azimuths", "need angles in [0, 180] degrees (the half eye)")
 
     def _validate_orientation(self) -> None:
@@ -260,7 +281,7 @@ class Parameters(NumericalSettings, EyeParameters):
             if self.tire_arc_deg != 90.0:
                 raise ParameterError("tire_arc_deg", "sets a circumferential tire's arc; a radial "
                                      "tire's extent is tire_length")
-            if tuple(self.suture_azimuths) != (0.0,):
+            if tuple(self.suture_meridians()) != (0.0,):
                 raise ParameterError("suture_azimuths", "a radial tire lies on the tear's meridian: "
                                      "its sutures cross it there (suture_azimuths=0)")
         elif self.tire_length != 12.0:
@@ -302,6 +323,18 @@ class Parameters(NumericalSettings, EyeParameters):
                            retina_thickness=self.retina_thickness, lens=self.lens,
                            tear_radius=self.tear_radius,
                            lens_diameter=self.lens_diameter, lens_thickness=self.lens_thickness)
+
+    def suture_meridians(self) -> tuple[float, ...]:
+        """The sutures' meridians (degrees from the tear): ``suture_azimuths`` when set, else
+        across the buckle chosen -- a band all round is sewn at 0, 90 and 180 degrees; a
+        segmental tire at 0 and within its end; a radial tire on the tear's meridian."""
+        if self.suture_azimuths:
+            return tuple(float(a) for a in self.suture_azimuths)
+        if self.buckle != "segmental":
+            return (0.0, 90.0, 180.0)
+        if self.tire_orientation == "radial":
+            return (0.0,)
+        return (0.0, round(SEGMENTAL_SUTURE_SPREAD * min(self.tire_arc_deg, 360.0) / 2, 6))
 
     def buckle_shape(self) -> BuckleShape:
         return BuckleShape(self.band_width, self.band_thickness, self.tire_width, self.tire_height,

@@ -23,10 +23,6 @@ class NumericalSettings(SolverChoice):
                "(its volume change O(μ/κ) of its strain): 300 ends the paper's three steps within "
                "0.4 % of mixed; 100 moves the IOP 1.4 %; 1,000 fails in step 2 at the paper's "
                "resolution, 10,000 in step 1 (docs/scleral_buckling.md, \"Condensed Q1P0\")", group=SOLVER)
-    drainage_drag_step: float = field(
-        0.05, "drainage: the retina's largest pseudo-time move per solve under the full IOP "
-        "(drag η = IOP / this on its subretinal face, relative to the last solved state; "
-        "switched off for the final solve of step 4)", "mm", group=SOLVER)
     penalty_factor: float = field(
         30.0, "buckle–sclera penalty α = factor · E_sclera / h (30: the hertz study's choice; "
         "100 halves the penetration and doubles the Newton iterations)", group=SOLVER)
@@ -169,7 +165,7 @@ class NumericalSettings(SolverChoice):
     settle_step: float = field(
         0.125, "largest load step of step 4 (settling) as a fraction of the step: 1/8 keeps "
         "the settled eye within 0.6 % of 20 equal load steps' (coarse and default meshes), "
-        "larger steps moved it up to 1.4 %. 0, and always with drainage: as the other steps, "
+        "larger steps moved it up to 1.4 %. 0: as the other steps, "
         "three quarters of a step or the buckle_step = 0.25 travel's share "
         "(docs/scleral_buckling.md, The settling step)", group=SOLVER)
     restore_contact_memory: bool = field(

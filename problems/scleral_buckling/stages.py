@@ -8,8 +8,8 @@ Each :class:`Stage` covers one unit of the load path, its fraction f from 0 to 1
   number or another control's value to a number, linearly or linearly in ln);
 - ``begin`` / ``end``: switches as it starts and after its last step converged (before
   that step is recorded): functions of the model, such as closing the liquid or placing
-  the buckle; an ``end`` switch that solves (the retina's settling) is counted with the
-  stage's last step and may report measurements of its own, recorded with it;
+  the buckle; an ``end`` switch that solves is counted with the stage's last step and
+  may report measurements of its own, recorded with it;
 - ``largest_step`` (a fraction of the stage), ``predicts`` (its load steps start from the
   secant predictor) and ``newton`` (its line search, fallback, stagnation test and
   modified Newton's contraction test).
@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Callable, Literal
 
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.scleral_buckling.parameters import Parameters
+from eyemech.problems.scleral_buckling.venting import PressureHistory
 from eyemech.problems.solve.augmentation import Augmentation
 from eyemech.problems.solve.driver import NewtonSettings, Stepping, StepRecord, follow_stages
 
@@ -117,12 +118,6 @@ def release_the_liquid(model: BucklingModel) -> None:
     model.liquid.release()
 
 
-def drain_to_equilibrium(model: BucklingModel) -> dict:
-    """The retina's snap onto the drained choroid followed in pseudo-time, then solved
-    without the drag (docs/scleral_buckling.md, Subretinal drainage)."""
-    return model.drainage.settle()
-
-
 # -- the operation -----------------------------------------------------------------------
 def largest_step(params: Parameters, buckle_step: float = 0.25) -> float:
     """The largest load step as a fraction of a stage: three quarters of it, and never a
@@ -148,7 +143,8 @@ def operation(params: Parameters) -> list[Stage]:
               end=(close_the_liquid, tie_the_buckle, place_the_buckle,
                    record_the_eye_before_surgery),
               largest_step=largest),
-        # the buckle moves radially inward by ``indentation`` against the closed liquid;
+        # the buckle moves radially inward by ``indentation`` against the closed liquid
+        # (vented at ``iop_limit_mmHg`` with ``venting``, here and in suturing);
         # full Newton steps (a failed solve repeated with bt: plain Newton can cycle
         # between two active sets) or bt, which in the first stage would only cost
         # iterations (12-14 per step instead of 3-4)
@@ -172,23 +168,15 @@ def operation(params: Parameters) -> list[Stage]:
 def settling(params: Parameters, iop: float, largest: float) -> Stage:
     """Hours after surgery: the acute state keeps the liquid's volume (the paper's law);
     aqueous outflow returns the IOP to its pre-operative value. P is pinned again, its
-    target ramped from the acute pressure back to the IOP. With external drainage the
-    subretinal fluid drains over it and the retina settles on the choroid at its end.
-    Stalled bt solves are stopped here only: its converged bt solves fall by 0.78 or less
-    over any 3 iterations (default, coarse and paper meshes), while the buckling stage's
-    with line_search = bt plateau at 0.997 before they converge (docs/scleral_buckling.md,
-    Stalled backtracking)."""
-    drains = params.drainage != "none"
+    target ramped from the acute pressure back to the IOP. Stalled bt solves are stopped
+    here only: its converged bt solves fall by 0.78 or less over any 3 iterations (default,
+    coarse and paper meshes), while the buckling stage's with line_search = bt plateau at
+    0.997 before they converge (docs/scleral_buckling.md, Stalled backtracking)."""
     ramps = (Ramp("pressure_target", "acute_pressure", iop, law=params.settle_ramp,
                   starts_unknown=params.settle_start == "target"),)
-    if drains:
-        ramps += (Ramp("drained", 0.0, 1.0),)
-    # with drainage the stage is also the retina's pseudo-time settling, measured with the
-    # other stages' load steps (docs/scleral_buckling.md, The settling step)
-    step = min(largest, params.settle_step) if params.settle_step > 0 and not drains else largest
+    step = min(largest, params.settle_step) if params.settle_step > 0 else largest
     retry = "basic" if params.settle_retry == "basic" and params.settle_line_search == "bt" else None
     return Stage("settling", "settled", ramps=ramps, begin=(release_the_liquid,),
-                 end=(drain_to_equilibrium,) if drains else (),
                  largest_step=step, predicts=params.settle_predictor == "secant",
                  newton=NewtonSettings(line_search=params.settle_line_search,
                                        fallback_line_search=retry,
@@ -237,6 +225,7 @@ class Operation:
         stages = operation(params) if stages is None else stages
         self.stages = [_Bound(stage, k + 1, self) for k, stage in enumerate(stages)]
         self.results: dict[str, dict] = {}  # the measurements at each stage's end
+        self.pressures = PressureHistory(params.iop_limit_mmHg)
         self.reports: dict = {}             # what the last switches reported
         self.augmentation = None
         multipliers = model.multipliers()
@@ -271,6 +260,8 @@ class Operation:
     def converged(self, record: StepRecord, stage: _Bound, ends: bool) -> None:
         values = self.model.measure() | self.reports
         self.reports = {}
+        values |= self.pressures.passed(stage.number, record.load - (stage.number - 1),
+                                        values["iop_mmHg"], values.get("vented_volume_uL", 0.0))
         self.ctx.record_step(step=record.step, load=record.load, stage=stage.number,
                              newton_iterations=record.iterations, cuts=record.cuts,
                              **record.counts(), krylov_iterations=record.linear_iterations,
@@ -284,6 +275,7 @@ class Operation:
     def register(self, checkpoints) -> None:
         checkpoints.value("stage_results", lambda: self.results,
                           lambda saved: setattr(self, "results", dict(saved)))
+        checkpoints.value("pressure_history", self.pressures.state, self.pressures.restore)
         if self.augmentation is not None:
             # the run's totals in the summary count the updates before the checkpoint too
             checkpoints.value("augmentation_counts", self._augmentation_counts,

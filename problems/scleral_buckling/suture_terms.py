@@ -35,7 +35,7 @@ class Sutures(Term):
     def __init__(self, body: Body, params: Parameters, buckle: RigidBuckle, loop: bool):
         self.body, self.buckle, self.loop = body, buckle, loop
         geo = body.geometry
-        self.bites = buckle.buckle.suture_bites(params.suture_azimuths, params.suture_width,
+        self.bites = buckle.buckle.suture_bites(params.suture_meridians(), params.suture_width,
                                                 geo.sclera_radius, math.radians(buckle.angle))
         points = [SuturePoint(azimuth, side, centre) for azimuth, side, centre in self.bites]
         self.forces = SutureForces(body.mesh, body.u.function_space, points, body.sclera_nodes,

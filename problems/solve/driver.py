@@ -209,6 +209,14 @@ class NonlinearSolver:
         self._factorisations = FactorisationCounter()
         self.stagnated = False  # the last solve was stopped by the stagnation test
         self.snes.setMonitor(petsc_callback(self._monitor))
+        # Newton iterations begun: SNES calls its update at the start of every iteration,
+        # the one that fails in its line search (a NaN residual) or in a callback included,
+        # while its iteration number counts the completed ones only
+        self._iterations_begun = 0
+        self.snes.setUpdate(petsc_callback(self._begin_iteration))
+
+    def _begin_iteration(self, _snes: PETSc.SNES, _iteration: int) -> None:
+        self._iterations_begun += 1
 
     def _monitor(self, snes: PETSc.SNES, _iteration: int, norm: float) -> None:
         """Records ‖F_k‖; stops a stagnating backtracking solve (``options.stagnation_window``). SNES
@@ -510,6 +518,7 @@ class NonlinearSolver:
         self.stagnated = False
         self.through_obstacle = False
         self._kept_iterations = 0
+        self._iterations_begun = 0
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
@@ -558,7 +567,7 @@ class NonlinearSolver:
         iterations = self.snes.getIterationNumber()
         work = SolverCounts(newton_solves=1, failed_newton_solves=0 if converged else 1,
                             newton_iterations=iterations if converged else 0,
-                            newton_iterations_all=iterations,
+                            newton_iterations_all=max(iterations, self._iterations_begun),
                             jacobians=self._jacobians - jacobians_before,
                             factorisations=numeric - numeric_before,
                             symbolic_factorisations=symbolic - symbolic_before,
@@ -969,7 +978,8 @@ class _Walk:
             if not self.controller.cut():
                 apply(self.value, 0.0)
                 raise SolveFailure(self.step, target, self.value, history, solver.reason(),
-                                   *stepping.describe())
+                                   *stepping.describe(),
+                                   failed_step=self._failed_step(target, counts_before, history))
         record = StepRecord(self.step, target, target - self.value, iterations,
                             self.controller.cuts, list(solver.residual_history),
                             solver.linear_iterations,
@@ -983,6 +993,20 @@ class _Walk:
             self.stages[self.stage_index].finish()
             record = record.with_work(solver.counts - finishing)
         self._converged(record, sized, state, on_converged)
+
+    def _failed_step(self, target: float, counts_before: SolverCounts,
+                     history: list[float]) -> dict:
+        """The step whose cuts are exhausted, as ``results.json`` records a step: every
+        attempt failed (``newton_iterations`` 0, ``cuts`` the failed attempts), its work
+        counted as a converged step's, the residuals of its last attempt."""
+        solver = self.solver
+        record = StepRecord(self.step, target, target - self.value, 0, self.controller.cuts,
+                            history, solver.linear_iterations,
+                            **StepRecord.work(solver.counts - counts_before))
+        stage = {} if self.stages is None else {"stage": self.stage_index + 1}
+        return {"step": record.step, "load": record.load, **stage, "status": "failed",
+                "newton_iterations": 0, "cuts": record.cuts, **record.counts(),
+                "krylov_iterations": record.linear_iterations, "residuals": record.residuals}
 
     def _attempt(self, target: float, state: list[np.ndarray]) -> tuple[bool, int, int]:
         """One attempt at ``target`` from ``state``: the predictor's start, Newton, the
