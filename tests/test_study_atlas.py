@@ -23,7 +23,7 @@ TABLES = sorted(STUDIES.glob("*.csv"))
 STALE = {
     "buckling_planning.csv", "buckling_sweep.csv", "contact_penalty.csv", "eye_calibration.csv",
     "eye_model_reduction.csv", "iol_flip.csv", "iol_speed.csv", "iol_stability.csv",
-    "keratotomy_magnitude.csv", "tonometry_convergence.csv", "tonometry_sweep.csv",
+    "tonometry_convergence.csv", "tonometry_sweep.csv",
 }
 
 
