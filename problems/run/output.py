@@ -36,7 +36,8 @@ class FieldWriter:
 
     def write(self, time: float) -> None:
         for writer in self._writers:
-            writer.write(time)
+            with self._failing(writer):
+                writer.write(time)
 
     def close(self, error: BaseException | None = None) -> None:
         """Collective. Called in a ``finally`` (or ``__exit__``) while an exception raised
@@ -45,15 +46,60 @@ class FieldWriter:
         from eyemech.problems.run.faults import abort_if_stranding
 
         abort_if_stranding(self.comm, error)
-        for writer in self._writers:
-            writer.close()
-        self._writers = []
+        writers, self._writers = self._writers, []
+        for writer in writers:
+            with self._failing(writer):
+                writer.close()
+
+    @contextlib.contextmanager
+    def _failing(self, writer):
+        """ADIOS2 reports a write it cannot do (a full disk) as a RuntimeError, and its
+        writer's destructor tries the same write again and throws, which ends the process
+        with SIGABRT: such a writer is retired (kept alive to the end of the process, see
+        :func:`_retire`) and the error raised as the OSError it is."""
+        try:
+            yield
+        except RuntimeError as err:
+            if writer in self._writers:
+                self._writers.remove(writer)
+            _retire(writer)
+            raise _as_os_error(err) from None
 
     def __enter__(self):
         return self
 
     def __exit__(self, kind, error, tb):
         self.close(error)
+
+
+# writers whose files could not be written: never destroyed (see FieldWriter._failing)
+_RETIRED: list = []
+
+
+def _retire(writer) -> None:
+    """Keep ``writer``'s C++ object alive for good: one reference more than Python will
+    ever release, so its destructor (which would repeat the failed write and abort) never
+    runs, not even when the interpreter exits (tests/test_faults.py, full disk)."""
+    import ctypes
+
+    cpp = getattr(writer, "_cpp_object", writer)
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(cpp))
+    _RETIRED.append(cpp)
+
+
+def _as_os_error(error: RuntimeError) -> Exception:
+    """ADIOS2's "couldn't write to file F : errno = N: ..." as OSError(N, ..., F)."""
+    import errno as errnos
+    import re
+
+    text = re.sub(r"\x1b\[[0-9;]*m", "", str(error))
+    found = re.search(r"errno = (\d+)", text)
+    if not found:
+        return error
+    number = int(found.group(1))
+    name = re.search(r"file (\S+)", text)
+    return OSError(number, os.strerror(number) if number in errnos.errorcode else text,
+                   name.group(1) if name else None)
 
 
 def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,

@@ -141,6 +141,9 @@ class Result:
 
     scene: str
     parameters: dict[str, Any]
+    # the run's identity: a hash of the scene and its parameters (problems/run/identity.py),
+    # also in run.json and in every checkpoint
+    run_id: str = ""
     quantities: dict[str, Any] = dataclasses.field(default_factory=dict)
     steps: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -273,6 +276,7 @@ class OutputFolder:
         self.lock = self.folder / LOCK_NAME
         self.held = False
         self.created = False
+        self.made: list[Path] = []
 
     def acquire(self) -> "OutputFolder":
         from eyemech.problems.run.parameters import ParameterError
@@ -290,11 +294,17 @@ class OutputFolder:
 
     def _acquire(self) -> None:
         folder = self.folder
-        for parent in (folder, *folder.parents):
-            if parent.exists() and not parent.is_dir():
-                where = "is a file" if parent == folder else f"is under the file {parent}"
-                raise ValueError(f"{folder} {where}; the output goes to a folder")
-        self.created = not folder.exists()
+        try:
+            for parent in (folder, *folder.parents):
+                if parent.exists() and not parent.is_dir():
+                    where = "is a file" if parent == folder else f"is under the file {parent}"
+                    raise ValueError(f"{folder} {where}; the output goes to a folder")
+            # the folders this run makes (the folder and missing parents, innermost first):
+            # bad input found later removes them again
+            self.made = [p for p in (folder, *folder.parents) if not p.exists()]
+        except OSError as err:  # e.g. a name too long for the file system
+            raise ValueError(f"cannot use {folder}: {err.strerror or err}") from None
+        self.created = bool(self.made)
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -335,7 +345,8 @@ class OutputFolder:
                     os.unlink(self.lock)
             if remove_if_empty and self.created:
                 with contextlib.suppress(OSError):
-                    self.folder.rmdir()  # fails, as it should, when anything is in it
+                    for made in self.made:
+                        made.rmdir()  # fails, as it should, when anything is in it
         self.held = False
 
 
