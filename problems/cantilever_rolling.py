@@ -42,6 +42,7 @@ from eyemech.problems.shell.model import (
     picture,
 )
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,8 +108,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         writer = ctx.field_writer([shell.u])
 
         def mean_end_rotation() -> float:
-            local = dolfinx.fem.assemble_scalar(rotation_form)
-            return ctx.comm.allreduce(float(local), op=MPI.SUM) / b
+            return assemble_scalar(rotation_form, ctx.comm) / b
 
         def apply(value: float, _increment: float) -> None:
             moment.value = value * params.moment_fraction * full_moment

@@ -62,6 +62,7 @@ from eyemech.problems.solid.spaces import (
 from eyemech.problems.solid.viscous_bar import AdaptiveSteps, ViscousHistory, march_adaptive
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.linear_solvers import SolverChoice
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,7 +198,7 @@ class Cornea:
         if self.has_cuts:
             N = ufl.FacetNormal(mesh)
             cut = ds(self.tagged.tag("incision"))
-            area = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(1.0 * cut)))
+            area = assemble_scalar(1.0 * cut, comm)
             # a Constant: the cut's area follows the mesh (a literal compiles anew per mesh)
             scale = dolfinx.fem.Constant(mesh, -2.0 / area)
             self._gape = dolfinx.fem.form(scale * ufl.dot(self.u, N) * cut)
@@ -248,7 +249,7 @@ class Cornea:
         """Mean normal opening of the cuts (mm): −∫ u·N dA over both lips / one lip's area."""
         if not self.has_cuts:
             return 0.0
-        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._gape))
+        return assemble_scalar(self._gape, self.comm)
 
 
 def _mirrored(points: np.ndarray, axis: int) -> np.ndarray:

@@ -50,6 +50,7 @@ from eyemech.problems.solid.spaces import (
 )
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.linear_solvers import SolverChoice
+from eyemech.problems.solve.scalars import assemble_scalar
 
 SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 
@@ -117,8 +118,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         ds, dx = shell.ds(metadata), shell.dx(metadata)
         wall = ds(shell.tag(params.cavity_tag))
         initial_volume = check_closed(u, wall, f"wall '{params.cavity_tag}'")
-        wall_area = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
-            dolfinx.fem.Constant(shell.mesh, 1.0) * wall)), op=MPI.SUM)
+        wall_area = assemble_scalar(dolfinx.fem.Constant(shell.mesh, 1.0) * wall, ctx.comm)
 
         initial_pressure = dolfinx.fem.Constant(shell.mesh, 0.0)
         external = dolfinx.fem.Constant(shell.mesh, 0.0)
@@ -159,7 +159,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             return cavity.current_pressure()
 
         def quantities() -> dict[str, float]:
-            octant = ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form), op=MPI.SUM)
+            octant = assemble_scalar(volume_form, ctx.comm)
             return {"cavity_pressure": cavity_pressure(), "inner_radius_deformed": inner_mean(),
                     "cavity_volume": 8.0 * octant}
 

@@ -47,6 +47,7 @@ from eyemech.problems.solve.driver import (
     follow_path,
 )
 from eyemech.problems.solve.linear_solvers import SolverChoice
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,7 +141,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def quantities() -> dict[str, float]:
             return {"inner_radius_deformed": inner_mean(),
                     "outer_radius_deformed": outer_mean(),
-                    "cavity_volume": ctx.comm.allreduce(dolfinx.fem.assemble_scalar(volume_form))}
+                    "cavity_volume": assemble_scalar(volume_form, ctx.comm)}
 
         u.name = "displacement"
         writer = ctx.field_writer([u])
@@ -220,10 +221,8 @@ def _displacement_error(u, shell, params: Parameters, a: float) -> float:
     exact = (r / R - 1.0) * X
     dx = shell.dx({"quadrature_degree": 2 * u.function_space.element.basix_element.degree + 2})
     comm = shell.mesh.comm
-    error = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
-        ufl.dot(u - exact, u - exact) * dx)), op=MPI.SUM)
-    norm = comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(ufl.dot(exact, exact) * dx)),
-                          op=MPI.SUM)
+    error = assemble_scalar(ufl.dot(u - exact, u - exact) * dx, comm)
+    norm = assemble_scalar(ufl.dot(exact, exact) * dx, comm)
     return float(np.sqrt(error / norm))
 
 

@@ -11,18 +11,18 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import dolfinx
 import numpy as np
 import pytest
 import ufl
 
 from eyemech.meshes import MeshError  # imports dolfinx_solver before dolfinx
 from eyemech.meshes.cornea import CorneaGeometry, cornea
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 def measure(tagged, name=None):
     form = 1.0 * (ufl.dx(domain=tagged.mesh) if name is None else tagged.ds()(tagged.tag(name)))
-    return tagged.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(form)))
+    return assemble_scalar(form, tagged.mesh.comm)
 
 
 def test_thickness_profile_meets_the_radii():

@@ -57,6 +57,7 @@ from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.run.results import Timings
 from eyemech.problems.solid.spaces import PetscNodeLayout
 from eyemech.problems.solve.augmentation import relative_change
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 @dataclasses.dataclass
@@ -159,7 +160,7 @@ class NodeToSurfaceContact:
         diagonal = mass.getDiagonal().array.copy()
         mass.destroy()
         one = dolfinx.fem.Constant(tagged.mesh, 1.0)
-        area = self.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(one * ds)))
+        area = assemble_scalar(one * ds, self.comm)
         total = self.comm.allreduce(float(diagonal.sum()))
         weights = diagonal * (area / total)
         owned = np.flatnonzero(weights > 0)

@@ -18,6 +18,7 @@ from eyemech.forms.kinematics import without_variables
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.solve.augmentation import relative_change
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 def slave_nodes(u: dolfinx.fem.Function, tagged: TaggedMesh, slave: str) -> np.ndarray:
@@ -59,10 +60,9 @@ def refuse_initial_penetration(penetration: NodalPenetration, key: str, toleranc
 def surface_integral(integrand, measure) -> callable:
     """A callable returning the global value of ∫ integrand over ``measure``."""
     compiled = dolfinx.fem.form(integrand * measure)
-    comm = compiled.mesh.comm
 
     def evaluate() -> float:
-        return comm.allreduce(dolfinx.fem.assemble_scalar(compiled), op=MPI.SUM)
+        return assemble_scalar(compiled)
 
     return evaluate
 

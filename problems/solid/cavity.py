@@ -23,7 +23,6 @@ import dolfinx.fem
 import dolfinx.fem.petsc
 import numpy as np
 import ufl
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from eyemech.forms import (
@@ -33,10 +32,7 @@ from eyemech.forms import (
     liquid_pressure,
 )
 from eyemech.meshes.tagged import MeshError
-
-
-def _assemble(form) -> float:
-    return form.mesh.comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM)
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 def check_closed(u, wall_measure, name: str = "cavity wall", rtol: float = 1e-6,
@@ -44,8 +40,8 @@ def check_closed(u, wall_measure, name: str = "cavity wall", rtol: float = 1e-6,
     """The enclosed volume, after checking that the wall closes it (with symmetry
     planes through the origin): the volumes from the fields x_k e_k must agree
     (:func:`eyemech.forms.axis_volumes`). Raises MeshError otherwise."""
-    volumes = [_assemble(dolfinx.fem.form(f)) for f in axis_volumes(u, wall_measure, outward_sign)]
-    volume = _assemble(dolfinx.fem.form(enclosed_volume(u, wall_measure, outward_sign)))
+    volumes = [assemble_scalar(f) for f in axis_volumes(u, wall_measure, outward_sign)]
+    volume = assemble_scalar(enclosed_volume(u, wall_measure, outward_sign))
     spread = max(volumes) - min(volumes)
     if not volume > 0 or spread > rtol * abs(volume):
         raise MeshError(
@@ -111,7 +107,7 @@ class SubstitutedCavity:
         return values
 
     def current_pressure(self) -> float:
-        self.last_volume = _assemble(self._volume_form)
+        self.last_volume = assemble_scalar(self._volume_form)
         return liquid_pressure(self.last_volume, self.initial_volume,
                                float(self.initial_pressure.value), self.bulk_modulus)
 

@@ -11,7 +11,8 @@ import dolfinx
 import dolfinx.fem
 import numpy as np
 import ufl
-from mpi4py import MPI
+
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,10 +138,10 @@ def surface_mean(integrand, measure) -> Callable[[], float]:
     numerator = dolfinx.fem.form(integrand * measure)
     area_form = dolfinx.fem.form(dolfinx.fem.Constant(measure.ufl_domain(), 1.0) * measure)
     comm = numerator.mesh.comm
-    area = comm.allreduce(dolfinx.fem.assemble_scalar(area_form), op=MPI.SUM)
+    area = assemble_scalar(area_form, comm)
 
     def evaluate() -> float:
-        return comm.allreduce(dolfinx.fem.assemble_scalar(numerator), op=MPI.SUM) / area
+        return assemble_scalar(numerator, comm) / area
 
     return evaluate
 

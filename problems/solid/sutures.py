@@ -21,6 +21,7 @@ from mpi4py import MPI
 
 from eyemech.forms.sutures import bite_weight, half_space_share, suture_residual
 from eyemech.problems.solid.probes import NodeProbe
+from eyemech.problems.solve.scalars import assemble_scalar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,7 +63,7 @@ class SutureForces:
         values = []
         for point in self.points:
             centre_constant.value[:] = point.centre
-            values.append(comm.allreduce(dolfinx.fem.assemble_scalar(form), op=MPI.SUM))
+            values.append(assemble_scalar(form, comm))
         self.mesh_integrals = np.array(values)
         if np.any(self.mesh_integrals <= 0.0):
             missing = [p.centre for p, a in zip(self.points, values) if a <= 0.0]

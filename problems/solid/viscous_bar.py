@@ -59,6 +59,7 @@ from eyemech.problems.solve.driver import (
     StepRecord,
     follow_path,
 )
+from eyemech.problems.solve.scalars import assemble_scalar
 
 LOADED_FACE = 1  # facet tag of x = L
 
@@ -268,8 +269,7 @@ class ViscousBar:
         F = deformation_gradient(self.u)
         self.residual = ve.residual(self.material, self.u, self.p, self.v, self.q, self.Cv, self.dx)
 
-        volume = comm.allreduce(dolfinx.fem.assemble_scalar(
-            dolfinx.fem.form(1.0 * self.dx)), op=MPI.SUM)
+        volume = assemble_scalar(1.0 * self.dx, comm)
         sigma = ve.cauchy_stress(self.material, F, self.p, self.Cv)
         self._stress_form = dolfinx.fem.form(sigma[0, 0] / volume * self.dx)
         self._stretch_form = dolfinx.fem.form(F[0, 0] / volume * self.dx)
@@ -300,10 +300,10 @@ class ViscousBar:
     # -- quantities -----------------------------------------------------------------
     def axial_cauchy_stress(self) -> float:
         """Volume mean of σ_xx (the state is homogeneous, so this is σ_xx itself)."""
-        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._stress_form), op=MPI.SUM)
+        return assemble_scalar(self._stress_form, self.comm)
 
     def axial_stretch(self) -> float:
-        return self.comm.allreduce(dolfinx.fem.assemble_scalar(self._stretch_form), op=MPI.SUM)
+        return assemble_scalar(self._stretch_form, self.comm)
 
 
 class UnstableIntegration(SolveFailure):

@@ -61,6 +61,7 @@ from eyemech.problems.run.results import (
 )
 from eyemech.problems.solve.callbacks import petsc_callback
 from eyemech.problems.solve.stale_factorisation import StaleFactorisation
+from eyemech.problems.solve.stepping import StepController
 
 if TYPE_CHECKING:
     from eyemech.problems.run.checkpoint import Checkpoints
@@ -845,18 +846,32 @@ class Stepping:
             return self.initial_step
         return min(self.initial_step, self.largest_step(value))
 
-    def next_increment(self, increment: float, record: "StepRecord", value: float) -> float:
-        """The increment after a converged step that ended at ``value``: grown after an
-        easy step (no cut), shrunk after a hard one, within [min_step, largest_step]."""
+    def controller(self) -> StepController:
+        """The step controller of this path, its lengths in the path's unit, at the first
+        step."""
         span = self.end - self.start
-        largest = self.largest_step(value) * span
-        effort = self.effort_of(record)
-        if record.cuts == 0 and effort <= self.easy_iterations:
-            increment = min(increment * self.grow, largest)
-        elif self.hard_iterations is not None and effort > self.hard_iterations:
-            increment = max(increment * self.shrink, self.min_step * span)
-        # a stage of its own limit (the next one, at a stop) caps what was carried over
-        return min(increment, largest) if self.stage_max_steps else increment
+        return StepController(self.first_step(self.start) * span, largest=self.max_step * span,
+                              smallest=self.min_step * span, max_cuts=self.max_cuts,
+                              grow_factor=self.grow, easy_effort=self.easy_iterations,
+                              hard_effort=self.hard_iterations, shrink_factor=self.shrink)
+
+    def accept(self, controller: StepController, record: "StepRecord", value: float) -> None:
+        """The controller told that the step ``record`` converged at ``value``: the next
+        step grown after an easy step (no cut), shrunk after a hard one, within
+        [min_step, largest_step] (the largest of the stage the next step is in)."""
+        controller.largest = self.largest_step(value) * (self.end - self.start)
+        controller.accept(self.effort_of(record))
+        if self.stage_max_steps:
+            # a stage of its own limit (the next one, at a stop) caps what was carried over
+            controller.limit(controller.largest)
+
+    def next_increment(self, increment: float, record: "StepRecord", value: float) -> float:
+        """The increment after a converged step of length ``increment`` that ended at
+        ``value`` (:meth:`accept` on a controller at that step)."""
+        controller = self.controller()
+        controller.step, controller.cuts = increment, record.cuts
+        self.accept(controller, record, value)
+        return controller.step
 
 
 @dataclasses.dataclass
@@ -931,7 +946,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     stops = sorted(s for s in set(stepping.stops) | {stepping.end}
                    if stepping.start < s <= stepping.end)
     value = stepping.start
-    increment = stepping.first_step(stepping.start) * span
+    controller = stepping.controller()
     records: list[StepRecord] = []
     step = 0
     resumed = checkpoints.enter_path(label) if checkpoints is not None else None
@@ -941,7 +956,7 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             apply(stepping.end, records[-1].increment if records else 0.0)
             checkpoints.leave_path([dataclasses.asdict(r) for r in records])
             return records
-        value, increment, step = resumed["value"], resumed["increment"], resumed["step"]
+        value, controller.step, step = resumed["value"], resumed["increment"], resumed["step"]
         records = [StepRecord(**r) for r in resumed["records"]]
         apply(value, records[-1].increment if records else 0.0)
     bar = _progress(solver, label, quiet)
@@ -957,12 +972,10 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         counts_before = solver.counts.copy()
         if checkpoints is not None:
             checkpoints.watch_step(solver)
-        cuts = augmented = 0
+        augmented = 0
         while True:
             next_stop = next(s for s in stops if s > value + 1e-12 * span)
-            target = min(value + increment, next_stop)
-            if next_stop - target < 1e-3 * increment:  # avoid a sliver before a stop
-                target = next_stop
+            target = controller.target(value, next_stop)
             apply(target, target - value)
             reference = None
             if predictor is not None and predictor.ready and stepping.predicts(value):
@@ -988,14 +1001,12 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
             log.info("step %d: no convergence at %.6g (%s), cutting", step, target, solver.reason())
             solver.restore_state(state)
             solver.restore_memory(memory)
-            cuts += 1
-            increment *= 0.5
-            if cuts > stepping.max_cuts or increment < stepping.min_step * span:
+            if not controller.cut():
                 apply(value, 0.0)
                 bar.close()
                 raise SolveFailure(step, target, value, history, solver.reason(),
                                    *stepping.describe())
-        record = StepRecord(step, target, target - value, iterations, cuts,
+        record = StepRecord(step, target, target - value, iterations, controller.cuts,
                             list(solver.residual_history), solver.linear_iterations,
                             **StepRecord.work(solver.counts - counts_before),
                             augmentations=augmented)
@@ -1004,21 +1015,21 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
         if on_converged is not None:
             on_converged(record)
         bar.update((target - stepping.start) / span - bar.n)
-        increment = stepping.next_increment(increment, record, value)
+        stepping.accept(controller, record, value)
         if predictor is not None:
             predictor.converged(value, state)
         if any(abs(target - s) <= 1e-12 * span for s in stops):
             # a new stage (or output interval) starts: its difficulty is not the last one's,
             # its path not the last one's continuation, its system perhaps not the last one's
             # (on_converged may switch terms on): no secant across it, no kept Jacobian
-            increment = max(increment, stepping.first_step(value) * span)
+            controller.at_least(stepping.first_step(value) * span)
             solver.invalidate_jacobian()
             if predictor is not None:
                 predictor.restart(value)
         if checkpoints is not None:
             try:
                 checkpoints.step_done({"label": label, "step": step, "value": value,
-                                       "increment": increment,
+                                       "increment": controller.step,
                                        "records": [dataclasses.asdict(r) for r in records]})
             except BaseException:
                 bar.close()

@@ -49,6 +49,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from eyemech.problems.run.parameters import field
+from eyemech.problems.solve.scalars import assemble_scalar
 
 LinearSolverName = Literal["direct", "iterative"]
 
@@ -192,8 +193,7 @@ class SchurPreconditioner:
         self.spaces, self.starts = spaces, starts
         self.real_blocks = [i for i, V in enumerate(spaces) if i > 0 and _is_real(V)]
         self.real_values = {i: dolfinx.fem.Constant(mesh, 1.0) for i in self.real_blocks}
-        volume = mesh.comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(
-            dolfinx.fem.Constant(mesh, 1.0) * dx)), op=MPI.SUM)
+        volume = assemble_scalar(dolfinx.fem.Constant(mesh, 1.0) * dx, mesh.comm)
         pressure_spaces = spaces[1:]
         forms = []
         for row, V in enumerate(pressure_spaces, start=1):
