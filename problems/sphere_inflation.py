@@ -80,7 +80,9 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius}), "
                                  f"got {self.outer_radius}")
         if self.element_size > self.outer_radius:
-            raise ParameterError("mesh_size", "is larger than the sphere")
+            key = self.resolution_key()  # mesh_size when given, else cells_across_wall
+            raise ParameterError(key, f"gives elements of {self.element_size:.4g} mm, larger "
+                                 f"than the sphere (outer radius {self.outer_radius:g} mm)")
         if not np.isfinite(self.pressure):
             raise ParameterError("pressure", "must be finite")
 

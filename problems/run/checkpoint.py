@@ -562,15 +562,26 @@ def _fingerprint(mesh) -> list[float]:
 
 
 # -- files ---------------------------------------------------------------------------------
+@contextlib.contextmanager
+def _naming(path: Path):
+    """An OSError of the write (a full disk) names the file it was writing."""
+    try:
+        yield
+    except OSError as err:
+        if err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
+
+
 def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    with open(path, "wb") as handle:
+    with _naming(path), open(path, "wb") as handle:
         np.savez(handle, **arrays)
         handle.flush()
         os.fsync(handle.fileno())
 
 
 def _write_text(path: Path, text: str) -> None:
-    with open(path, "w") as handle:
+    with _naming(path), open(path, "w") as handle:
         handle.write(text)
         handle.flush()
         os.fsync(handle.fileno())

@@ -15,7 +15,7 @@ from eyemech.forms import ordering  # noqa: F401  (UFL's operand order: forms/or
 from eyemech.meshes import MeshError
 from eyemech.problems.run import identity, jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
-from eyemech.problems.run.faults import abort_if_stranding
+from eyemech.problems.run.faults import abort_if_stranding, output_error
 from eyemech.problems.run.identity import run_id
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
@@ -176,8 +176,15 @@ class RunContext:
             if late_bad_input:
                 self._give_folder_back()
             elif not (error is not None and self.checkpoints.resume_meta is not None):
-                self.write()
-                self._clear_previous()
+                try:
+                    self.write()
+                except OSError as failed:
+                    # a full disk that stopped the run cannot take results.json either:
+                    # the first failure is the one to report
+                    if not (output_error(failed) and output_error(error)):
+                        raise
+                else:
+                    self._clear_previous()
             # a resume that failed before it reached the checkpoint keeps the folder's
             # results.json (say "interrupted"): it still describes the run
         finally:

@@ -49,7 +49,7 @@ EXIT_RANK_FAILED = 1
 EXIT_OUTPUT = 2
 ABORT_GRACE_SECONDS = 0.5
 # the errors of a folder that cannot take the run's files (docs/cli.md, exit code 2)
-OUTPUT_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
+OUTPUT_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO)
 
 
 def output_error(error: BaseException | None) -> bool:

@@ -88,18 +88,22 @@ def _retire(writer) -> None:
 
 
 def _as_os_error(error: RuntimeError) -> Exception:
-    """ADIOS2's "couldn't write to file F : errno = N: ..." as OSError(N, ..., F)."""
+    """ADIOS2's "couldn't write to file F : errno = N: ..." as OSError(N, ..., F); one
+    without a number ("couldn't close file F, in call to fstream close", also a full
+    disk) as EIO. Other errors as they are."""
     import errno as errnos
     import re
 
     text = re.sub(r"\x1b\[[0-9;]*m", "", str(error))
+    name = re.search(r"couldn't \w+(?: to)? file ([^\s,]+)", text)
     found = re.search(r"errno = (\d+)", text)
-    if not found:
-        return error
-    number = int(found.group(1))
-    name = re.search(r"file (\S+)", text)
-    return OSError(number, os.strerror(number) if number in errnos.errorcode else text,
-                   name.group(1) if name else None)
+    if found:
+        number = int(found.group(1))
+        return OSError(number, os.strerror(number) if number in errnos.errorcode else text,
+                       name.group(1) if name else None)
+    if name:
+        return OSError(errnos.EIO, "ADIOS2 could not write it (a full disk?)", name.group(1))
+    return error
 
 
 def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,
@@ -200,10 +204,43 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
         getattr(plotter, f"view_{camera}")()
     else:  # a direction to look from
         plotter.view_vector(camera)
-    tmp = Path(path).with_suffix(".tmp.png")
-    plotter.screenshot(str(tmp))
-    plotter.close()
-    os.replace(tmp, path)
+    try:
+        save_screenshot(plotter, Path(path))
+    finally:
+        plotter.close()
+
+
+def save_screenshot(plotter, path: Path) -> None:
+    """``plotter``'s picture in ``path``, whole or not at all: written beside it and renamed;
+    a failed write (a full disk) leaves no partial file and names ``path``."""
+    tmp = path.with_suffix(".tmp.png")
+    try:
+        plotter.screenshot(str(tmp))
+        os.replace(tmp, path)
+    except BaseException as err:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if isinstance(err, OSError) and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
+
+
+def vtu_bytes(grid) -> bytes:
+    """``grid`` as a ``.vtu`` file's bytes, as pyvista's ``save`` writes it (binary data,
+    zlib-compressed), made in memory: VTK's XML writer that fails to write a file (a full
+    disk) corrupts the heap (seen: "double free or corruption", SIGSEGV), so the bytes
+    are written by Python, which raises an OSError naming the file instead."""
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+    writer = vtkXMLUnstructuredGridWriter()
+    writer.SetInputData(grid)
+    writer.SetDataModeToBinary()
+    writer.SetCompressorTypeToZLib()
+    writer.WriteToOutputStringOn()
+    if not writer.Write():
+        raise RuntimeError("VTK could not serialise the grid")
+    return writer.GetOutputStdString().encode("latin-1") \
+        if hasattr(writer, "GetOutputStdString") else writer.GetOutputString().encode("latin-1")
 
 
 class PyvistaSeries:
@@ -224,9 +261,9 @@ class PyvistaSeries:
         if self.out is None or self.comm.rank != 0 or grid is None:
             return
         name = f"{self.stem}_{len(self.entries):04d}.vtu"
-        tmp = self.out / f".{name}.tmp.vtu"
-        grid.save(str(tmp))
-        os.replace(tmp, self.out / name)
+        from eyemech.problems.run.results import write_bytes_atomic
+
+        write_bytes_atomic(self.out / name, vtu_bytes(grid))
         self.entries.append((time, name))
         datasets = "\n".join(f'    <DataSet timestep="{t:.9g}" part="0" file="{n}"/>'
                              for t, n in self.entries)

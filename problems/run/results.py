@@ -227,33 +227,45 @@ def _temporary(path: Path) -> tuple[int, str]:
     return fd, tmp
 
 
-def write_json_atomic(path: str | Path, data: Any) -> None:
-    """Write JSON so that readers see the old file or the whole new one, never a part."""
+def write_bytes_atomic(path: str | Path, data: bytes) -> None:
+    """``data`` in ``path``, whole or not at all (a temporary file beside it, renamed); an
+    error (a full disk) names ``path`` and leaves no temporary file."""
     path = Path(path)
     fd, tmp = _temporary(path)
     try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(data, handle, indent=2)
-            handle.write("\n")
-            handle.flush()
-            os.fsync(handle.fileno())
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
         raise
 
 
-def write_text_atomic(path: str | Path, text: str) -> None:
+def write_json_atomic(path: str | Path, data: Any) -> None:
+    """Write JSON so that readers see the old file or the whole new one, never a part."""
+    write_text_atomic(path, json.dumps(data, indent=2) + "\n", sync=True)
+
+
+def write_text_atomic(path: str | Path, text: str, sync: bool = False) -> None:
+    """Write ``text`` so that readers see the old file or the whole new one; an error
+    (a full disk) names ``path`` and leaves no temporary file."""
     path = Path(path)
     fd, tmp = _temporary(path)
     try:
         with os.fdopen(fd, "w") as handle:
             handle.write(text)
+            if sync:
+                handle.flush()
+                os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
         raise
 
 

@@ -17,6 +17,14 @@ duration of a command (:func:`stop_signals`):
   handler has not run :data:`GRACE_SECONDS` after a signal, the main thread is stuck in
   C, and the watchdog ends the process; a second signal ends it at once.
 
+The watchdog is a Python thread: it runs while the main thread waits in a call that
+releases the GIL (an mpi4py collective call, a sleep, file I/O, gmsh), not while it sits
+in one that holds it (petsc4py's solves, DOLFINx's assembly). A divergence between ranks
+leaves at least one rank in the first kind -- an mpi4py collective call or the lock-step
+check's wait (problems/run/lockstep.py) -- and when that rank ends, mpiexec ends the
+others. A process whose main thread holds the GIL takes the signal when the C call
+returns (a linear solve: seconds).
+
 Every way out uses ``os._exit(128 + signum)`` after flushing stdout and stderr: under
 ``mpiexec`` (MPICH hydra forwards SIGINT and SIGTERM to every rank) each rank exits with
 that code and so does ``mpiexec`` (tests/test_faults.py). Outside the command line
@@ -139,10 +147,14 @@ def grace_seconds() -> float:
 
 # -- the C-level handlers --------------------------------------------------------------
 # gmsh's initialisation resets SIGTERM (and SIGSEGV, SIGFPE, SIGHUP) to the default action
-# at the C level, behind Python's back (its bundled PETSc pops its signal handlers), so a
-# SIGTERM after meshing would kill the process by the signal (mpiexec then exits with 15).
-# The watchdog puts the handlers back within REARM_SECONDS, as saved when they were set.
+# at the C level, behind Python's back: the PETSc that libgmsh bundles pushes and pops its
+# signal handlers. A SIGTERM then kills the process by the signal (mpiexec exits with 15).
+# PETSc reads PETSC_OPTIONS when it initialises, so ``-no_signal_handler`` there, set after
+# our own PETSc has started (its options database does not see it), keeps gmsh's PETSc off
+# the handlers; the watchdog also puts them back within REARM_SECONDS should anything
+# else replace them.
 REARM_SECONDS = 0.1
+GMSH_PETSC_OPTION = "-no_signal_handler"
 _SIGACTION_BYTES = 256  # more than any libc's struct sigaction
 
 
@@ -222,6 +234,8 @@ def stop_signals(rank: int = 0) -> Iterator[None]:
     if not _main_thread() or _state.managed:
         yield
         return
+    petsc_options = os.environ.get("PETSC_OPTIONS")
+    os.environ["PETSC_OPTIONS"] = f"{petsc_options or ''} {GMSH_PETSC_OPTION}".strip()
     read_fd, write_fd = os.pipe()
     os.set_blocking(write_fd, False)
     _state.rank, _state.received, _state.taken = rank, 0, 0
@@ -235,6 +249,10 @@ def stop_signals(rank: int = 0) -> Iterator[None]:
     try:
         yield
     finally:
+        if petsc_options is None:
+            os.environ.pop("PETSC_OPTIONS", None)
+        else:
+            os.environ["PETSC_OPTIONS"] = petsc_options
         signal.set_wakeup_fd(_state.previous_fd)
         for signum, handler in _state.previous.items():
             signal.signal(signum, handler)
