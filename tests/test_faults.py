@@ -618,12 +618,12 @@ def _wait_for(predicate, seconds: float, what: str) -> None:
 def _rank_pids(mpiexec: int) -> list[int]:
     """The processes two generations below ``mpiexec`` (its proxy's children: the ranks)."""
     parents = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
+    for status in Path("/proc").glob("[0-9]*/stat"):
         try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
+            fields = status.read_text().rsplit(")", 1)[1].split()
         except OSError:
             continue
-        parents[int(stat.parent.name)] = int(fields[1])
+        parents[int(status.parent.name)] = int(fields[1])
     proxies = [p for p, parent in parents.items() if parent == mpiexec]
     return sorted(p for p, parent in parents.items() if parent in proxies)
 

@@ -476,6 +476,9 @@ class Checkpoints:
     def close(self) -> None:
         """The run ends (collective: every rank, as ``RunContext.__exit__``)."""
         self.restore_signal_handlers()
+        if self.lockstep.comm is not None:  # the longest wait of any rank, for results.json
+            self.lockstep.longest_wait = self.lockstep.comm.allreduce(
+                self.lockstep.longest_wait, op=MPI.MAX)
         self.lockstep.free()
         if self._hang_comm is not None:
             self._hang_comm.Free()
@@ -492,6 +495,9 @@ class Checkpoints:
         if self.resumed_from is not None:
             out["resumed_from"] = str(self.resumed_from)
             out["restore_seconds"] = round(self.restore_seconds, 4)
+        if self.lockstep.checks:  # the longest wait of any rank for the others at a step's end
+            out["lockstep_checks"] = self.lockstep.checks
+            out["lockstep_wait_max_s"] = round(self.lockstep.longest_wait, 4)
         return out
 
 

@@ -74,6 +74,7 @@ class Lockstep:
         self.timeout = timeout_seconds() if timeout is None else timeout
         self.comm = comm.Dup() if comm.size > 1 and self.timeout > 0 else None
         self.checks = 0
+        self.longest_wait = 0.0  # seconds this rank waited for the others at a check
 
     def free(self) -> None:
         if self.comm is not None:
@@ -95,7 +96,8 @@ class Lockstep:
         others = [r for r in range(comm.size) if r != comm.rank]
         receives = [comm.Irecv(table[r], source=r, tag=tag) for r in others]
         sends = [comm.Isend(mine, dest=r, tag=tag) for r in others]
-        deadline = time.monotonic() + self.timeout
+        start = time.monotonic()
+        deadline = start + self.timeout
         pause = 5e-5
         while not MPI.Request.Testall(receives):
             if time.monotonic() > deadline:
@@ -105,6 +107,7 @@ class Lockstep:
             time.sleep(pause)
             pause = min(2 * pause, 0.01)
         MPI.Request.Waitall(sends)
+        self.longest_wait = max(self.longest_wait, time.monotonic() - start)
         differs = np.flatnonzero(np.any(table != table[0], axis=1))
         if len(differs):
             raise RanksDiverged(self._describe(where, table))
