@@ -28,7 +28,8 @@ from pathlib import Path
 
 BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
-COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "max_rel_diff", "worst_quantity", "note")
+COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "max_rel_diff", "worst_quantity",
+           "lockstep_wait_max_s", "note")
 
 
 def flat(quantities: dict, prefix: str = "") -> dict[str, object]:
@@ -108,9 +109,12 @@ def main() -> int:
             serial = None
             for ranks in counts:
                 code, seconds, result, said = run(name, ranks, Path(scratch) / f"{name}-{ranks}")
+                # the longest any rank waited for the others at a step's end (scenes with
+                # checkpoints; docs/parallel.md, "Ranks in step")
+                waited = (result or {}).get("checkpoints", {}).get("lockstep_wait_max_s", "")
                 row = {"scene": name, "ranks": ranks, "exit_code": code,
                        "wall_s": round(seconds, 1), "max_rel_diff": "", "worst_quantity": "",
-                       "note": said[:160]}
+                       "lockstep_wait_max_s": waited, "note": said[:160]}
                 if ranks == 1:
                     serial = result
                 elif result is not None and serial is not None:

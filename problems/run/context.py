@@ -102,7 +102,10 @@ class RunContext:
         (problems/run/identity.py)."""
         if self.out is None:
             return
-        self._fresh = self.checkpoints.resume_meta is None
+        # a resume continues its own folder; any other folder is this run's to take
+        resume = self.options.checkpoint.resume
+        self._fresh = self.checkpoints.resume_meta is None or resume is None \
+            or Path(resume).resolve() != self.out.resolve()
         error, previous = None, (set(), None)
         if self.rank0:
             try:

@@ -170,7 +170,11 @@ def _run_cases(scene, all_cases, ids, grid, out: Path, ranks_per_case: int,
             continue
         case_dir = Path(out) / f"case_{index:04d}"
         row = {"case": index, **{k: overrides[k] for k in grid}}
-        previous = _finished(case_dir, ids[index]) if resume else None
+        # read on the case's rank 0 and shared: whether the case runs, and from where, is
+        # a collective choice (another rank could see the files otherwise, e.g. on NFS)
+        previous, resume_from = sub.bcast(
+            (_finished(case_dir, ids[index]) if resume else None,
+             resume and latest(case_dir) is not None) if sub.rank == 0 else None, root=0)
         if previous is not None:
             if sub.rank == 0:
                 rows.append({**row, **previous})
@@ -178,7 +182,7 @@ def _run_cases(scene, all_cases, ids, grid, out: Path, ranks_per_case: int,
         params = build(scene.parameters, overrides)
         try:
             result = scene.run(params, comm=sub, out=case_dir,
-                               options=_case_options(options, case_dir, resume))
+                               options=_case_options(options, case_dir, resume_from))
             row.update(status=result.status, **_scalars(result.quantities))
             row.update(_case_timings(result.timings))
         except Interrupted:
@@ -199,10 +203,11 @@ def _run_cases(scene, all_cases, ids, grid, out: Path, ranks_per_case: int,
     return table
 
 
-def _case_options(options: RunOptions | None, case_dir: Path, resume: bool) -> RunOptions | None:
-    """With --resume, an interrupted case continues from its last checkpoint (its own:
-    the case folders were arranged by run id)."""
-    if not resume or latest(case_dir) is None:
+def _case_options(options: RunOptions | None, case_dir: Path,
+                  resume_from: bool) -> RunOptions | None:
+    """With --resume, an interrupted case (one with checkpoints: ``resume_from``) continues
+    from its last checkpoint (its own: the case folders were arranged by run id)."""
+    if not resume_from:
         return options
     options = options or RunOptions()
     return dataclasses.replace(options, checkpoint=dataclasses.replace(options.checkpoint,
