@@ -63,6 +63,6 @@ __all__ = [
 ]
 
 from eyemech.forms import contact  # noqa: E402  (obstacles: contact.Plane, contact.Ring, ...)
-from eyemech.forms.elastic import compressible_neo_hooke, lame  # noqa: E402
+from eyemech.forms.elastic import CompressibleNeoHooke, compressible_neo_hooke, lame  # noqa: E402
 
-__all__ += ["contact", "compressible_neo_hooke", "lame"]
+__all__ += ["contact", "CompressibleNeoHooke", "compressible_neo_hooke", "lame"]

@@ -282,7 +282,8 @@ def augmented_pressure(g, multiplier, penalty, smoothing):
                         penalty * (eps - shifted) ** 2 / (4 * eps)))
 
 
-def smoothed_penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:
+def smoothed_penalty_pressure(gaps: np.ndarray, penalty: float,
+                              smoothing: float) -> tuple[np.ndarray, np.ndarray]:
     """p(g) = −φ'(g) ≥ 0 of :func:`smoothed_penalty_density` and its slope dp/dg, on
     arrays of gaps (for the node-wise contacts evaluated in numpy)."""
     gaps = np.asarray(gaps, dtype=float)

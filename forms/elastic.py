@@ -3,6 +3,8 @@ incompressible (contact benchmarks, stiff supports)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import ufl
 
 
@@ -13,12 +15,35 @@ def lame(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
     return mu, lmbda
 
 
+@dataclasses.dataclass(frozen=True)
+class CompressibleNeoHooke:
+    """W = μ/2 (I1 − 3 − 2 ln J) + λ/2 (ln J)², with I1 = tr(FᵀF) and (μ, λ) the Lamé
+    constants of (E, ν): linear elasticity with (E, ν) at small strain, well behaved under
+    large compression."""
+
+    youngs_modulus: float
+    poisson_ratio: float
+
+    @property
+    def shear_modulus(self) -> float:
+        """Small-strain shear modulus μ = E / (2 (1 + ν))."""
+        return lame(self.youngs_modulus, self.poisson_ratio)[0]
+
+    @property
+    def bulk_modulus(self) -> float:
+        """Small-strain bulk modulus K = λ + 2μ/3."""
+        mu, lmbda = lame(self.youngs_modulus, self.poisson_ratio)
+        return lmbda + 2.0 * mu / 3.0
+
+    def strain_energy(self, F):
+        mu, lmbda = lame(self.youngs_modulus, self.poisson_ratio)
+        J = ufl.det(F)
+        return 0.5 * mu * (ufl.tr(F.T * F) - 3 - 2 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
+
+
 def compressible_neo_hooke(F, youngs_modulus: float, poisson_ratio: float):
-    """W = μ/2 (I1 − 3 − 2 ln J) + λ/2 (ln J)², with I1 = tr(FᵀF): linear elasticity
-    with (E, ν) at small strain, well behaved under large compression."""
-    mu, lmbda = lame(youngs_modulus, poisson_ratio)
-    J = ufl.det(F)
-    return 0.5 * mu * (ufl.tr(F.T * F) - 3 - 2 * ufl.ln(J)) + 0.5 * lmbda * ufl.ln(J) ** 2
+    """The energy density of :class:`CompressibleNeoHooke` (E, ν) at ``F``."""
+    return CompressibleNeoHooke(youngs_modulus, poisson_ratio).strain_energy(F)
 
 
 def spring_support_energy(u, stiffness, measure):

@@ -21,8 +21,22 @@ from eyemech.forms.kinematics import isochoric_invariants
 
 
 class Material(Protocol):
+    """An isochoric law: its energy, and the moduli of its linearisation at F = I (the
+    law is incompressible at small strain: Young's modulus is 3μ, the bulk stiffness
+    comes from the pressure multiplier or :func:`volumetric_energy`)."""
+
     def strain_energy(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """Isochoric strain energy density per reference volume."""
+        ...
+
+    @property
+    def shear_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain shear modulus μ (MPa)."""
+        ...
+
+    @property
+    def youngs_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain Young's modulus of the incompressible law, 3μ (MPa)."""
         ...
 
 
@@ -38,10 +52,16 @@ class PolynomialIsochoric:
                 raise ValueError(f"polynomial term ({r}, {s}) must have r, s >= 0, not both 0")
 
     @property
-    def shear_modulus(self) -> float:
-        """Small-strain shear modulus μ = 2 (c10 + c01)."""
-        linear = {(r, s): c for r, s, c in self.coefficients}
-        return 2.0 * (linear.get((1, 0), 0.0) + linear.get((0, 1), 0.0))
+    def shear_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain shear modulus μ = 2 (c10 + c01): the terms of higher order vanish
+        to second order at F = I (tests/test_moduli.py)."""
+        linear = [c for r, s, c in self.coefficients if (r, s) in ((1, 0), (0, 1))]
+        return 2.0 * sum(linear[1:], linear[0]) if linear else 0.0
+
+    @property
+    def youngs_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain Young's modulus of the incompressible law, E = 3μ."""
+        return 3.0 * self.shear_modulus
 
     def strain_energy(self, F):
         I1b, I2b, _ = isochoric_invariants(F)
@@ -68,6 +88,16 @@ class Yeoh:
     c10: float | ufl.core.expr.Expr
     c20: float | ufl.core.expr.Expr = 0.0
     c30: float | ufl.core.expr.Expr = 0.0
+
+    @property
+    def shear_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain shear modulus μ = 2 c10 (c20 and c30 stiffen at finite strain only)."""
+        return 2.0 * self.c10
+
+    @property
+    def youngs_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain Young's modulus of the incompressible law, E = 3μ = 6 c10."""
+        return 3.0 * self.shear_modulus
 
     def strain_energy(self, F):
         x = isochoric_invariants(F)[0] - 3

@@ -54,7 +54,13 @@ class ShellMaterial:
         E, nu = self.youngs_modulus, self.poisson_ratio
         return E / (1.0 - nu ** 2) * ((1.0 - nu) * strain + nu * ufl.tr(strain) * P)
 
+    @property
+    def shear_modulus(self):
+        """In-plane small-strain shear modulus μ = E / (2 (1 + ν))."""
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
     def bending_stiffness(self):
+        """Flexural rigidity D = E h³ / (12 (1 − ν²)): bending moment per unit curvature."""
         E, nu, h = self.youngs_modulus, self.poisson_ratio, self.thickness
         return E * h ** 3 / (12.0 * (1.0 - nu ** 2))
 
@@ -317,7 +323,7 @@ def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int
     argument-dependent factors stay first variations, and the strains are the covariant
     2×2 ones (``_Variations``). UFL's symbolic derivative instead carries Δδn, Δδm, … as
     full (test × trial) expressions through the whole composite energy, and FFCx emits
-    megabytes of C per kernel for it (issue 8 §4).
+    megabytes of C per kernel for it.
 
     Bulk:   h [C(δE):ΔE + C(E):ΔδE] + h³/12 [C(δK):ΔK + C(K):ΔδK],
             δE_αβ = ½(δa_α·a_β + a_α·δa_β), ΔδE_αβ = ½(δa_α·Δa_β + Δa_α·δa_β),
@@ -333,7 +339,15 @@ def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int
     bulk = (h * (law.pair(q.dE, q.DE) + law.pair(q.E, q.dDE))
             + Db * (law.pair(q.dK, q.DK) + ufl.inner(SK, q.dDK_products)
                     + q.normal_second_variation(q.weighted_U(SK))))
+    edges = _edge_second_variation(u, v, w, material, orientation, degree, penalty_factor)
+    return bulk * dx + edges * dS
 
+
+def _edge_second_variation(u, v, w, material: ShellMaterial, orientation, degree: int,
+                           penalty_factor):
+    """The interior edges' part of :func:`shell_jacobian` (its "Edges" line): Δδe, to be
+    integrated over dS."""
+    Db = material.thickness ** 3 / 12.0
     mesh = ufl.domain.extract_unique_domain(u)
     nu = ufl.FacetNormal(mesh)
     size = ufl.CellDiameter(mesh)
@@ -394,7 +408,7 @@ def shell_jacobian(u, v, w, material: ShellMaterial, orientation, *, degree: int
              + weight * dD_theta_products - theta * dDM_products
              + p.normal_second_variation(x_plus) + m.normal_second_variation(x_minus)
              + _unit_second_variation(t, f_len, 1.0, y_t, df, Df))
-    return bulk * dx + edges * dS
+    return edges
 
 
 def _varies(value) -> bool:

@@ -86,9 +86,31 @@ class Viscoelastic:
                 raise ValueError(f"{name} must be > 0, got {value!r}")
 
     @property
+    def shear_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain shear modulus of the relaxed solid (Cv = C̄: the viscous branch
+        carries no stress), μ∞."""
+        return self.mu_inf
+
+    @property
+    def glassy_shear_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain shear modulus of an instantaneous load (Cv = I, the viscous
+        branch not yet flowed), μ∞ + μv."""
+        return self.mu_inf + self.mu_v
+
+    @property
+    def youngs_modulus(self) -> float | ufl.core.expr.Expr:
+        """Relaxed Young's modulus of the incompressible solid, 3μ∞."""
+        return 3.0 * self.shear_modulus
+
+    @property
+    def glassy_youngs_modulus(self) -> float | ufl.core.expr.Expr:
+        """Instantaneous Young's modulus of the incompressible solid, 3(μ∞ + μv)."""
+        return 3.0 * self.glassy_shear_modulus
+
+    @property
     def retardation_time(self) -> float:
         """Creep time of the small-strain standard linear solid: τ (μ∞ + μv) / μ∞."""
-        return self.tau * (self.mu_inf + self.mu_v) / self.mu_inf
+        return self.tau * self.glassy_shear_modulus / self.shear_modulus
 
     def free_energy(self, F, Cv):
         """Ψ = μ∞/2 (tr C̄ − 3) + μv/2 (tr(C̄ Cv⁻¹) − 3)."""

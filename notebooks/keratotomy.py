@@ -16,6 +16,8 @@
 # surgery's aim), the gape of the cuts, and the deformed incised cornea in pyvista.
 # Point `EYEMECH_RUN_DIR` at a run's output folder; without it the notebook runs a coarse
 # case itself (2 mm planform elements, 8 incisions, 1 h of creep: about a minute).
+# `shown` collects the numbers displayed with where they are in `results.json`
+# (tests/test_notebooks.py checks them).
 
 # %%
 import json
@@ -37,6 +39,10 @@ if not (run_dir / "results.json").exists():
                     "--out", str(run_dir), "--quiet"], check=True)
 results = json.loads((run_dir / "results.json").read_text())
 params, q = results["parameters"], results["quantities"]
+where = str(run_dir / "results.json")
+shown = [(where, "quantities.power_change_initial_D", q["power_change_initial_D"]),
+         (where, "quantities.power_change_final_D", q["power_change_final_D"]),
+         (where, "quantities.creep_power_change_D", q["creep_power_change_D"])]
 print(f"{params['incisions']} incisions, {params['incision_depth']:.0%} deep, optical zone "
       f"{params['optical_zone']} mm, IOP {params['iop_mmHg']} mmHg, τ = {params['tau'] / 3600:g} h")
 print(f"power change at t = 0: {q['power_change_initial_D']:+.2f} D, after "
@@ -63,6 +69,7 @@ axes[2].set(xlabel="time (h)", ylabel="mean gape of the cuts (µm)")
 for ax in axes:
     ax.grid(alpha=0.3)
 fig.tight_layout()
+plt.show()
 
 # %% [markdown]
 # ## The incised cornea, deformed
@@ -96,22 +103,20 @@ with RunContext("keratotomy", scene_params, MPI.COMM_WORLD, None, RunOptions()) 
     follow_path(body.solver(ctx),
                 lambda f, _i: setattr(body.pressure, "value", f * scene_params.iop_mmHg * kt.MMHG),
                 Stepping(initial_step=1.0), quiet=True)
-print(f"glassy power {body.power_D():.2f} D (run: {q['power_D'][0]:.2f} D at t = 0)")
+print(f"glassy power {body.power_D():.4f} D (run: {q['power_D'][0]:.4f} D at t = 0)")
+shown.append((where, "quantities.power_D.0", body.power_D()))
 
 nodal = dolfinx.fem.functionspace(body.tagged.mesh, ("Lagrange", 1, (3,)))
 u1 = dolfinx.fem.Function(nodal, name="displacement")
 u1.interpolate(body.u)
 grid = gather_grid(u1)
-grid.point_data["|u| (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
 pv.OFF_SCREEN = True
 plotter = pv.Plotter(off_screen=True, window_size=(700, 550))
-plotter.add_mesh(grid.warp_by_vector("displacement", factor=5.0), scalars="|u| (mm)",
-                 cmap="viridis", show_edges=True)
-plotter.add_text("displacement × 5", font_size=10)
+plotter.add_mesh(grid.warp_by_vector("displacement", factor=5.0), scalars="displacement (mm)",
+                 cmap="viridis", show_edges=True, clim=(0.0, float(grid["displacement (mm)"].max())),
+                 scalar_bar_args={"title": "displacement (mm)", "fmt": "%.3g"})
+plotter.add_text("the incised cornea at t = 0, displacement × 5", font_size=10)
 plotter.view_vector((0.3, -1.0, 1.4))
-image = plotter.screenshot(return_img=True)
-plotter.close()
-plt.figure(figsize=(7, 5.5))
-plt.imshow(image)
-plt.axis("off")
-print("rendered", image.shape, "max |u|", float(grid["|u| (mm)"].max()), "mm")
+plotter.show(jupyter_backend="static")
+print("max displacement", float(grid["displacement (mm)"].max()), "mm")

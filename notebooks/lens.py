@@ -61,6 +61,9 @@ results = json.loads((run_dir / "results.json").read_text())
 params, q, steps = results["parameters"], results["quantities"], results["steps"]
 scene = results.get("scene", "iol-injection")
 contact = params.get("contact", True)  # iol-fold has no switch: its chamber is always there
+where = str(run_dir / "results.json")
+shown = [(where, f"quantities.{k}", q[k]) for k in ("triangles", "dofs", "steps",
+                                                     "steps_per_second", "haptic_max_strain")]
 print(f"{scene}: {q['triangles']} triangles, {q['dofs']} dofs, {q['steps']} steps, "
       f"{sum(s['newton_iterations'] for s in steps)} Newton iterations, {q['steps_per_second']:.2f} steps/s")
 # contact=false switches self-contact off too (iol_injection.inject), whatever the flag says
@@ -98,8 +101,8 @@ axes[2].bar(t, [s["newton_iterations"] for s in steps], width=0.8 * np.diff(t, p
 axes[2].set(xlabel="t (s)", ylabel="Newton iterations (orange: after a cut)")
 distance = np.array([d if d is not None else np.nan for d in q.get("self_distance_mm", [])], float)
 if len(distance) == len(t) and np.isfinite(distance).any():
-    shown = np.isfinite(distance)
-    axes[3].semilogy(t[shown], distance[shown], "o-", ms=3)
+    finite = np.isfinite(distance)
+    axes[3].semilogy(t[finite], distance[finite], "o-", ms=3)
 else:
     axes[3].text(0.5, 0.5, "no two parts within\nipctk's search radius", ha="center", va="center",
                  transform=axes[3].transAxes)
@@ -107,6 +110,7 @@ axes[3].set(xlabel="t (s)", ylabel="min self distance (mm)")
 for ax in axes:
     ax.grid(alpha=0.3)
 fig.tight_layout()
+plt.show()
 
 # %% [markdown]
 # ## The frames
@@ -128,7 +132,8 @@ if start_file.is_file():
 
     saved = np.load(start_file)
     start = frames[0].copy()
-    start.point_data["displacement"] = saved["displacement"][cKDTree(saved["coordinates"]).query(start.points)[1]]
+    nearest = cKDTree(saved["coordinates"]).query(start.points)[1]
+    start.point_data["displacement"] = saved["displacement"][nearest]
     start.cell_data["surface strain"] = np.full(start.n_cells, np.nan)  # not saved with the state
     entries.insert(0, (0.0, start_file))
     frames.insert(0, start)

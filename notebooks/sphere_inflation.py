@@ -14,7 +14,8 @@
 # Post-processing of `eyemech run sphere-inflation`: the pressure–radius path of the
 # run against the exact solution, and the deformed wall coloured by the pressure field.
 # Point `EYEMECH_RUN_DIR` at a run's output folder; without it the notebook runs a
-# coarse case itself.
+# coarse case itself. `shown` collects every number displayed with where it is in
+# `results.json` (tests/test_notebooks.py checks them).
 
 # %%
 import json
@@ -35,8 +36,12 @@ if not (run_dir / "results.json").exists():
     subprocess.run([str(eyemech), "run", "sphere-inflation", "--set", "mesh_size=2",
                     "--out", str(run_dir), "--quiet"], check=True)
 results = json.loads((run_dir / "results.json").read_text())
-params = results["parameters"]
-print({k: round(v, 6) if isinstance(v, float) else v for k, v in results["quantities"].items()})
+params, quantities = results["parameters"], results["quantities"]
+shown: list[tuple[str, str, float]] = []
+for key in ("inner_radius_deformed", "inner_radius_exact", "inner_radius_error", "cavity_volume"):
+    if key in quantities:
+        print(f"{key:24s} {quantities[key]:.6g}")
+        shown.append((str(run_dir / "results.json"), f"quantities.{key}", quantities[key]))
 
 # %% [markdown]
 # ## The load path against the exact solution
@@ -59,19 +64,29 @@ ax.set_xlabel("inner stretch a / A")
 ax.set_ylabel("pressure (MPa)")
 ax.legend()
 fig.tight_layout()
+plt.show()
 
 # %% [markdown]
 # ## The deformed wall
-# `state.pvd` indexes one `.vtu` per converged step; the last is the final state.
+# `state.pvd` indexes one `.vtu` per converged step at its load factor (0: unloaded); a
+# reader picks the last, the loaded sphere (`pv.read` would give the first). The mesh is
+# the sphere's octant (symmetry planes); the colour is the pressure field p (MPa).
 
 # %%
 pv.OFF_SCREEN = True
-series = pv.read(run_dir / "state.pvd")
-final = series[len(series) - 1]
+reader = pv.get_reader(str(run_dir / "state.pvd"))
+reader.set_active_time_value(reader.time_values[-1])
+final = reader.read()[0]
+points = final.points + final.point_data["displacement"]
+radii = np.linalg.norm(points, axis=1)
+inner = radii[np.isclose(np.linalg.norm(final.points, axis=1), A, atol=1e-6 * A)]
+print(f"load factor {reader.time_values[-1]:g}: deformed inner radius {inner.mean():.6g} mm "
+      f"(results.json {quantities['inner_radius_deformed']:.6g}), pressure field "
+      f"{final['pressure'].min():.4g} … {final['pressure'].max():.4g} MPa")
+shown.append((str(run_dir / "results.json"), "steps.-1.load_factor", reader.time_values[-1]))
 warped = final.warp_by_vector("displacement")
 plotter = pv.Plotter(off_screen=True, window_size=(700, 500))
-plotter.add_mesh(warped, scalars="pressure", show_edges=True)
+plotter.add_mesh(warped, scalars="pressure", show_edges=True, cmap="viridis",
+                 scalar_bar_args={"title": "pressure p (MPa)", "fmt": "%.3g"})
 plotter.view_vector((-1.0, -1.3, 0.8))
-image = plotter.screenshot(return_img=True)
-plotter.close()
-print("rendered", image.shape, "pressure range", final["pressure"].min(), final["pressure"].max())
+plotter.show(jupyter_backend="static")

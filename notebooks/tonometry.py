@@ -38,6 +38,10 @@ if not (run_dir / "results.json").exists():
                    check=True)
 results = json.loads((run_dir / "results.json").read_text())
 params, q = results["parameters"], results["quantities"]
+where = str(run_dir / "results.json")
+shown = [(where, f"quantities.{k}", q[k]) for k in
+         ("iop_mmHg", "iop_reading_mmHg", "iop_reading_dry_mmHg", "reading_error_mmHg",
+          "applanation_force_g", "applanation_depth_mm")]
 print(f"cornea {1000 * params['central_thickness']:.0f} µm thick, E = {params['youngs_modulus']} MPa, "
       f"{q['cells']} cells, {q['dofs']} dofs")
 print(f"true IOP {q['iop_mmHg']:.1f} mmHg → reading {q['iop_reading_mmHg']:.2f} mmHg "
@@ -81,32 +85,41 @@ axes[2].legend()
 for ax in axes:
     ax.grid(alpha=0.3)
 fig.tight_layout()
+plt.show()
 
 # %% [markdown]
 # ## The applanated cornea
-# `state.pvd` holds the cornea at the reading. A section through the apex shows the flat disc
-# under the prism and the cornea bending round its edge; the colour is the displacement.
+# `state.pvd` holds the cornea at the reading (its time value is the applanation depth). A
+# section through the apex shows the flat disc under the prism and the cornea bending round
+# its edge; the colour is the displacement from the unloaded cornea.
 
 # %%
 pv.OFF_SCREEN = True
-grid = pv.read(run_dir / "state.pvd")
-if isinstance(grid, pv.MultiBlock):
-    grid = grid[0]
-grid.point_data["|u| (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+reader = pv.get_reader(str(run_dir / "state.pvd"))  # one state: the reading, at its depth
+reader.set_active_time_value(reader.time_values[-1])
+grid = reader.read()[0]
+shown.append((where, "quantities.applanation_depth_mm", reader.time_values[-1]))
+grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
 deformed = grid.warp_by_vector("displacement", factor=1.0)
 section = deformed.slice(normal="y", origin=(0.0, 0.0, 0.0))
 plotter = pv.Plotter(off_screen=True, window_size=(900, 420))
 plotter.add_mesh(grid.slice(normal="y", origin=(0.0, 0.0, 0.0)), color="grey", opacity=0.35)
-plotter.add_mesh(section, scalars="|u| (mm)", show_edges=True, cmap="viridis")
+plotter.add_mesh(section, scalars="displacement (mm)", show_edges=True, cmap="viridis",
+                 clim=(0.0, float(grid["displacement (mm)"].max())),
+                 scalar_bar_args={"title": "displacement (mm)", "fmt": "%.3g"})
 apex = deformed.points[:, 2].max()
-plotter.add_mesh(pv.Plane(center=(0, 0, apex), direction=(0, 0, 1), i_size=4, j_size=4),
-                 color="lightblue", opacity=0.5)
+# the prism's flat face (blue) and the flattened disc of the reading (red)
+plotter.add_mesh(pv.Cylinder(center=(0, 0, apex + 0.25), direction=(0, 0, 1), radius=3.5,
+                             height=0.5), color="lightblue", opacity=0.6)
+disc = q["contact_diameter_mm"] / 2
+plotter.add_mesh(pv.Line((-disc, -0.01, apex), (disc, -0.01, apex)), color="red", line_width=5)
 plotter.view_xz()
 plotter.camera.zoom(1.8)
 plotter.show(jupyter_backend="static")
 
 # %% [markdown]
-# The undeformed section (grey) lies above the prism plane at the centre: the applanation
-# depth is the distance between them. The reading's error comes from the bending stiffness
+# The grey section is the unloaded cornea: the IOP lifts the apex (by
+# `apex_displacement_iop_mm`), and the prism (blue) pushes it back by the applanation depth
+# until the flat disc (red) is 3.06 mm across. The reading's error comes from the bending stiffness
 # of this thick shell; the `tonometry` sweeps over `central_thickness` and `youngs_modulus`
 # (docs/cornea.md) show how it grows with both.

@@ -9,7 +9,9 @@ import math
 import numpy as np
 
 from eyemech.problems.run.output import (
+    add_legend,
     gather_grid,
+    region_data,
     render_png,
 )
 
@@ -27,7 +29,7 @@ class Writer:
         stem = "fields" if resumed is None else f"fields_from_{resumed.name}"
         self.earlier = sorted(p.name for p in folder.glob("fields*.bp")) \
             if resumed is not None and folder is not None else []
-        self.vtx = ctx.field_writer([model.u], stem=stem)
+        self.vtx = ctx.field_writer([model.u], stem=stem, pvd=False)  # VTX on request
         self.series = ctx.pyvista_series()
         self.pictures = ctx.pictures
         ctx.checkpoints.value("pyvista_series", lambda: self.series.entries,
@@ -35,7 +37,7 @@ class Writer:
                                   slice(None), [tuple(e) for e in saved]))
 
     def state(self, load: float, stage: int, picture: bool = False) -> None:
-        if not (self.vtx.files or self.pictures):
+        if self.ctx.field_dir is None and not self.pictures:  # --no-fields --no-pictures
             return
         with self.ctx.timings("output"):
             self.vtx.write(load)
@@ -46,7 +48,9 @@ class Writer:
             dofmap = model.von_mises.field.function_space.dofmap.list[:cells, 0]
             grid = gather_grid(model.u, cell_data={
                 "von_mises": model.von_mises.field.x.array[dofmap],
-                "c": model.stiffness.x.array[dofmap]})
+                "c": model.stiffness.x.array[dofmap],
+                "tissue": region_data(model.eye.cell_tags, cells)})
+            add_legend(grid, model.eye.names, mesh.topology.dim)
             self.series.write(load, grid)
             if picture and self.pictures:
                 # the outline reads distributed unknowns (collective): every rank computes

@@ -32,7 +32,7 @@ from mpi4py import MPI
 from eyemech.forms.shell import Kinematics, end_rotation
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
     Shell,
@@ -48,16 +48,17 @@ from eyemech.problems.solve.scalars import assemble_scalar
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, ShellDiscretisation):
     moment_fraction: float = field(
-        1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)")
-    youngs_modulus: float = field(1.2e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa")
-    poisson_ratio: float = field(0.0, "Poisson's ratio (0: exact circle, no anticlastic bending)")
-    length: float = field(12.0, "strip length", "mm")
-    width: float = field(1.0, "strip width", "mm")
-    thickness: float = field(0.1, "strip thickness", "mm")
-    divisions: int = field(32, "squares along the length")
-    width_divisions: int = field(1, "squares across the width")
-    kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
-    load_steps: int = field(8, "initial number of load steps (cut and grown as needed)")
+        1.0, "end moment as a fraction of M_max = 2π E I / L (1 = full circle)", group=PHYSICS)
+    youngs_modulus: float = field(1.2e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.0, "Poisson's ratio (0: exact circle, no anticlastic bending)",
+                                 group=PHYSICS)
+    length: float = field(12.0, "strip length", "mm", group=GEOMETRY)
+    width: float = field(1.0, "strip width", "mm", group=GEOMETRY)
+    thickness: float = field(0.1, "strip thickness", "mm", group=GEOMETRY)
+    divisions: int = field(32, "squares along the length", group=GEOMETRY)
+    width_divisions: int = field(1, "squares across the width", group=GEOMETRY)
+    kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear", group=PHYSICS)
+    load_steps: int = field(8, "initial number of load steps (cut and grown as needed)", group=SOLVER)
 
     RESOLUTION_KEY: ClassVar[str] = "divisions"
 

@@ -39,7 +39,7 @@ from eyemech.forms.dynamics import mass_form
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import Shell, ShellDiscretisation, check_shell_parameters, newton_options
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
@@ -56,19 +56,19 @@ BETA_L = 1.8751040687  # first root of cos βL cosh βL = −1
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, ShellDiscretisation):
-    youngs_modulus: float = field(1.0, "Young's modulus (the lens acrylic)", "MPa")
-    poisson_ratio: float = field(0.0, "Poisson's ratio (0: the strip is a beam)")
-    density: float = field(1.2e-9, "mass density (1.2 g/cm³)", "tonne/mm³")
-    length: float = field(6.0, "strip length", "mm")
-    width: float = field(1.0, "strip width", "mm")
-    thickness: float = field(0.13, "strip thickness", "mm")
-    divisions: int = field(12, "squares along the length")
-    kinematics: Kinematics = field("linear", "linear (small vibration) or nonlinear")
-    amplitude: float = field(0.01, "initial tip deflection as a fraction of the length")
-    scheme: SchemeName = field("newmark", "time scheme: " + " | ".join(SCHEMES))
-    damping: float = field(0.0, "mass-proportional damping c as a fraction of ω₁", "")
-    steps_per_period: int = field(40, "time steps per undamped period 2π/ω₁")
-    periods: float = field(2.0, "simulated time in undamped periods")
+    youngs_modulus: float = field(1.0, "Young's modulus (the lens acrylic)", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.0, "Poisson's ratio (0: the strip is a beam)", group=PHYSICS)
+    density: float = field(1.2e-9, "mass density (1.2 g/cm³)", "tonne/mm³", group=PHYSICS)
+    length: float = field(6.0, "strip length", "mm", group=GEOMETRY)
+    width: float = field(1.0, "strip width", "mm", group=GEOMETRY)
+    thickness: float = field(0.13, "strip thickness", "mm", group=GEOMETRY)
+    divisions: int = field(12, "squares along the length", group=GEOMETRY)
+    kinematics: Kinematics = field("linear", "linear (small vibration) or nonlinear", group=PHYSICS)
+    amplitude: float = field(0.01, "initial tip deflection as a fraction of the length", group=PHYSICS)
+    scheme: SchemeName = field("newmark", "time scheme: " + " | ".join(SCHEMES), group=SOLVER)
+    damping: float = field(0.0, "mass-proportional damping c as a fraction of ω₁", "", group=PHYSICS)
+    steps_per_period: int = field(40, "time steps per undamped period 2π/ω₁", group=SOLVER)
+    periods: float = field(2.0, "simulated time in undamped periods", group=PHYSICS)
 
     RESOLUTION_KEY: ClassVar[str] = "divisions"
 
@@ -160,8 +160,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 
         end = steps * dt
         with ctx.timings("time_stepping"):
-            follow_path(solver, apply, Stepping(0.0, end, quantity="time", unit="s", initial_step=1.0 / steps, max_step=1.0 / steps,
-                                                grow=1.0, min_step=1e-3 / steps),
+            follow_path(solver, apply, Stepping(0.0, end, quantity="time", unit="s", initial_step=1.0 / steps,
+                                                max_step=1.0 / steps, grow=1.0, min_step=1e-3 / steps),
                         on_converged=converged, label=SCENE.name, quiet=ctx.options.quiet)
         times, tip_w = np.asarray(times), np.asarray(tip_w)
         reference = amplitude * oscillator_response(omega, damping, dt, steps, params.scheme)

@@ -40,7 +40,7 @@ from eyemech.forms.contact import default_penalty
 from eyemech.meshes.contact_bodies import stacked_blocks
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
@@ -50,18 +50,18 @@ QUADRATURE = {"quadrature_degree": 2}
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    width: float = field(1.0, "width of both blocks (square)", "mm")
-    youngs_modulus: float = field(1.0, "Young's modulus of both blocks", "MPa")
-    poisson_ratio: float = field(0.3, "Poisson's ratio", "")
-    pressure: float = field(0.01, "pressure on the top face", "MPa")
-    penalty: float = field(30.0, "penalty factor: α = penalty · E / master_size", "")
-    master_size: float = field(0.25, "element size of the lower (master) block", "mm")
-    slave_size: float = field(0.17, "element size of the upper (slave) block", "mm")
-    degree: int = field(1, "displacement degree (1 or 2)")
-    passes: int = field(1, "1: slave surface on master surface; 2: also the reverse (two-pass)")
+    width: float = field(1.0, "width of both blocks (square)", "mm", group=GEOMETRY)
+    youngs_modulus: float = field(1.0, "Young's modulus of both blocks", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.3, "Poisson's ratio", "", group=PHYSICS)
+    pressure: float = field(0.01, "pressure on the top face", "MPa", group=PHYSICS)
+    penalty: float = field(30.0, "penalty factor: α = penalty · E / master_size", "", group=SOLVER)
+    master_size: float = field(0.25, "element size of the lower (master) block", "mm", group=GEOMETRY)
+    slave_size: float = field(0.17, "element size of the upper (slave) block", "mm", group=GEOMETRY)
+    degree: int = field(1, "displacement degree (1 or 2)", group=GEOMETRY)
+    passes: int = field(1, "1: slave surface on master surface; 2: also the reverse (two-pass)", group=SOLVER)
     method: Literal["segment-to-segment", "node-to-surface"] = field(
         "segment-to-segment", "contact discretisation: pressure integrated over the slave "
-        "surface segmented by the master triangles (mortar integration), or at the slave nodes")
+        "surface segmented by the master triangles (mortar integration), or at the slave nodes", group=SOLVER)
 
     def _block_cells(self) -> dict[str, float]:
         """Tetrahedra of each w × w × w/2 block at its size (regular tetrahedra, h³/(6√2));
@@ -101,7 +101,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                     comm=ctx.comm)
         V = dolfinx.fem.functionspace(blocks.mesh, ("Lagrange", params.degree, (3,)))
         u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
-        energy = compressible_neo_hooke(deformation_gradient(u), params.youngs_modulus, params.poisson_ratio) * blocks.dx(QUADRATURE)
+        energy = (compressible_neo_hooke(deformation_gradient(u), params.youngs_modulus, params.poisson_ratio)
+                  * blocks.dx(QUADRATURE))
         load = dolfinx.fem.Constant(blocks.mesh, 0.0)
         residual = ufl.derivative(energy, u, v) + follower_pressure(
             load, u, v, blocks.ds(QUADRATURE)(blocks.tag("top")))

@@ -26,7 +26,7 @@ from eyemech.forms import NeoHooke
 from eyemech.meshes.cook import TIP, cook_membrane
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import gather_grid, render_png
-from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.residual import solid_residual
 from eyemech.problems.solid.spaces import (
@@ -44,12 +44,16 @@ REFERENCE_TIP_DISPLACEMENT = 6.9  # mm, converged value of the references above
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    shear_modulus: float = field(80.1938, "shear modulus μ = 2 c10 (neo-Hooke)", "MPa")
-    load: float = field(100.0, "total shear force on the right edge per unit thickness", "N/mm")
-    elements_per_side: int = field(8, "structured elements along each edge of the panel")
-    element: ElementName = field("Q2P1", "element family: " + ", ".join(ELEMENTS))
-    bulk_modulus: float = field(400942.0, "bulk modulus of the displacement-only P1 family", "MPa")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+    shear_modulus: float = field(80.1938, "shear modulus μ = 2 c10 (neo-Hooke)", "MPa", group=PHYSICS)
+    load: float = field(100.0, "total shear force on the right edge per unit thickness", "N/mm",
+                        group=PHYSICS)
+    elements_per_side: int = field(8, "structured elements along each edge of the panel", group=GEOMETRY)
+    element: ElementName = field("Q2P1", "element family: " + ", ".join(ELEMENTS), group=GEOMETRY)
+    bulk_modulus: float = field(400942.0, "bulk modulus of the displacement-only P1 family", "MPa",
+                                group=PHYSICS)
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
+                               "Newton converges from the unloaded state, a failed step is cut)",
+                            group=SOLVER)
 
     RESOLUTION_KEY: ClassVar[str] = "elements_per_side"
 
@@ -140,6 +144,9 @@ def _boundary_conditions(V, panel):
 CORNER = (0.0, 12.0, 34.0, 46.0, -1.0, 2.0)  # the clamped top corner: steepest pressure
 
 
+PRESSURE = "pressure p (MPa)"  # the colour bar's title
+
+
 def pressure_picture(u, p, path: Path, title: str, clim=None, bounds=None) -> Path | None:
     """The pressure on the deformed panel seen from +z (rank 0 writes it), or on the
     part of it inside the reference ``bounds`` box. Constant pressures are drawn per
@@ -151,19 +158,19 @@ def pressure_picture(u, p, path: Path, title: str, clim=None, bounds=None) -> Pa
         shown = dolfinx.fem.Function(P1, name="displacement")
         shown.interpolate(u)
         n_cells = mesh.topology.index_map(3).size_local
-        grid = gather_grid(shown, cell_data={"p": p.x.array[:n_cells]})
+        grid = gather_grid(shown, cell_data={PRESSURE: p.x.array[:n_cells]})
     else:
         DG = dolfinx.fem.functionspace(mesh, ("DG", 1, (3,)))
         shown = dolfinx.fem.Function(DG, name="displacement")
         shown.interpolate(u)
-        scalar = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 1)), name="p")
+        scalar = dolfinx.fem.Function(dolfinx.fem.functionspace(mesh, ("DG", 1)), name=PRESSURE)
         scalar.interpolate(dolfinx.fem.Expression(p, scalar.function_space.element.interpolation_points))
-        grid = gather_grid(shown, point_data={"p": scalar})
+        grid = gather_grid(shown, point_data={PRESSURE: scalar})
     if grid is None:
         return None
     if bounds is not None:
         grid = grid.clip_box(bounds, invert=False)
-    render_png(grid, path, scalars="p", warp="displacement", title=title, camera="xy",
+    render_png(grid, path, scalars=PRESSURE, warp="displacement", title=title, camera="xy",
                clim=clim, show_undeformed=False, cmap="coolwarm")
     return path
 

@@ -25,7 +25,7 @@ from mpi4py import MPI
 
 from eyemech.forms.shell import Kinematics
 from eyemech.problems.run.context import RunOptions
-from eyemech.problems.run.parameters import field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.hemisphere import HemisphereParameters, run_hemisphere
 
@@ -46,10 +46,11 @@ SZE_MAX_FORCE = 400.0
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(HemisphereParameters):
-    force: float = field(SZE_MAX_FORCE, "each point load at the end of the path (whole shell)", "N")
-    divisions: int = field(16, "divisions from the equator to the hole (5× as many around)")
-    kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
-    load_steps: int = field(20, "initial number of load steps (cut and grown as needed)")
+    force: float = field(SZE_MAX_FORCE, "each point load at the end of the path (whole shell)", "N",
+                         group=PHYSICS)
+    divisions: int = field(16, "divisions from the equator to the hole (5× as many around)", group=GEOMETRY)
+    kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear", group=PHYSICS)
+    load_steps: int = field(20, "initial number of load steps (cut and grown as needed)", group=SOLVER)
 
 
 def sze_reference(force: float) -> tuple[float, float]:

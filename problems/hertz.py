@@ -48,7 +48,8 @@ from eyemech.problems.contact.rigid import (
     surface_integral,
 )
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.output import picture_metadata
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs, symmetry_bcs
 from eyemech.problems.solve.augmentation import Augmentation
@@ -61,29 +62,34 @@ CONTACT_QUADRATURE = {"quadrature_degree": 6}
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    radius: float = field(1.0, "radius of the ball", "mm")
-    youngs_modulus: float = field(1.0, "Young's modulus E", "MPa")
-    poisson_ratio: float = field(0.3, "Poisson's ratio ν", "")
-    indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm")
-    penalty: float = field(30.0, "penalty factor: α = penalty · E / mesh_size", "")
-    resolution: float = field(2.6, "cells per contact radius a = √(R d) in the contact zone", "")
-    far_resolution: float = field(4.0, "cells per ball radius away from the contact zone", "")
-    mesh_size: float = field(0.0, "element size in the contact zone; 0 = √(R d) / resolution", "mm")
-    far_size: float = field(0.0, "element size away from the contact zone; 0 = radius / far_resolution", "mm")
-    max_cells: int = field(100_000, "refuse a mesh estimated above this many cells (before meshing)")
-    initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm")
-    load_steps: int = field(2, "initial number of load steps (cut and grown as needed)")
+    radius: float = field(1.0, "radius of the ball", "mm", group=GEOMETRY)
+    youngs_modulus: float = field(1.0, "Young's modulus E", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.3, "Poisson's ratio ν", "", group=PHYSICS)
+    indentation: float = field(0.001, "approach d of the plane towards the ball's centre", "mm",
+                               group=PHYSICS)
+    penalty: float = field(30.0, "penalty factor: α = penalty · E / mesh_size", "", group=SOLVER)
+    resolution: float = field(2.6, "cells per contact radius a = √(R d) in the contact zone", "",
+                              group=GEOMETRY)
+    far_resolution: float = field(4.0, "cells per ball radius away from the contact zone", "", group=GEOMETRY)
+    mesh_size: float = field(0.0, "element size in the contact zone; 0 = √(R d) / resolution", "mm",
+                             group=GEOMETRY)
+    far_size: float = field(0.0, "element size away from the contact zone; 0 = radius / far_resolution", "mm",
+                            group=GEOMETRY)
+    max_cells: int = field(100_000, "refuse a mesh estimated above this many cells (before meshing)",
+                           group=GEOMETRY)
+    initial_gap: float = field(0.0, "distance of the plane below the ball at the start", "mm", group=GEOMETRY)
+    load_steps: int = field(2, "initial number of load steps (cut and grown as needed)", group=SOLVER)
     contact_method: Literal["penalty", "augmented-lagrangian"] = field(
         "penalty", "penalty: p = α⟨−g⟩; augmented-lagrangian: p = ⟨λ − α g⟩ with multipliers λ at "
         "the ball's surface nodes, updated after every converged load step (Uzawa) until they "
         "change by less than augmentation_tolerance: at factor 3 the penetration 460× below the "
         "penalty's, the force 0.24 % above factor 300's (the nodal constraint against the "
-        "penalty's Gauss points; docs/contact.md §4b)")
+        "penalty's Gauss points; docs/contact.md §4b)", group=SOLVER)
     augmentation_tolerance: float = field(
         0.01, "augmented-lagrangian: a step is done when its multipliers change by at most this "
-        "fraction (‖λ_new − λ‖/‖λ_new‖)")
+        "fraction (‖λ_new − λ‖/‖λ_new‖)", group=SOLVER)
     max_augmentations: int = field(20, "augmented-lagrangian: multiplier updates per load step "
-                                   "at most (the step is then accepted)")
+                                   "at most (the step is then accepted)", group=SOLVER)
 
     def validate(self) -> None:
         self.require_positive("radius", "youngs_modulus", "indentation", "penalty", "resolution",
@@ -175,26 +181,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                         tolerance=params.augmentation_tolerance,
                                         max_updates=params.max_augmentations)
 
-        force_z = resultant_force(plane, u, alpha, ds_contact, multiplier=lam)[2]
-        pressure = contact.contact_pressure(plane, u, alpha, multiplier=lam)
-        X = ufl.SpatialCoordinate(mesh)
-        moment = surface_integral(pressure * (X[0] ** 2 + X[1] ** 2), ds_contact)
-        total = surface_integral(pressure, ds_contact)
-        symmetry = 4.0  # quarter model
-
-        def quantities(depth: float) -> dict[str, float]:
-            p_total = total()
-            radius = float(np.sqrt(2.5 * moment() / p_total)) if p_total > 0 else 0.0
-            force = symmetry * force_z()
-            exact = hertz_force(params, depth)
-            values = {"contact_force": force, "contact_radius": radius,
-                      "max_penetration": penetration(), "indentation": depth,
-                      "hertz_force": exact, "hertz_radius": float(np.sqrt(R * depth))}
-            if exact > 0:
-                values["force_error"] = force / exact - 1.0
-                values["radius_error"] = radius / values["hertz_radius"] - 1.0
-            return values
-
+        quantities = _quantities(params, plane, u, alpha, lam, ds_contact, penetration)
         writer = ctx.field_writer([u])
         writer.write(0.0)
 
@@ -204,7 +191,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def converged(record) -> None:
             depth = record.load * params.indentation
             ctx.record_step(step=record.step, load_factor=record.load, newton_iterations=record.iterations,
-                            cuts=record.cuts, **record.counts(), residuals=record.residuals, **quantities(depth))
+                            cuts=record.cuts, **record.counts(), residuals=record.residuals,
+                            **quantities(depth))
             with ctx.timings("output"):
                 writer.write(record.load)
 
@@ -230,6 +218,34 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
     return ctx.result
 
 
+def _quantities(params: Parameters, plane: contact.Plane, u, alpha, lam, ds_contact,
+                penetration: NodalPenetration):
+    """quantities(depth): the contact force and radius of the whole ball (4 quarters), the
+    largest penetration and Hertz's force and radius at the indentation ``depth``. The
+    radius from the pressure's second moment: a² = (5/2) ∫ p r² / ∫ p for Hertz's p."""
+    force_z = resultant_force(plane, u, alpha, ds_contact, multiplier=lam)[2]
+    pressure = contact.contact_pressure(plane, u, alpha, multiplier=lam)
+    X = ufl.SpatialCoordinate(u.function_space.mesh)
+    moment = surface_integral(pressure * (X[0] ** 2 + X[1] ** 2), ds_contact)
+    total = surface_integral(pressure, ds_contact)
+    symmetry = 4.0  # quarter model
+
+    def quantities(depth: float) -> dict[str, float]:
+        p_total = total()
+        radius = float(np.sqrt(2.5 * moment() / p_total)) if p_total > 0 else 0.0
+        force = symmetry * force_z()
+        exact = hertz_force(params, depth)
+        values = {"contact_force": force, "contact_radius": radius,
+                  "max_penetration": penetration(), "indentation": depth,
+                  "hertz_force": exact, "hertz_radius": float(np.sqrt(params.radius * depth))}
+        if exact > 0:
+            values["force_error"] = force / exact - 1.0
+            values["radius_error"] = radius / values["hertz_radius"] - 1.0
+        return values
+
+    return quantities
+
+
 def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, params: Parameters) -> None:
     """Contact pressure α⟨−g⟩ at the surface nodes against Hertz's p0 (1 − r²/a²)^½."""
     X = penetration.values.function_space.tabulate_dof_coordinates()[penetration.nodes]
@@ -243,7 +259,7 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from eyemech.problems.studies._common import stamp
+    from eyemech.problems.run.results import stamp
 
     r = np.concatenate([g[0] for g in gathered])
     p = np.concatenate([g[1] for g in gathered])
@@ -264,7 +280,8 @@ def _picture(penetration: NodalPenetration, alpha: float, ctx: RunContext, param
     fig.text(0.01, 0.01, stamp(), fontsize=5, color="grey")
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     path = ctx.out / "hertz.png"
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, metadata=picture_metadata(ctx.result.scene, ctx.result.parameters,
+                                                         ax.get_title()))
     plt.close(fig)
     ctx.result.pictures.append(path.name)
 

@@ -15,7 +15,7 @@ from eyemech.problems.lens.fold import FoldParameters, fold, self_contact_kind
 from eyemech.problems.lens.model import LensShell, save_state, write_animation
 from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import field
+from eyemech.problems.run.parameters import GEOMETRY, field
 from eyemech.problems.run.scene import Scene
 
 
@@ -25,7 +25,8 @@ class Parameters(FoldParameters):
 
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle of iol-speed: the same roll, chamber and ipctk self-contact on "
-                                    "its vertices and triangles, the same pictures and .vtu frames)")
+                                    "its vertices and triangles, the same pictures and .vtu frames)",
+                         group=GEOMETRY)
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
@@ -74,7 +75,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     with ctx.timings("time_stepping"):
         folded, history = fast_injection.fold(params, lens, ctx.record_step, frames)
     ctx.result.quantities.update(model=params.model, **fast_injection.quantities(history, params),
-                                 triangles=len(lens.shell.tri), nodes=len(lens.shell.X), dofs=lens.shell.n_dofs)
+                                 triangles=len(lens.shell.tri), nodes=len(lens.shell.X),
+                                 dofs=lens.shell.n_dofs)
     if ctx.out is not None and ctx.rank0:
         fast_injection.save_state(ctx.out / "folded_state.npz", lens, folded)
         ctx.result.fields.append("folded_state.npz")

@@ -53,7 +53,7 @@ from eyemech.problems.lens.models import MODELS, Model
 from eyemech.problems.lens.push import PlungerMotion, axial_fluid_speed
 from eyemech.problems.lens.time_error import step_error
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure, Stepping, follow_path
 from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
@@ -64,44 +64,53 @@ class Parameters(FoldParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle of iol-speed: the same walls, plunger, fluid, friction and "
                                     "ipctk self-contact on its vertices and triangles, the same pictures and "
-                                    ".vtu frames)")
-    folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)")
-    fold_seed: Literal["p2", "p1"] = field("p2", "model=p2-c0ip with folded_state='': the model that folds the "
-                                                 "lens (p1: the rotation-free P1 fold, seconds instead of "
-                                                 "minutes, its vertices and the patch quadratics at the edge "
-                                                 "midpoints as the P2 lens' folded state; docs/iol.md §4b)")
-    plunger_speed: float = field(40.0, "plunger speed", "mm/s")
-    plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm")
-    settle_time: float = field(0.2, "time after the plunger stops", "s")
-    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
-    linearised: bool = field(False, "one linearised implicit solve per step (SOFA style) instead of Newton")
+                                    ".vtu frames)", group=GEOMETRY)
+    folded_state: str = field("", "folded_state.npz of an iol-fold run ('' = fold first)", group=SOLVER)
+    fold_seed: Literal["p2", "p1"] = field(
+        "p2", "model=p2-c0ip with folded_state='': the model that folds the lens (p1: the rotation-free P1 "
+              "fold, seconds instead of minutes, its vertices and the patch quadratics at the edge midpoints "
+              "as the P2 lens' folded state; docs/iol.md §4b)", group=SOLVER)
+    plunger_speed: float = field(40.0, "plunger speed", "mm/s", group=PHYSICS)
+    plunger_overshoot: float = field(1.0, "how far the plunger face goes past the nozzle tip", "mm",
+                                     group=PHYSICS)
+    settle_time: float = field(0.2, "time after the plunger stops", "s", group=PHYSICS)
+    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES), group=SOLVER)
+    linearised: bool = field(False, "one linearised implicit solve per step (SOFA style) instead of Newton",
+                             group=SOLVER)
     jacobian_lag: int = field(1, "reuse the Jacobian and its factorisation for this many Newton "
-                                 "iterations, across steps (1 = full Newton)")
+                                 "iterations, across steps (1 = full Newton)", group=SOLVER)
     contact: bool = field(True, "rigid contact on; false: the folded lens unfolds in free space "
-                                "(the deformation-only speed)")
-    frames_every: int = field(1, "at least this many steps between two frames (PNG + .vtu)")
+                                "(the deformation-only speed)", group=PHYSICS)
+    frames_every: int = field(1, "at least this many steps between two frames (PNG + .vtu)", group=SOLVER)
     frame_interval: float = field(0.01, "a frame (PNG + .vtu) each time the simulated time has advanced this "
-                                        "much since the last one (0: every frames_every steps)", "s")
+                                        "much since the last one (0: every frames_every steps)", "s",
+                                  group=SOLVER)
     fluid_carried: bool = field(True, "the damping acts on the lens' velocity relative to the viscoelastic "
                                       "fluid, which the plunger drives through the bore (false: relative to "
-                                      "rest: a drag that crushes the trailing haptic, docs/iol.md)")
-    plunger_engages: Literal["optic", "lens"] = field("optic", "what the plunger head pushes: 'optic' (the trailing haptic lies "
-                                          "beside the plunger tip, as loading instructions ask) or 'lens' "
-                                          "(every node: the trailing haptic is crushed)")
-    jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm")
+                                      "rest: a drag that crushes the trailing haptic, docs/iol.md)",
+                                group=PHYSICS)
+    plunger_engages: Literal["optic", "lens"] = field(
+        "optic", "what the plunger head pushes: 'optic' (the trailing haptic lies beside the plunger tip, "
+                 "as loading instructions ask) or 'lens' (every node: the trailing haptic is crushed)",
+        group=PHYSICS)
+    jet_length: float = field(2.0, "decay length of the fluid's jet beyond the nozzle tip", "mm",
+                              group=PHYSICS)
     fold_cache: bool = field(True, "with folded_state='': reuse a fold made earlier with the same lens and "
                                    "fold parameters and the same code, from the user's cache folder "
-                                   "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold")
+                                   "($XDG_CACHE_HOME or ~/.cache)/eyemech/iol-fold; false: always fold",
+                             group=SOLVER)
     capsule_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the capsular bag (lagged, "
-                                         "smoothed over friction_slip; 0 = frictionless)")
-    cartridge_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the cartridge bore and nozzle "
-                                           "(0: a coated cartridge lubricated by viscoelastic)")
-    injector_twist: float = field(0.0, "the surgeon turns the injector about its axis by this angle during the "
-                                       "push, in step with the plunger's travel (right-handed about the push "
-                                       "direction); the round bore drags the lens round only through "
-                                       "cartridge_friction", "deg")
+                                         "smoothed over friction_slip; 0 = frictionless)", group=PHYSICS)
+    cartridge_friction: float = field(0.0, "Coulomb coefficient μ of the lens on the cartridge bore and "
+                                           "nozzle (0: a coated cartridge lubricated by viscoelastic)",
+                                      group=PHYSICS)
+    injector_twist: float = field(0.0, "the surgeon turns the injector about its axis by this angle during "
+                                       "the push, in step with the plunger's travel (right-handed about the "
+                                       "push direction); the round bore drags the lens round only through "
+                                       "cartridge_friction", "deg", group=PHYSICS)
     start_ramp: float = field(0.0, "the plunger (and the fluid it drives) accelerates from rest to "
-                                    "plunger_speed over this time, linearly (0 = a jump to full speed)", "s")
+                                    "plunger_speed over this time, linearly (0 = a jump to full speed)", "s",
+                              group=PHYSICS)
 
     def validate(self) -> None:
         layout = InjectorLayout()
@@ -120,7 +129,8 @@ class Parameters(FoldParameters):
             refuse_on_p1(self, {"linearised": False, "jacobian_lag": 1, "scheme": "backward-euler",
                                 "fold_seed": "p2"})
         if self.fold_seed == "p1" and self.folded_state:
-            raise ParameterError("fold_seed", "fold_seed=p1 folds the lens; folded_state gives the fold: set one")
+            raise ParameterError("fold_seed", "fold_seed=p1 folds the lens; folded_state gives the fold: "
+                                              "set one")
         if self.plunger_speed * self.time_step > 0.5 * self.nozzle_radius:
             raise ParameterError("plunger_speed", f"{self.plunger_speed} mm/s moves the plunger "
                                  f"{self.plunger_speed * self.time_step:.3g} mm per step, more than half "
@@ -205,22 +215,23 @@ def seed_from_p1_fold(ctx: RunContext, params: Parameters, shell: LensShell) -> 
     # first step released that penalty force (1.3e-2 N, 4× the largest elastic residual)
     hooks: dict[str, list] = {"residual_hooks": [], "jacobian_hooks": []}
     if params.contact:
-        bore = NodalContact(shell.u, {"cartridge": InjectorLayout().cartridge(params)}, params.contact_stiffness,
-                            excluded=vertices)
+        bore = NodalContact(shell.u, {"cartridge": InjectorLayout().cartridge(params)},
+                            params.contact_stiffness, excluded=vertices)
         hooks = {"residual_hooks": [bore.residual_hook], "jacobian_hooks": [bore.jacobian_hook]}
     relax = NonlinearSolver(shell.residual(), shell.u, [dolfinx.fem.dirichletbc(held, vertices)],
                             jacobian=shell.jacobian(), options=lens_newton(ctx), timings=ctx.timings, **hooks)
     # the fold's layers are ≈ 0.03 mm apart and the midpoints move up to 0.07 mm: without the
     # barrier (and its CCD-limited updates) they relax through the other layer; the held
     # vertices' rows stay Dirichlet rows
-    self_contact = lens_self_contact(shell, params, excluded_dofs=(3 * vertices[:, None] + np.arange(3)).ravel())
+    held_dofs = (3 * vertices[:, None] + np.arange(3)).ravel()
+    self_contact = lens_self_contact(shell, params, excluded_dofs=held_dofs)
     if self_contact is not None:
         self_contact.check(what="the P2 lens on the P1 fold")
         self_contact.attach(relax)
     converged, iterations = relax.solve()
     if not converged:
-        raise SolveFailure(f"fold_seed=p1: the P2 edge midpoints on the P1 fold did not relax in {iterations} "
-                           "Newton iterations")
+        raise SolveFailure(f"fold_seed=p1: the P2 edge midpoints on the P1 fold did not relax in "
+                           f"{iterations} Newton iterations")
     ctx.result.quantities.update(fold_seed="p1", fold_steps=len(history.time), fold_wall_seconds=history.wall,
                                  fold_newton_iterations=int(sum(history.newton)),
                                  fold_self_intersecting=bool(any(history.intersecting)),
@@ -254,7 +265,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         with ctx.timings("folding"):
             folded, fold_history = fast_injection.fold(params, lens)
         q.update(fold_steps=len(fold_history.time), fold_wall_seconds=fold_history.wall,
-                 fold_newton_iterations=int(sum(fold_history.newton)), fold_step_cuts=int(sum(fold_history.cuts)),
+                 fold_newton_iterations=int(sum(fold_history.newton)),
+                 fold_step_cuts=int(sum(fold_history.cuts)),
                  fold_self_intersecting=bool(any(fold_history.intersecting)))
         if ctx.out is not None and ctx.rank0:
             fast_injection.save_state(ctx.out / "folded_state.npz", lens, folded)
@@ -264,7 +276,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     with ctx.timings("time_stepping"):
         injection.run()
     q.update(model=params.model, **injection.quantities(),
-             operation_wall_seconds=time.perf_counter() - begin - frames.seconds, frames_wall_seconds=frames.seconds)
+             operation_wall_seconds=time.perf_counter() - begin - frames.seconds,
+             frames_wall_seconds=frames.seconds)
     if ctx.out is not None and ctx.rank0:
         frames.finish("injection.gif")
 
@@ -385,7 +398,8 @@ class Injection:
         # the head fills the bore and more: a node sliding along the wall must not leave its reach
         self.plunger = Plunger(self.start, self.axis, params.bore_radius + 0.5)
         self.obstacles = {"cartridge": layout.cartridge(params, lip=layout.nozzle_lip),
-                          "plunger": self.plunger, "capsule": layout.capsule(params)} if params.contact else {}
+                          "plunger": self.plunger, "capsule": layout.capsule(params)} \
+            if params.contact else {}
         walls = {k: v for k, v in self.obstacles.items() if k != "plunger"}
         self.contact = NodalContact(shell.u, walls, params.contact_stiffness, slip=params.friction_slip,
                                     friction={"capsule": params.capsule_friction,

@@ -86,7 +86,7 @@ from eyemech.problems.lens.time_error import (
     validate_adaptive,
 )
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solve.time_integration import SCHEMES, ImplicitDynamics, SchemeName
 
@@ -102,43 +102,57 @@ PHASES = ("residual", "jacobian", "factorisation", "solve", "contact", "other")
 class Parameters(LensParameters):
     model: Model = field("p2-c0ip", "the lens model: " + " | ".join(MODELS) + " (the rotation-free P1 "
                                     "triangle: numba kernels, method=newton with jacobian=fresh or "
-                                    "lagged; contact=true: the capsule by nodal penalty; surface_contact=true: ipctk "
-                                    "self-contact on its triangles)")
+                                    "lagged; contact=true: the capsule by nodal penalty; "
+                                    "surface_contact=true: ipctk self-contact on its triangles)",
+                         group=GEOMETRY)
     surface_contact: bool = field(False, "p1-rotation-free: ipctk self-contact on the P1 triangles (barrier "
                                          "d̂ = self_contact_distance, κ = self_contact_stiffness, CCD-limited "
-                                         "updates, intersection check every step)")
-    bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient per "
-                                     "edge: consistent on every mesh) | patch (6-node quadratic fit: 2× faster, "
-                                     "too soft on alternating-diagonal meshes)")
-    method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS))
-    jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS))
-    refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps")
+                                         "updates, intersection check every step)", group=PHYSICS)
+    bending: Bending = field("edge", "p1-rotation-free's curvature: edge (Green formula with one gradient "
+                                     "per edge: consistent on every mesh) | patch (6-node quadratic fit: "
+                                     "2× faster, too soft on alternating-diagonal meshes)", group=GEOMETRY)
+    method: Method = field("newton", "how a step is solved: " + " | ".join(METHODS), group=SOLVER)
+    jacobian: JacobianKind = field("fresh", "the Jacobian of the linear solves: " + " | ".join(JACOBIANS),
+                                   group=SOLVER)
+    refresh: int = field(10, "lagged / matrix-free: a new Jacobian + factorisation every this many steps",
+                         group=SOLVER)
     stall: float = field(0.5, "lagged Newton: a new Jacobian when an iteration reduces the residual "
                               "by less than this factor (p1-rotation-free: fresh factors at every "
-                              "step's start, kept within the step while this holds)")
-    krylov_rtol: float = field(1e-3, "matrix-free: GMRES relative tolerance per Newton iteration")
-    krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed")
-    steps: int = field(30, "time steps per run")
-    time_step: float = field(0.01, "Δt (the paper: 0.01 s)", "s")
-    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES))
-    rtol: float = field(1e-6, "Newton: relative residual reduction per step")
-    atol: float = field(1e-11, "Newton: absolute residual (shell forces are ~1e-4 N; round-off ~1e-13)", "N")
-    max_iterations: int = field(25, "Newton iterations per step before the run is declared failed")
-    quadrature_degree: int = field(0, "quadrature degree of the shell integrals (0: 2 × degree)")
-    mesh_scale: float = field(1.0, "all lens mesh sizes (optic, haptic, junction) times this")
-    roll_radius: float = field(3.0, "the released lens starts rolled onto a cylinder of this radius", "mm")
-    contact: bool = field(False, "release it inside a rigid ellipsoidal capsule (penalty contact)")
-    capsule_semi_axes: tuple = field((5.6, 5.6, 2.6), "capsule semi-axes (x, y, z)", "mm")
-    tangent: Tangent = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative of "
-                                     "the residual: the same matrix, twice the compile and assembly time)")
+                              "step's start, kept within the step while this holds)", group=SOLVER)
+    krylov_rtol: float = field(1e-3, "matrix-free: GMRES relative tolerance per Newton iteration",
+                               group=SOLVER)
+    krylov_max_it: int = field(30, "matrix-free: GMRES iterations before the preconditioner is refreshed",
+                               group=SOLVER)
+    steps: int = field(30, "time steps per run", group=SOLVER)
+    time_step: float = field(0.01, "Δt (the paper: 0.01 s)", "s", group=SOLVER)
+    scheme: SchemeName = field("backward-euler", "time scheme: " + " | ".join(SCHEMES), group=SOLVER)
+    rtol: float = field(1e-6, "Newton: relative residual reduction per step", group=SOLVER)
+    atol: float = field(1e-11, "Newton: absolute residual (shell forces are ~1e-4 N; round-off ~1e-13)", "N",
+                        group=SOLVER)
+    max_iterations: int = field(25, "Newton iterations per step before the run is declared failed",
+                                group=SOLVER)
+    quadrature_degree: int = field(0, "quadrature degree of the shell integrals (0: 2 × degree)",
+                                   group=GEOMETRY)
+    mesh_scale: float = field(1.0, "all lens mesh sizes (optic, haptic, junction) times this", group=GEOMETRY)
+    roll_radius: float = field(3.0, "the released lens starts rolled onto a cylinder of this radius", "mm",
+                               group=PHYSICS)
+    contact: bool = field(False, "release it inside a rigid ellipsoidal capsule (penalty contact)",
+                          group=PHYSICS)
+    capsule_semi_axes: tuple = field((5.6, 5.6, 2.6), "capsule semi-axes (x, y, z)", "mm", group=GEOMETRY)
+    tangent: Tangent = field("explicit", "the Jacobian form: " + " | ".join(TANGENTS) + " (UFL's derivative "
+                                     "of the residual: the same matrix, twice the compile and assembly time)",
+                             group=SOLVER)
     native_kernels: bool = field(False, "compile the shell kernels with -O3 -march=native (≈ 20 % faster "
-                                        "Jacobian here; the JIT cache must then not be shared between CPU types)")
-    repeats: int = field(1, "runs of the same steps (the state is reset); steps/s is the best of them")
-    time_stepping: Literal["fixed", "adaptive"] = field("fixed", "fixed (Δt = time_step: the paper's step, at which the speed is measured) | "
-                                        "adaptive (the deformation-only release over steps × time_step with Δt "
-                                        "chosen by the time-error estimate: docs/iol.md §1)")
+                                        "Jacobian here; the JIT cache must then not be shared between CPU "
+                                        "types)", group=SOLVER)
+    repeats: int = field(1, "runs of the same steps (the state is reset); steps/s is the best of them",
+                         group=SOLVER)
+    time_stepping: Literal["fixed", "adaptive"] = field(
+        "fixed", "fixed (Δt = time_step: the paper's step, at which the speed is measured) | "
+                 "adaptive (the deformation-only release over steps × time_step with Δt "
+                 "chosen by the time-error estimate: docs/iol.md §1)", group=SOLVER)
     time_tolerance: float = field(0.01, "time_stepping=adaptive: allowed estimated displacement error at the "
-                                        "end of the release", "mm")
+                                        "end of the release", "mm", group=SOLVER)
 
     def validate(self) -> None:
         super().validate()
@@ -152,16 +166,16 @@ class Parameters(LensParameters):
                                  "(R(u_n)); the linearised step does not evaluate it: use method=newton")
         if self.model == "p1-rotation-free":
             if self.method != "newton" or self.jacobian not in ("fresh", "lagged"):
-                raise ParameterError("method", "model=p1-rotation-free runs method=newton with jacobian=fresh "
-                                     "or lagged (the other methods are the P2 model's)")
+                raise ParameterError("method", "model=p1-rotation-free runs method=newton with "
+                                     "jacobian=fresh or lagged (the other methods are the P2 model's)")
             if self.jacobian == "lagged" and not 0.0 < self.stall < 1.0:
                 raise ParameterError("stall", "model=p1-rotation-free, jacobian=lagged: a contraction factor "
                                      "between 0 and 1")
             if self.scheme != "backward-euler":
                 raise ParameterError("scheme", "model=p1-rotation-free integrates with backward-euler only")
         elif self.surface_contact:
-            raise ParameterError("surface_contact", "the P1 surface's self-contact is model=p1-rotation-free's "
-                                 "(the P2 lens' is iol-injection's)")
+            raise ParameterError("surface_contact", "the P1 surface's self-contact is "
+                                 "model=p1-rotation-free's (the P2 lens' is iol-injection's)")
         if len(self.capsule_semi_axes) != 3 or min(self.capsule_semi_axes) <= 0:
             raise ParameterError("capsule_semi_axes", "three positive semi-axes, mm")
         if self.roll_radius < 0.5 * self.overall_length / np.pi:
@@ -461,8 +475,9 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
             return release(params, steps, lens, stall=params.stall if params.jacobian == "lagged" else None,
                            self_contact=params.surface_contact, obstacles=obstacles)
         except RuntimeError as err:  # Newton did not converge within max_iterations
-            raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = {params.time_step:g} s "
-                                 f"from the released roll (Newton: {err}); take a smaller time_step") from err
+            raise ParameterError("time_step", f"model=p1-rotation-free cannot take Δt = "
+                                 f"{params.time_step:g} s from the released roll (Newton: {err}); take a "
+                                 "smaller time_step") from err
 
     with ctx.timings("form_compilation"):
         timed(1)
@@ -473,7 +488,8 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
     steps = params.steps
     history = best["history"]
     ctx.result.quantities.update(
-        model=params.model, bending=params.bending, method=params.method, jacobian=params.jacobian, steps=steps, repeats=len(runs),
+        model=params.model, bending=params.bending, method=params.method, jacobian=params.jacobian,
+        steps=steps, repeats=len(runs),
         steps_per_second=steps / best["wall"], steps_per_second_cpu=steps / min(r["cpu"] for r in runs),
         steps_per_second_all=[steps / r["wall"] for r in runs],
         cpu_seconds_per_step={k: v / steps for k, v in best["phases_cpu"].items()},
@@ -486,9 +502,10 @@ def _run_rotation_free(ctx: RunContext, params: Parameters) -> None:
         ctx.result.quantities.update(max_penetration_mm=max(history["penetration"], default=0.0),
                                      capsule_semi_axes_mm=obstacles["capsule"].semi_axes.tolist())
     if params.surface_contact:
+        closest = history["min_distance"] if np.isfinite(history["min_distance"]) \
+            else None  # None: no pair came within d̂
         ctx.result.quantities.update(intersecting_steps=history["intersecting"],
-                                     min_self_distance_mm=history["min_distance"] if np.isfinite(history["min_distance"])
-                                     else None)  # None: no pair came within d̂
+                                     min_self_distance_mm=closest)
 
 
 def _lens(params: Parameters) -> LensShell:

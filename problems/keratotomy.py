@@ -50,7 +50,15 @@ from eyemech.meshes import MeshError
 from eyemech.meshes.cornea import CorneaGeometry, bending_length, cell_count, cornea
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import displacement_grid, render_png
-from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import (
+    GEOMETRY,
+    MMHG,
+    PHYSICS,
+    SOLVER,
+    ParameterError,
+    SceneParameters,
+    field,
+)
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.limbus import Support, limbus_support, validate_support
 from eyemech.problems.solid.spaces import (
@@ -67,49 +75,53 @@ from eyemech.problems.solve.scalars import assemble_scalar
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
-    incisions: int = field(8, "number of radial incisions (0 = intact only)")
-    incision_depth: float = field(0.9, "incision depth, fraction of the local thickness")
-    optical_zone: float = field(3.0, "clear central zone diameter", "mm")
-    incision_end: float = field(5.35, "planform radius where the incisions stop", "mm")
-    iop_mmHg: float = field(15.0, "intra-ocular pressure on the posterior surface", "mmHg")
-    mu_inf: float = field(0.04, "equilibrium shear modulus μ∞", "MPa")
-    mu_v: float = field(0.03, "viscous-branch shear modulus μv", "MPa")
-    tau: float = field(3600.0, "relaxation time τ", "s")
-    t_end: float = field(4 * 3600.0, "end of the creep period", "s")
+    incisions: int = field(8, "number of radial incisions (0 = intact only)", group=PHYSICS)
+    incision_depth: float = field(0.9, "incision depth, fraction of the local thickness", group=PHYSICS)
+    optical_zone: float = field(3.0, "clear central zone diameter", "mm", group=PHYSICS)
+    incision_end: float = field(5.35, "planform radius where the incisions stop", "mm", group=PHYSICS)
+    iop_mmHg: float = field(15.0, "intra-ocular pressure on the posterior surface", "mmHg", group=PHYSICS)
+    mu_inf: float = field(0.04, "equilibrium shear modulus μ∞", "MPa", group=PHYSICS)
+    mu_v: float = field(0.03, "viscous-branch shear modulus μv", "MPa", group=PHYSICS)
+    tau: float = field(3600.0, "relaxation time τ", "s", group=PHYSICS)
+    t_end: float = field(4 * 3600.0, "end of the creep period", "s", group=PHYSICS)
     first_dt: float = field(300.0, "first time step (then growing); the output times are the "
-                            "grid first_dt, first_dt (1 + dt_growth), ... in both modes", "s")
+                            "grid first_dt, first_dt (1 + dt_growth), ... in both modes", "s", group=SOLVER)
     dt_growth: float = field(1.6, "growth factor of successive time steps (of output intervals "
-                             "in adaptive mode)")
+                             "in adaptive mode)", group=SOLVER)
     time_stepping: Literal["adaptive", "fixed"] = field(
         "adaptive", "adaptive: steps from the embedded BE/FE error estimate (module viscous_bar), "
-                    "landing on the output grid; fixed: the output grid is the time grid")
+                    "landing on the output grid; fixed: the output grid is the time grid", group=SOLVER)
     time_tolerance: float = field(1e-2, "adaptive mode: allowed relative stress error from the "
-                                        "time steps (embedded BE/FE estimate, module viscous_bar)")
-    max_steps: int = field(20000, "most time steps a creep run may take (adaptive or fixed)")
-    anterior_radius: float = field(7.8, "anterior radius of curvature", "mm")
-    posterior_radius: float = field(6.5, "posterior apical radius of curvature", "mm")
-    central_thickness: float = field(0.52, "central thickness", "mm")
-    limbal_thickness: float = field(0.67, "thickness at the limbus", "mm")
-    diameter: float = field(11.7, "planform diameter at the limbus", "mm")
+                                        "time steps (embedded BE/FE estimate, module viscous_bar)",
+                                  group=SOLVER)
+    max_steps: int = field(20000, "most time steps a creep run may take (adaptive or fixed)", group=SOLVER)
+    anterior_radius: float = field(7.8, "anterior radius of curvature", "mm", group=GEOMETRY)
+    posterior_radius: float = field(6.5, "posterior apical radius of curvature", "mm", group=GEOMETRY)
+    central_thickness: float = field(0.52, "central thickness", "mm", group=GEOMETRY)
+    limbal_thickness: float = field(0.67, "thickness at the limbus", "mm", group=GEOMETRY)
+    diameter: float = field(11.7, "planform diameter at the limbus", "mm", group=GEOMETRY)
     support: Support = field("clamped", "limbus support: clamped, or "
-                                                   "elastic (distributed springs standing in for the sclera)")
+                                                   "elastic (distributed springs standing in for the sclera)",
+                             group=PHYSICS)
     limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
-                                    "(≈ E_sclera / 5 mm)", "MPa/mm")
+                                    "(≈ E_sclera / 5 mm)", "MPa/mm", group=PHYSICS)
     resolution: float = field(2.0, "planform cells per bending length √(anterior_radius · "
                               "central_thickness) (2.0: 1.007 mm on the default cornea); sets the "
-                              "radial element size unless mesh_size is given")
+                              "radial element size unless mesh_size is given", group=GEOMETRY)
     mesh_size: float = field(0.0, "radial element size in the planform; 0 = √(anterior_radius · "
-                             "central_thickness) / resolution", "mm")
+                             "central_thickness) / resolution", "mm", group=GEOMETRY)
     max_cells: int = field(20_000, "refuse a mesh of more hexahedra than this (counted before "
-                           "meshing; 20,000 Q2P1 cells ≈ 0.6 M unknowns)")
-    azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))")
-    layers: int = field(2, "element layers through the thickness (at least)")
+                           "meshing; 20,000 Q2P1 cells ≈ 0.6 M unknowns)", group=GEOMETRY)
+    azimuthal_divisions: int = field(24, "elements around (rounded up to a multiple of lcm(8, incisions))",
+                                     group=GEOMETRY)
+    layers: int = field(2, "element layers through the thickness (at least)", group=GEOMETRY)
     geometry_degree: int = field(1, "cell geometry: 1 = trilinear (faceted) cells, 2 = 27-node "
-                                 "cells on the curved surfaces")
-    fit_diameter: float = field(3.0, "central zone of the anterior sphere fit", "mm")
-    element: Literal["Q2P1"] = field("Q2P1", "element family (hexahedra)")
+                                 "cells on the curved surfaces", group=GEOMETRY)
+    fit_diameter: float = field(3.0, "central zone of the anterior sphere fit", "mm", group=GEOMETRY)
+    element: Literal["Q2P1"] = field("Q2P1", "element family (hexahedra)", group=GEOMETRY)
     symmetry: Literal["full", "quarter"] = field("full", "mesh the whole cornea, or the quadrant "
-                                                 "x, y > 0 with symmetry planes (even incisions)")
+                                                 "x, y > 0 with symmetry planes (even incisions)",
+                                                 group=GEOMETRY)
 
     RESOLUTION_KEY: ClassVar[str] = "resolution"
 
@@ -192,7 +204,7 @@ class Cornea:
             residual += support
         self.residual_blocks = list(ufl.extract_blocks(residual))
         # the glassy shear modulus (the load step) scales the pressure Schur complement
-        self.iterative = params.linear_solver(material.mu_inf + material.mu_v, dx)
+        self.iterative = params.linear_solver(material.glassy_shear_modulus, dx)
         self._central_anterior(V, fdim, params.fit_diameter / 2)
         self.has_cuts = incisions > 0
         if self.has_cuts:
@@ -318,8 +330,8 @@ def _simulate(ctx: RunContext, body: Cornea, params: Parameters,
         accept(step.step, step.load, step.increment, step.iterations, step.cuts, step.residuals,
                body.history.time_error(), step.counts())
 
-    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=1.0,
-                                        max_step=1.0, min_step=1e-6, stops=outputs),
+    follow_path(solver, apply, Stepping(start=0.0, end=params.t_end, quantity="time", unit="s",
+                                        initial_step=1.0, max_step=1.0, min_step=1e-6, stops=outputs),
                 on_converged=converged, label=f"{label} creep", quiet=ctx.options.quiet,
                 checkpoints=ctx.checkpoints)
     return series, summary
@@ -373,7 +385,8 @@ def _picture(ctx: RunContext, body: Cornea, params: Parameters) -> None:
     path = ctx.out / "cornea.png"
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.3, -1.0, 1.4),
                title=f"{params.incisions} incisions, OZ {params.optical_zone:g} mm, "
-                     f"t = {params.t_end / 3600:g} h")
+                     f"t = {params.t_end / 3600:g} h",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

@@ -31,7 +31,7 @@ from eyemech.forms import (
 from eyemech.meshes import spherical_shell
 from eyemech.problems.reference import analytic
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.cavity import (
     SubstitutedCavity,
@@ -58,23 +58,27 @@ SYMMETRY = {"symmetry_x": 0, "symmetry_y": 1, "symmetry_z": 2}
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
     RESOLUTION_KEY: ClassVar[str] = "cells_across_wall"
-    inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm")
-    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
-    c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa")
+    inner_radius: float = field(10.0, "inner (cavity) radius of the unloaded sphere", "mm", group=GEOMETRY)
+    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm", group=GEOMETRY)
+    c10: float = field(0.05, "neo-Hookean constant of the wall, W = c10 (Ī1 - 3)", "MPa", group=PHYSICS)
     bulk_modulus: float = field(0.2, "liquid bulk modulus K (seed 002 uses 2083.3 for the "
                                 "vitreous; the default is soft so the wall and liquid share the load)",
-                                "MPa")
+                                "MPa", group=PHYSICS)
     initial_pressure: float = field(0.002, "liquid pressure P_ini at the stress-free cavity volume",
-                                    "MPa")
-    external_pressure: float = field(0.05, "external pressure on the outer surface (follower)", "MPa")
+                                    "MPa", group=PHYSICS)
+    external_pressure: float = field(0.05, "external pressure on the outer surface (follower)", "MPa",
+                                     group=PHYSICS)
     cells_across_wall: float = field(1.0, "elements across the wall thickness (outer − inner radius); "
-                                   "sets the element size unless mesh_size is given")
-    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
-    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
+                                   "sets the element size unless mesh_size is given", group=GEOMETRY)
+    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm",
+                             group=GEOMETRY)
+    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS), group=GEOMETRY)
     cavity_formulation: Literal["real", "substituted"] = field(
-        "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
-    cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid")
+        "real", "cavity pressure as a Real-space unknown, or substituted (dense wall block)", group=SOLVER)
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
+                               "Newton converges from the unloaded state, a failed step is cut)",
+                            group=SOLVER)
+    cavity_tag: str = field("cavity_wall", "facet tag of the wall enclosing the liquid", group=GEOMETRY)
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
@@ -89,9 +93,8 @@ class Parameters(SceneParameters, SolverChoice):
         if not self.outer_radius > self.inner_radius:
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius})")
         if self.element_size > self.outer_radius:
-            key = self.resolution_key()  # mesh_size when given, else cells_across_wall
-            raise ParameterError(key, f"gives elements of {self.element_size:.4g} mm, larger "
-                                 f"than the sphere (outer radius {self.outer_radius:g} mm)")
+            raise ParameterError(self.resolution_key(), f"gives an element size of "
+                                 f"{self.element_size:.3g} mm, larger than the sphere")
         for key in ("initial_pressure", "external_pressure"):
             if not np.isfinite(getattr(self, key)):
                 raise ParameterError(key, "must be finite")
@@ -131,7 +134,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     (("initial_volume", initial_volume), ("wall_area", wall_area),
                      ("bulk_modulus", params.bulk_modulus))}
         bcs = symmetry_bcs(u.function_space, shell, SYMMETRY)
-        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx)
+        law = NeoHooke(c10)
+        residual = (solid_residual(law, family, fields, tests, dx)
                     + follower_pressure(external, u, v, ds(shell.tag("outer"))))
         if real:
             P, qP = fields[-1], tests[-1]
@@ -146,24 +150,11 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             residual += follower_pressure(cavity.pressure, u, v, wall)
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
-                                 iterative=params.linear_solver(2 * c10, dx))
+                                 iterative=params.linear_solver(law.shear_modulus, dx))
         if cavity is not None:
             cavity.install(solver)
 
-        volume_form = dolfinx.fem.form(enclosed_volume(u, wall))
-        x = ufl.SpatialCoordinate(shell.mesh) + u
-        inner_mean = surface_mean(ufl.sqrt(ufl.dot(x, x)), wall)
-
-        def cavity_pressure() -> float:
-            if real:  # the one Real dof is owned by one rank
-                owned = P.function_space.dofmap.index_map.size_local
-                return float(ctx.comm.allreduce(float(np.sum(P.x.array[:owned])), op=MPI.SUM))
-            return cavity.current_pressure()
-
-        def quantities() -> dict[str, float]:
-            octant = assemble_scalar(volume_form, ctx.comm)
-            return {"cavity_pressure": cavity_pressure(), "inner_radius_deformed": inner_mean(),
-                    "cavity_volume": 8.0 * octant}
+        quantities = _quantities(ctx.comm, u, wall, fields[-1] if real else None, cavity)
 
         def apply(load: float, _increment: float) -> None:
             initial_pressure.value = load * params.initial_pressure
@@ -194,6 +185,27 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         q["seconds_per_newton_step"] = solve_seconds / max(1, newton["iterations"])
         _exact(q, params)
     return ctx.result
+
+
+def _quantities(comm: MPI.Comm, u, wall, P, cavity: SubstitutedCavity | None):
+    """The measured quantities of the state: cavity pressure (the Real unknown ``P``, or
+    the substituted cavity's), mean deformed inner radius, cavity volume (8 octants)."""
+    volume_form = dolfinx.fem.form(enclosed_volume(u, wall))
+    x = ufl.SpatialCoordinate(u.function_space.mesh) + u
+    inner_mean = surface_mean(ufl.sqrt(ufl.dot(x, x)), wall)
+
+    def cavity_pressure() -> float:
+        if P is not None:  # the one Real dof is owned by one rank
+            owned = P.function_space.dofmap.index_map.size_local
+            return float(comm.allreduce(float(np.sum(P.x.array[:owned])), op=MPI.SUM))
+        return cavity.current_pressure()
+
+    def quantities() -> dict[str, float]:
+        octant = assemble_scalar(volume_form, comm)
+        return {"cavity_pressure": cavity_pressure(), "inner_radius_deformed": inner_mean(),
+                "cavity_volume": 8.0 * octant}
+
+    return quantities
 
 
 def _exact(q: dict, params: Parameters) -> None:

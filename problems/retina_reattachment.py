@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import Literal
 
 import dolfinx
 import dolfinx.fem
@@ -34,7 +35,7 @@ from eyemech.meshes.contact_bodies import layered_caps
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import gather_grid, render_png
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.spaces import global_dofs
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
@@ -49,22 +50,28 @@ FACING = ("slave", "master")  # the soft layer's outer face, the stiff layer's i
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters):
-    inner_radius: float = field(10.0, "inner radius of the soft layer", "mm")
-    soft_thickness: float = field(0.2, "thickness of the soft layer (retina)", "mm")
-    gap: float = field(0.1, "initial gap between the layers", "mm")
-    stiff_thickness: float = field(0.3, "thickness of the stiff layer (choroid, sclera)", "mm")
-    half_angle: float = field(12.0, "polar half-angle of the caps", "deg")
-    soft_modulus: float = field(0.005, "Young's modulus of the soft layer", "MPa")
-    stiff_modulus: float = field(0.05, "Young's modulus of the stiff layer", "MPa")
-    poisson_ratio: float = field(0.3, "Poisson's ratio of both layers", "")
-    pressure: float = field(2e-5, "pressure on the soft layer's inner face", "MPa")
-    penalty: float = field(30.0, "penalty factor: α = penalty · soft_modulus / mesh_size", "")
-    smoothing: float = field(0.5, "penalty round-off width ε as a fraction of p/α (0 = plain kink)", "")
-    mesh_size: float = field(0.3, "element size", "mm")
-    degree: int = field(2, "displacement degree (1 or 2)")
-    load_steps: int = field(8, "initial number of load steps (cut and grown as needed)")
-    slave: str = field("slave", "facet region of the slave surface")
-    master: str = field("master", "facet region of the master surface")
+    inner_radius: float = field(10.0, "inner radius of the soft layer", "mm", group=GEOMETRY)
+    soft_thickness: float = field(0.2, "thickness of the soft layer (retina)", "mm", group=GEOMETRY)
+    gap: float = field(0.1, "initial gap between the layers", "mm", group=GEOMETRY)
+    stiff_thickness: float = field(0.3, "thickness of the stiff layer (choroid, sclera)", "mm",
+                                   group=GEOMETRY)
+    half_angle: float = field(12.0, "polar half-angle of the caps", "deg", group=GEOMETRY)
+    soft_modulus: float = field(0.005, "Young's modulus of the soft layer", "MPa", group=PHYSICS)
+    stiff_modulus: float = field(0.05, "Young's modulus of the stiff layer", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.3, "Poisson's ratio of both layers", "", group=PHYSICS)
+    pressure: float = field(2e-5, "pressure on the soft layer's inner face", "MPa", group=PHYSICS)
+    penalty: float = field(30.0, "penalty factor: α = penalty · soft_modulus / mesh_size", "", group=SOLVER)
+    smoothing: float = field(0.5, "penalty round-off width ε as a fraction of p/α (0 = plain kink)", "",
+                             group=SOLVER)
+    mesh_size: float = field(0.3, "element size", "mm", group=GEOMETRY)
+    degree: int = field(2, "displacement degree (1 or 2)", group=GEOMETRY)
+    load_steps: int = field(8, "initial number of load steps (cut and grown as needed)", group=SOLVER)
+    # the caps' two contact faces (meshes/contact_bodies.py::layered_caps); another facet
+    # region (the clamped "fixed" face) is no contact surface
+    slave: Literal["slave", "master"] = field("slave", "facet region of the slave surface",
+                                              group=GEOMETRY)
+    master: Literal["slave", "master"] = field("master", "facet region of the master surface",
+                                               group=GEOMETRY)
 
     def domain_volume(self) -> float:
         """The two quarter caps' volume (meshes/contact_bodies.py::layered_caps): gmsh's
@@ -131,9 +138,12 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         V = dolfinx.fem.functionspace(mesh, ("Lagrange", params.degree, (3,)))
         u, v = dolfinx.fem.Function(V, name="displacement"), ufl.TestFunction(V)
         dx = caps.dx(QUADRATURE)
-        energy = (compressible_neo_hooke(deformation_gradient(u), params.soft_modulus, params.poisson_ratio) * dx(caps.tag("soft"))
-                  + compressible_neo_hooke(deformation_gradient(u), params.stiff_modulus, params.poisson_ratio)
-                  * dx(caps.tag("stiff")))
+
+        def energy_density(youngs_modulus: float):
+            return compressible_neo_hooke(deformation_gradient(u), youngs_modulus, params.poisson_ratio)
+
+        energy = (energy_density(params.soft_modulus) * dx(caps.tag("soft"))
+                  + energy_density(params.stiff_modulus) * dx(caps.tag("stiff")))
         pressure = dolfinx.fem.Constant(mesh, 0.0)
         residual = ufl.derivative(energy, u, v) + follower_pressure(
             pressure, u, v, caps.ds(QUADRATURE)(caps.tag("pressure")))
@@ -159,8 +169,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         def converged(record) -> None:
             contact.search()
             ctx.record_step(step=record.step, load_factor=record.load, newton_iterations=record.iterations,
-                            cuts=record.cuts, **record.counts(), residuals=record.residuals, min_gap=contact.min_gap(),
-                            **contact.summary())
+                            cuts=record.cuts, **record.counts(), residuals=record.residuals,
+                            min_gap=contact.min_gap(), **contact.summary())
             with ctx.timings("output"):
                 writer.write(record.load)
 
@@ -206,12 +216,13 @@ def _picture(u, ctx: RunContext, params: Parameters) -> None:
     grid = gather_grid(u)
     if grid is None:
         return
-    grid.point_data["|u| (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
+    grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
     path = ctx.out / "retina-reattachment.png"
     # seen across the symmetry plane y = 0: the section shows the closed gap
-    render_png(grid, path, scalars="|u| (mm)", warp="displacement", camera=(0.0, -1.0, 0.0),
+    render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.0, -1.0, 0.0),
                show_undeformed=False,
-               title=f"retina-reattachment: gap {params.gap:g} mm closed by p = {params.pressure:g} MPa")
+               title=f"retina-reattachment: gap {params.gap:g} mm closed by p = {params.pressure:g} MPa",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

@@ -673,6 +673,7 @@ def _stepping(params: Parameters) -> Stepping:
     predicts = (True, True, True, params.settle_predictor == "secant")
     return Stepping(0.0, _span(params), initial_step=min(0.25 / _span(params), largest),
                     max_step=largest, stops=(1.0, 2.0, 3.0), stage_max_steps=tuple(stages),
+                    stage_names=("IOP", "buckling", "suturing", "settling")[:int(_span(params))],
                     stage_predicts=predicts[:int(_span(params))],
                     predictor=params.predictor, effort=params.step_effort,
                     hard_iterations=params.hard_step_effort or None)

@@ -23,7 +23,7 @@ from mpi4py import MPI
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
     Shell,
@@ -39,15 +39,16 @@ REFERENCE = 0.3024  # MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, ShellDiscretisation):
-    radius: float = field(25.0, "cylinder radius", "mm")
-    length: float = field(50.0, "roof length (between the diaphragms)", "mm")
-    half_angle: float = field(40.0, "half opening angle", "deg")
-    thickness: float = field(0.25, "shell thickness", "mm")
-    youngs_modulus: float = field(4.32e8, "Young's modulus", "MPa")
-    poisson_ratio: float = field(0.0, "Poisson's ratio")
-    gravity_load: float = field(90.0, "self weight per unit (reference) area, acting along -z", "MPa")
-    divisions: int = field(16, "squares along the length and around the arc")
-    kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear")
+    radius: float = field(25.0, "cylinder radius", "mm", group=GEOMETRY)
+    length: float = field(50.0, "roof length (between the diaphragms)", "mm", group=GEOMETRY)
+    half_angle: float = field(40.0, "half opening angle", "deg", group=GEOMETRY)
+    thickness: float = field(0.25, "shell thickness", "mm", group=GEOMETRY)
+    youngs_modulus: float = field(4.32e8, "Young's modulus", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.0, "Poisson's ratio", group=PHYSICS)
+    gravity_load: float = field(90.0, "self weight per unit (reference) area, acting along -z", "MPa",
+                                group=PHYSICS)
+    divisions: int = field(16, "squares along the length and around the arc", group=GEOMETRY)
+    kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear", group=PHYSICS)
 
     RESOLUTION_KEY: ClassVar[str] = "divisions"
 
@@ -90,7 +91,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                                      dofs=shell.dofs())
         if ctx.pictures:
             with ctx.timings("output"):
-                picture(shell.u, ctx, "scordelis-lo", "-u_z", lambda d: -d[:, 2], scale=10.0)
+                picture(shell.u, ctx, "scordelis-lo", "-u_z (mm)", lambda d: -d[:, 2], scale=10.0)
     return ctx.result
 
 

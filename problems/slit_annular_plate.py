@@ -38,7 +38,7 @@ from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
     Shell,
@@ -61,16 +61,16 @@ SZE_MAX_LINE_LOAD = 0.8
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, ShellDiscretisation):
     line_load: float = field(SZE_MAX_LINE_LOAD, "vertical line load on the free slit edge at the "
-                                                "end of the path (per unit length)", "N/mm")
-    inner_radius: float = field(6.0, "inner radius", "mm")
-    outer_radius: float = field(10.0, "outer radius", "mm")
-    thickness: float = field(0.03, "plate thickness", "mm")
-    youngs_modulus: float = field(21e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa")
-    poisson_ratio: float = field(0.0, "Poisson's ratio")
-    divisions: int = field(48, "squares around the ring")
-    radial_divisions: int = field(6, "squares across the ring")
-    kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear")
-    load_steps: int = field(20, "initial number of load steps (cut and grown as needed)")
+                                                "end of the path (per unit length)", "N/mm", group=PHYSICS)
+    inner_radius: float = field(6.0, "inner radius", "mm", group=GEOMETRY)
+    outer_radius: float = field(10.0, "outer radius", "mm", group=GEOMETRY)
+    thickness: float = field(0.03, "plate thickness", "mm", group=GEOMETRY)
+    youngs_modulus: float = field(21e6, "Young's modulus (Sze, Liu & Lo 2004)", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.0, "Poisson's ratio", group=PHYSICS)
+    divisions: int = field(48, "squares around the ring", group=GEOMETRY)
+    radial_divisions: int = field(6, "squares across the ring", group=GEOMETRY)
+    kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear", group=PHYSICS)
+    load_steps: int = field(20, "initial number of load steps (cut and grown as needed)", group=SOLVER)
 
     RESOLUTION_KEY: ClassVar[str] = "divisions"
 

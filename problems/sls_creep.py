@@ -20,7 +20,8 @@ from mpi4py import MPI
 
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.output import picture_metadata
+from eyemech.problems.run.parameters import PHYSICS, SOLVER, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.viscous_bar import (
     BarParameters,
@@ -34,9 +35,9 @@ from eyemech.problems.solve.driver import NonlinearSolver
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(BarParameters):
-    stress: float = field(0.003, "axial Cauchy stress applied at t = 0 and held", "MPa")
-    t_end: float = field(800.0, "end time (4 retardation times at the defaults)", "s")
-    dt: float = field(2.0, "time step (fixed mode; the first step in adaptive mode)", "s")
+    stress: float = field(0.003, "axial Cauchy stress applied at t = 0 and held", "MPa", group=PHYSICS)
+    t_end: float = field(800.0, "end time (4 retardation times at the defaults)", "s", group=PHYSICS)
+    dt: float = field(2.0, "time step (fixed mode; the first step in adaptive mode)", "s", group=SOLVER)
 
     def validate(self) -> None:
         super().validate()
@@ -44,7 +45,7 @@ class Parameters(BarParameters):
             raise ParameterError("stress", f"must be finite and nonzero, got {self.stress!r}")
         # incompressible neo-Hooke in uniaxial tension has no limit point, but a glassy
         # stretch beyond ~3 or a compression below ~0.5 is outside what this bar is for
-        glassy = self.stress / (self.mu_inf + self.mu_v)
+        glassy = self.stress / self.material.glassy_shear_modulus
         if not -1.0 < glassy < 8.0:
             raise ParameterError("stress", f"{self.stress} MPa gives σ/(μ∞+μv) = {glassy:.3g}: "
                                  "outside (−1, 8), the range this benchmark is meant for")
@@ -94,9 +95,11 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 def _picture(ctx: RunContext, params: Parameters, times, strains) -> None:
     path = ctx.out / "axial_strain.png"
     sls = reference.sls_creep_strain(times, params.stress, params.mu_inf, params.mu_v, params.tau)
-    plot_history(path, times, strains, sls, "axial strain λ − 1",
-                 f"creep at σ = {params.stress:g} MPa, τc = {params.material.retardation_time:g} s, "
-                 f"{_steps(params)}", reference_label="standard linear solid (small strain)")
+    title = (f"creep at σ = {params.stress:g} MPa, τc = {params.material.retardation_time:g} s, "
+             f"{_steps(params)}")
+    plot_history(path, times, strains, sls, "axial strain λ − 1 (1)", title,
+                 reference_label="standard linear solid (small strain)",
+                 metadata=picture_metadata(ctx.result.scene, ctx.result.parameters, title))
     ctx.result.pictures.append(path.name)
 
 

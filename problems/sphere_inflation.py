@@ -26,7 +26,7 @@ from eyemech.problems.run.output import (
     gather_grid,
     render_png,
 )
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.mean_dilatation import MeanDilatation
 from eyemech.problems.solid.residual import solid_residual
@@ -53,22 +53,25 @@ from eyemech.problems.solve.scalars import assemble_scalar
 @dataclasses.dataclass(frozen=True)
 class Parameters(SceneParameters, SolverChoice):
     RESOLUTION_KEY: ClassVar[str] = "cells_across_wall"
-    inner_radius: float = field(10.0, "inner radius of the unloaded sphere", "mm")
-    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm")
-    c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa")
-    pressure: float = field(0.01, "internal pressure (follower load)", "MPa")
+    inner_radius: float = field(10.0, "inner radius of the unloaded sphere", "mm", group=GEOMETRY)
+    outer_radius: float = field(12.0, "outer radius of the unloaded sphere", "mm", group=GEOMETRY)
+    c10: float = field(0.05, "neo-Hookean constant, W = c10 (I1 - 3)", "MPa", group=PHYSICS)
+    pressure: float = field(0.01, "internal pressure (follower load)", "MPa", group=PHYSICS)
     cells_across_wall: float = field(2.0, "elements across the wall thickness (outer − inner radius); "
-                                   "sets the element size unless mesh_size is given")
-    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm")
-    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS))
+                                   "sets the element size unless mesh_size is given", group=GEOMETRY)
+    mesh_size: float = field(0.0, "target element size; 0 = wall thickness / cells_across_wall", "mm",
+                             group=GEOMETRY)
+    element: ElementName = field("P2P1", "element family: " + ", ".join(ELEMENTS), group=GEOMETRY)
     bulk_modulus: float = field(100.0, "bulk modulus of the displacement-only P1 family "
                                 "(U = K/4 (J² − 1 − 2 ln J)) and of Q1P0 with dg0_pressure = condensed "
-                                "(U = K/2 (J̄ − 1)²); unused by the mixed families", "MPa")
+                                "(U = K/2 (J̄ − 1)²); unused by the mixed families", "MPa", group=PHYSICS)
     dg0_pressure: Literal["mixed", "condensed"] = field(
         "mixed", "Q1P0's DG0 pressure: mixed (an unknown per cell, exactly incompressible) or "
                  "condensed (eliminated cell by cell, p = K (J̄ − 1): the mean-dilatation method, "
-                 "O(μ/K) from mixed; docs/hyperelastic.md)")
-    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: Newton converges from the unloaded state, a failed step is cut)")
+                 "O(μ/K) from mixed; docs/hyperelastic.md)", group=GEOMETRY)
+    load_steps: int = field(1, "initial number of load steps; 1 = the whole load at once (a smooth problem: "
+                               "Newton converges from the unloaded state, a failed step is cut)",
+                            group=SOLVER)
 
     def validate(self) -> None:
         self.require_positive("inner_radius", "c10", "cells_across_wall", "load_steps", "bulk_modulus")
@@ -80,9 +83,8 @@ class Parameters(SceneParameters, SolverChoice):
             raise ParameterError("outer_radius", f"must exceed inner_radius ({self.inner_radius}), "
                                  f"got {self.outer_radius}")
         if self.element_size > self.outer_radius:
-            key = self.resolution_key()  # mesh_size when given, else cells_across_wall
-            raise ParameterError(key, f"gives elements of {self.element_size:.4g} mm, larger "
-                                 f"than the sphere (outer radius {self.outer_radius:g} mm)")
+            raise ParameterError(self.resolution_key(), f"gives an element size of "
+                                 f"{self.element_size:.3g} mm, larger than the sphere")
         if not np.isfinite(self.pressure):
             raise ParameterError("pressure", "must be finite")
 
@@ -123,12 +125,13 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         bcs = symmetry_bcs(u.function_space, shell, {"symmetry_x": 0, "symmetry_y": 1,
                                                      "symmetry_z": 2})
         mean_dilatation = MeanDilatation(u, bulk_modulus, dx, bcs) if condensed else None
-        residual = (solid_residual(NeoHooke(c10), family, fields, tests, dx, bulk_modulus,
+        law = NeoHooke(c10)
+        residual = (solid_residual(law, family, fields, tests, dx, bulk_modulus,
                                    condensed_pressure=getattr(mean_dilatation, "pressure", None))
                     + follower_pressure(pressure, u, v, ds(shell.tag("cavity_wall"))))
         solver = NonlinearSolver(list(ufl.extract_blocks(residual)), fields, bcs,
                                  options=ctx.options.newton, timings=ctx.timings,
-                                 iterative=params.linear_solver(2 * c10, dx),
+                                 iterative=params.linear_solver(law.shear_modulus, dx),
                                  auto_factorisation=auto_factorisation(params.element))
         if mean_dilatation is not None:
             solver.state_hooks.append(mean_dilatation.update)
@@ -146,30 +149,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
                     "cavity_volume": assemble_scalar(volume_form, ctx.comm)}
 
         u.name = "displacement"
-        writer = ctx.field_writer([u])
         pressure_field = mean_dilatation.pressure if condensed else fields[1] if len(fields) > 1 else None
-        pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
-        writer_p = ctx.field_writer([view for view, _ in pressure_out])
-        series = ctx.pyvista_series()
-        # pressure on the displacement's nodes, for pyvista (one grid, one space); made only
-        # when fields are written (a function space costs ≈ 0.05 s at h = 1)
-        nodal_pressure = dolfinx.fem.Function(dolfinx.fem.functionspace(
-            shell.mesh, ("Lagrange", family.displacement_degree)), name="pressure") \
-            if ctx.field_dir is not None else None
-
-        def write_state(load: float) -> None:
-            with ctx.timings("output"):
-                for _, update in pressure_out:
-                    update()
-                writer.write(load)
-                writer_p.write(load)
-                if ctx.field_dir is not None:
-                    extra = {}
-                    for view, _ in pressure_out:
-                        nodal_pressure.interpolate(view)
-                        extra["pressure"] = nodal_pressure
-                    series.write(load, gather_grid(u, extra))
-
+        write_state, close_fields = _field_output(ctx, shell, family, u, pressure_field)
         write_state(0.0)
 
         def apply(load: float, _increment: float) -> None:
@@ -191,25 +172,62 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             ctx.result.quantities.update(quantities())
             raise
         finally:
-            writer.close()
-            writer_p.close()
-            ctx.result.fields = writer.files + writer_p.files + series.files
+            ctx.result.fields = close_fields()
         ctx.result.quantities.update(quantities())
         ctx.result.quantities["jacobian_nonzeros"] = solver.jacobian_nonzeros()
         ctx.result.quantities["dofs"] = global_dofs(*fields)
-        try:
-            exact = analytic.sphere_inner_radius(params.pressure, params.inner_radius,
-                                                 params.outer_radius, params.c10)
-            ctx.result.quantities["inner_radius_exact"] = exact
-            ctx.result.quantities["inner_radius_error"] = (
-                ctx.result.quantities["inner_radius_deformed"] / exact - 1.0)
-            ctx.result.quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
-        except ValueError:
-            pass
+        _compare_with_exact(ctx.result.quantities, u, shell, params)
         if ctx.pictures:
             with ctx.timings("output"):
                 _picture(u, ctx, params)
     return ctx.result
+
+
+def _field_output(ctx: RunContext, shell, family, u, pressure_field):
+    """(write_state(load), close() -> files): the displacement and the pressure as VTX
+    fields, and both on the displacement's nodes as the pyvista series."""
+    writer = ctx.field_writer([u], pvd=False)  # VTX on request; state.pvd below
+    pressure_out = [lagrange_view(pressure_field, "pressure")] if pressure_field is not None else []
+    writer_p = ctx.field_writer([view for view, _ in pressure_out], pvd=False)
+    series = ctx.pyvista_series()
+    # pressure on the displacement's nodes, for pyvista (one grid, one space); made only
+    # when fields are written (a function space costs ≈ 0.05 s at h = 1)
+    nodal_pressure = dolfinx.fem.Function(dolfinx.fem.functionspace(
+        shell.mesh, ("Lagrange", family.displacement_degree)), name="pressure") \
+        if ctx.field_dir is not None else None
+
+    def write_state(load: float) -> None:
+        with ctx.timings("output"):
+            for _, update in pressure_out:
+                update()
+            writer.write(load)
+            writer_p.write(load)
+            if ctx.field_dir is not None:
+                extra = {}
+                for view, _ in pressure_out:
+                    nodal_pressure.interpolate(view)
+                    extra["pressure"] = nodal_pressure
+                series.write(load, gather_grid(u, extra))
+
+    def close() -> list:
+        writer.close()
+        writer_p.close()
+        return writer.files + writer_p.files + series.files
+
+    return write_state, close
+
+
+def _compare_with_exact(quantities: dict, u, shell, params: Parameters) -> None:
+    """The exact inner radius, the relative error of the computed one and the displacement's
+    L² error (none when the pressure exceeds the exact solution's limit point)."""
+    try:
+        exact = analytic.sphere_inner_radius(params.pressure, params.inner_radius,
+                                             params.outer_radius, params.c10)
+        quantities["inner_radius_exact"] = exact
+        quantities["inner_radius_error"] = quantities["inner_radius_deformed"] / exact - 1.0
+        quantities["displacement_error"] = _displacement_error(u, shell, params, exact)
+    except ValueError:
+        pass
 
 
 def _displacement_error(u, shell, params: Parameters, a: float) -> float:
@@ -236,7 +254,8 @@ def _picture(u, ctx: RunContext, params: Parameters) -> None:
     path = ctx.out / "deformed.png"
     # seen from the open side: the symmetry planes show the wall and the cavity
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(-1.0, -1.3, 0.8),
-               title=f"sphere-inflation, p = {params.pressure:g} MPa")
+               title=f"sphere-inflation, p = {params.pressure:g} MPa",
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
 
 

@@ -61,7 +61,15 @@ from eyemech.meshes.cornea import CorneaGeometry, cell_count, cornea
 from eyemech.problems.contact.rigid import resultant_force
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import PyvistaSeries, displacement_grid, render_png
-from eyemech.problems.run.parameters import MMHG, ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import (
+    GEOMETRY,
+    MMHG,
+    PHYSICS,
+    SOLVER,
+    ParameterError,
+    SceneParameters,
+    field,
+)
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.limbus import SUPPORTS, Support, limbus_support, validate_support
 from eyemech.problems.solid.spaces import (
@@ -84,36 +92,39 @@ CONTACT_QUADRATURE = 6    # the penalty integrand has a kink at the contact edge
 class Parameters(SceneParameters):
     RESOLUTION_KEY: ClassVar[str] = "resolution"
 
-    iop_mmHg: float = field(15.0, "true intra-ocular pressure on the posterior surface", "mmHg")
+    iop_mmHg: float = field(15.0, "true intra-ocular pressure on the posterior surface", "mmHg",
+                            group=PHYSICS)
     youngs_modulus: float = field(0.13, "instantaneous Young's modulus of the cornea, E = 3(μ∞ + μv); "
                                   "0.13 makes the model read the true IOP at 520 µm (Goldmann's "
-                                  "calibration, docs/cornea.md)", "MPa")
-    central_thickness: float = field(0.52, "central corneal thickness", "mm")
-    limbal_thickness: float = field(0.67, "thickness at the limbus", "mm")
-    anterior_radius: float = field(7.8, "anterior radius of curvature", "mm")
-    posterior_radius: float = field(6.5, "posterior apical radius of curvature", "mm")
-    diameter: float = field(11.7, "planform diameter at the limbus", "mm")
-    applanation_diameter: float = field(GOLDMANN_DIAMETER, "contact disc diameter at the reading", "mm")
+                                  "calibration, docs/cornea.md)", "MPa", group=PHYSICS)
+    central_thickness: float = field(0.52, "central corneal thickness", "mm", group=GEOMETRY)
+    limbal_thickness: float = field(0.67, "thickness at the limbus", "mm", group=GEOMETRY)
+    anterior_radius: float = field(7.8, "anterior radius of curvature", "mm", group=GEOMETRY)
+    posterior_radius: float = field(6.5, "posterior apical radius of curvature", "mm", group=GEOMETRY)
+    diameter: float = field(11.7, "planform diameter at the limbus", "mm", group=GEOMETRY)
+    applanation_diameter: float = field(GOLDMANN_DIAMETER, "contact disc diameter at the reading", "mm",
+                                        group=PHYSICS)
     tear_film_mmHg: float = field(4.57, "capillary attraction of the tear meniscus on the prism, as a "
-                                  "pressure over the disc (McCafferty et al. 2018: 4.57 ± 0.18 mmHg)", "mmHg")
+                                  "pressure over the disc (McCafferty et al. 2018: 4.57 ± 0.18 mmHg)", "mmHg",
+                                  group=PHYSICS)
     penalty: float = field(30.0, "applanator penalty factor: α = penalty · E / h, h the planform "
-                           "element size", "")
-    support: Support = field("clamped", "limbus support: " + ", ".join(SUPPORTS))
+                           "element size", "", group=SOLVER)
+    support: Support = field("clamped", "limbus support: " + ", ".join(SUPPORTS), group=PHYSICS)
     limbus_stiffness: float = field(0.4, "spring stiffness per area of the elastic limbus "
-                                    "(≈ E_sclera / 5 mm)", "MPa/mm")
+                                    "(≈ E_sclera / 5 mm)", "MPa/mm", group=PHYSICS)
     resolution: float = field(3.06, "planform cells per applanation radius "
                               "(applanation_diameter / 2; 3.06: 0.5 mm at Goldmann's 3.06 mm); sets "
-                              "the radial element size unless mesh_size is given")
+                              "the radial element size unless mesh_size is given", group=GEOMETRY)
     mesh_size: float = field(0.0, "radial element size in the planform; 0 = applanation_diameter "
-                             "/ 2 / resolution", "mm")
+                             "/ 2 / resolution", "mm", group=GEOMETRY)
     max_cells: int = field(20_000, "refuse a mesh of more hexahedra than this (counted before "
-                           "meshing; 20,000 Q2P1 cells ≈ 0.6 M unknowns)")
-    azimuthal_divisions: int = field(16, "elements around (rounded up to a multiple of 8)")
-    layers: int = field(2, "element layers through the thickness")
+                           "meshing; 20,000 Q2P1 cells ≈ 0.6 M unknowns)", group=GEOMETRY)
+    azimuthal_divisions: int = field(16, "elements around (rounded up to a multiple of 8)", group=GEOMETRY)
+    layers: int = field(2, "element layers through the thickness", group=GEOMETRY)
     geometry_degree: int = field(2, "cell geometry: 2 = 27-node cells on the curved surfaces, "
-                                 "1 = trilinear (faceted) cells")
+                                 "1 = trilinear (faceted) cells", group=GEOMETRY)
     max_depth: float = field(1.0, "give up if the applanator has moved this far past the apex "
-                             "without reaching the contact diameter", "mm")
+                             "without reaching the contact diameter", "mm", group=SOLVER)
 
     def validate(self) -> None:
         self.require_positive("iop_mmHg", "youngs_modulus", "applanation_diameter", "penalty",
@@ -302,13 +313,15 @@ def _push(body: Applanation, ctx: RunContext, params: Parameters, top: float) ->
                                "while the applanator advanced (the cap buckles)")
         visited.append((step.load, radius))
         ctx.record_step(stage="applanation", depth_mm=step.load, contact_radius_mm=radius,
-                        force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts, **step.counts())
+                        force_N=body.force(), newton_iterations=step.iterations, cuts=step.cuts,
+                        **step.counts())
         if radius >= target:
             raise Reached
 
     guess = params.anterior_radius - math.sqrt(params.anterior_radius**2 - target**2)  # sagitta
     try:
-        follow_path(body.solver, apply, Stepping(end=params.max_depth, quantity="applanator depth", unit="mm", initial_step=0.5 * guess / params.max_depth,
+        follow_path(body.solver, apply, Stepping(end=params.max_depth, quantity="applanator depth", unit="mm",
+                                                 initial_step=0.5 * guess / params.max_depth,
                                                  max_step=0.5 * guess / params.max_depth, min_step=1e-5),
                     on_converged=converged, label="applanation", quiet=ctx.options.quiet)
     except Reached:
@@ -377,15 +390,38 @@ def _picture(ctx: RunContext, body: Applanation, params: Parameters) -> None:
     if grid is None:
         return
     # the applanated cornea for notebooks (pyvista cannot read VTX .bp)
-    series = PyvistaSeries(ctx.out, ctx.comm)
+    series = PyvistaSeries(ctx.field_dir, ctx.comm)  # none under --no-fields
     series.write(ctx.result.quantities["applanation_depth_mm"], grid)
     ctx.result.fields.extend(series.files)
     path = ctx.out / "tonometry.png"
     q = ctx.result.quantities
     render_png(grid, path, scalars="displacement (mm)", warp="displacement", camera=(0.0, -1.0, 0.35),
                title=f"applanated to {q['contact_diameter_mm']:.2f} mm: reading "
-                     f"{q['iop_reading_mmHg']:.1f} mmHg (true {params.iop_mmHg:g})")
+                     f"{q['iop_reading_mmHg']:.1f} mmHg (true {params.iop_mmHg:g}); prism blue, "
+                     f"flattened disc red",
+               extras=_tonometer(grid, q["contact_diameter_mm"]),
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)
+
+
+# Goldmann's prism: a flat face 7 mm across (its tip); drawn 0.4 mm thick, see-through
+PRISM_DIAMETER, PRISM_DRAWN_THICKNESS = 7.0, 0.4
+
+
+def _tonometer(grid, disc_diameter: float) -> list:
+    """The prism's flat face on the deformed apex (translucent blue) and the rim of the
+    flattened disc of the reading (red), as extras for :func:`render_png`."""
+    import pyvista
+
+    apex = float((grid.points[:, 2] + grid.point_data["displacement"][:, 2]).max())
+    prism = pyvista.Cylinder(center=(0.0, 0.0, apex + PRISM_DRAWN_THICKNESS / 2), direction=(0, 0, 1),
+                             radius=PRISM_DIAMETER / 2, height=PRISM_DRAWN_THICKNESS, resolution=60)
+    angle = np.linspace(0.0, 2.0 * np.pi, 121)
+    rim = np.column_stack([disc_diameter / 2 * np.cos(angle), disc_diameter / 2 * np.sin(angle),
+                           np.full_like(angle, apex + 0.01)])
+    disc = pyvista.lines_from_points(rim)
+    return [(prism, {"color": "lightsteelblue", "opacity": 0.3}),
+            (disc, {"color": "red", "line_width": 6, "label": "flattened disc"})]
 
 
 SCENE = Scene(name="tonometry", kind="scene", parameters=Parameters, run=run,

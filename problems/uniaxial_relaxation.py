@@ -20,7 +20,8 @@ from mpi4py import MPI
 
 from eyemech.problems.reference import viscoelastic as reference
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import ParameterError, field
+from eyemech.problems.run.output import picture_metadata
+from eyemech.problems.run.parameters import PHYSICS, ParameterError, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.solid.viscous_bar import (
     BarParameters,
@@ -34,8 +35,9 @@ from eyemech.problems.solve.driver import NonlinearSolver
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(BarParameters):
-    stretch: float = field(1.2, "axial stretch λ reached at ramp_time and then held")
-    ramp_time: float = field(10.0, "duration of the linear stretch ramp (0: a step at t = 0)", "s")
+    stretch: float = field(1.2, "axial stretch λ reached at ramp_time and then held", group=PHYSICS)
+    ramp_time: float = field(10.0, "duration of the linear stretch ramp (0: a step at t = 0)", "s",
+                             group=PHYSICS)
 
     def validate(self) -> None:
         super().validate()
@@ -104,10 +106,11 @@ def point_reference(params: Parameters, times) -> np.ndarray:
 
 def _picture(ctx: RunContext, params: Parameters, times, stresses) -> None:
     path = ctx.out / "cauchy_stress.png"
+    title = (f"uniaxial relaxation, λ = {params.stretch:g}, τ = {params.tau:g} s, "
+             f"{_steps(params)} ({params.time_scheme})")
     plot_history(path, times, stresses, point_reference(params, times), "axial Cauchy stress (MPa)",
-                 f"uniaxial relaxation, λ = {params.stretch:g}, τ = {params.tau:g} s, "
-                 f"{_steps(params)} ({params.time_scheme})",
-                 reference_label="same law at one point (scipy)")
+                 title, reference_label="same law at one point (scipy)",
+                 metadata=picture_metadata(ctx.result.scene, ctx.result.parameters, title))
     ctx.result.pictures.append(path.name)
 
 

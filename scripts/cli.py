@@ -1,15 +1,18 @@
 """``eyemech``: list, run and sweep scenes (design brief §4).
 
     eyemech list [-v]
-    eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json]
+    eyemech run NAME [--config F.toml] [--set k=v ...] [--out DIR] [--json] [--vtx]
                      [--checkpoint-every N|Tm] [--resume DIR]
+    eyemech run NAME --help          (the scene's parameters by group, with units and defaults)
     eyemech sweep NAME --grid k=v1,v2 [--grid ...] --out DIR [--ranks-per-case R] [--resume]
+                       [--fields] [--pictures]
     eyemech study NAME|all|list [--quick] [--out DIR]
     eyemech bench NAME [--set KEY=VALUE ...] [--out docs/bench]
 
 Exit codes: 0 done, 2 bad input (nothing solved, nothing written), 3 the solve
 failed (the last converged state and results.json with status "failed" are kept),
-4 a sweep ended but some of its cases failed (sweep.csv says which), 130 / 143
+4 a sweep or study ended but some of its cases failed (sweep.csv or the study's
+table says which), 130 / 143
 stopped by SIGINT / SIGTERM after writing a checkpoint (128 + the signal number;
 continue with ``eyemech run NAME --resume DIR``), 1 an unexpected error (under MPI
 on one rank: its traceback, then MPI_Abort ends the job).
@@ -45,7 +48,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="parameter tables in Markdown (docs/parameters.md)")
 
     def common(p):
-        p.add_argument("name", help="scene or benchmark (see 'eyemech list')")
+        p.add_argument("name", help="scene or benchmark (see 'eyemech list'); 'eyemech "
+                       f"{p.prog.split()[-1]} NAME --help' lists its parameters by group")
         p.add_argument("--config", help="TOML file with parameter values")
         p.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                        help="override one parameter (repeatable)")
@@ -56,7 +60,11 @@ def _parser() -> argparse.ArgumentParser:
                             "Jacobians only), or auto: the scene's choice, LU unless LDLᵀ was "
                             "measured to pay (docs/atlas/peer-comparison.md)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
-        p.add_argument("--no-fields", action="store_true", help="do not write VTX fields")
+        p.add_argument("--no-fields", action="store_true",
+                       help="do not write fields (.vtu + .pvd, or .bp with --vtx)")
+        p.add_argument("--vtx", action="store_true",
+                       help="also write the fields as ADIOS2 VTX (.bp, in parallel, for "
+                            "ParaView with ADIOS2) beside the .vtu + .pvd (pyvista and ParaView)")
         p.add_argument("--no-pictures", action="store_true", help="do not render PNG pictures")
         p.add_argument("--checkpoint-every", default="10m", metavar="N|Tm",
                        help="write a checkpoint every N steps or T minutes (10m; 0 = only on "
@@ -79,6 +87,10 @@ def _parser() -> argparse.ArgumentParser:
     p_sweep.add_argument("--ranks-per-case", type=int, default=1)
     p_sweep.add_argument("--resume", action="store_true", help="skip cases already finished")
     p_sweep.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p_sweep.add_argument("--fields", action="store_true",
+                         help="write each case's fields (off by default in a sweep)")
+    p_sweep.add_argument("--pictures", action="store_true",
+                         help="render each case's PNG pictures (off by default in a sweep)")
     p_study = sub.add_parser("study", help="accuracy-vs-cost and stability studies (CSV + PNG)")
     p_study.add_argument("name", help="study name, or 'all' (see 'eyemech study list')")
     p_study.add_argument("--out", help="output folder (default docs/studies; with --quick "
@@ -90,10 +102,15 @@ def _parser() -> argparse.ArgumentParser:
     p_bench.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                          help="override one parameter on top of the scene's benchmark settings "
                               "(repeatable; the row's settings column names them all)")
+    parser.commands = {"run": p_run, "sweep": p_sweep}  # for `eyemech run NAME --help`
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    scene_help = _scene_help_request(argv)
+    if scene_help is not None:
+        return _scene_help(*scene_help)
     args = _parser().parse_args(argv)
     if args.command == "list" and not (args.verbose or args.markdown):
         return _list_from_source()
@@ -210,6 +227,42 @@ def _check_paths(args) -> None:
                 raise ParameterError(f"--{key}", why)
 
 
+def _scene_help_request(argv: list[str]) -> tuple[str, str] | None:
+    """(command, scene) for ``eyemech run|sweep NAME ... --help``, else None (argparse's help)."""
+    words = [w for w in argv if w not in ("-v", "--verbose")]
+    if len(words) < 3 or words[0] not in ("run", "sweep") or words[1].startswith("-"):
+        return None
+    return (words[0], words[1]) if {"-h", "--help"} & set(words[2:]) else None
+
+
+def _scene_help(command: str, name: str) -> int:
+    """The command's options, then the scene's parameters by group with type, default,
+    unit and meaning (what ``--set`` and ``--config`` accept)."""
+    import shutil
+    import textwrap
+
+    parser = _parser()
+    print(parser.commands[command].format_help())
+    from eyemech import problems
+    from eyemech.problems.run.parameters import groups
+
+    try:
+        scene = problems.get(name)
+    except KeyError as err:
+        print(f"eyemech: error: {err.args[0]}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    width = max(80, min(shutil.get_terminal_size((100, 24)).columns, 120))
+    print(f"{scene.name}: {scene.summary}\n\nparameters (--set KEY=VALUE, or KEY = VALUE in "
+          f"--config FILE.toml; all scenes: docs/parameters.md):")
+    for group, rows in groups(scene.parameters).items():
+        print(f"\n  {group}:")
+        for key, kind, default, unit, text in rows:
+            head = f"    {key} = {default!s}" + (f" {unit}" if unit else "") + f"  ({kind})"
+            print(head)
+            print(textwrap.fill(text, width, initial_indent=" " * 8, subsequent_indent=" " * 8))
+    return 0
+
+
 def _only_rank_0_reports(rank: int, verbose: bool) -> None:
     """Log records and Python warnings from rank 0 only: every rank runs the same code,
     so the others would repeat each line (a step cut under -v, a missing checkpoint, a
@@ -243,13 +296,15 @@ def _list_from_source() -> int:
 
 
 def _list(problems, verbose: bool, say) -> int:
-    from eyemech.problems.run.parameters import describe
+    from eyemech.problems.run.parameters import groups
 
     for name, scene in problems.scenes().items():
         say(f"{name:24s} {scene.kind:10s} {scene.summary}")
         if verbose:
-            for key, kind, default, unit, text in describe(scene.parameters):
-                say(f"    {key:20s} {kind:14s} {default!s:12s} {unit:8s} {text}")
+            for group, rows in groups(scene.parameters).items():
+                say(f"  {group}:")
+                for key, kind, default, unit, text in rows:
+                    say(f"    {key:20s} {kind:14s} {default!s:12s} {unit:8s} {text}")
     return 0
 
 
@@ -265,31 +320,44 @@ def _study(args, comm, say) -> int:
     for name in chosen:
         if name not in known:
             raise KeyError(f"unknown study '{name}'; known: {', '.join(sorted(known))}")
+    from eyemech.problems.studies import record
+
     out = Path(args.out or ("results/studies-quick" if args.quick else "docs/studies"))
     began = time.perf_counter()
+    failed = []
     for name in chosen:
         start = time.perf_counter()
-        files = known[name].run(out=out, quick=args.quick, comm=comm)
+        with record(known[name], args.quick) as done:
+            files = known[name].run(out=out, quick=args.quick, comm=comm)
         say(f"{name}: wrote {', '.join(str(f) for f in files)} "
             f"({time.perf_counter() - start:.0f} s)")
+        # rank 0 writes the tables: it alone knows the failed cases
+        done.failed = comm.bcast(done.failed if comm.rank == 0 else None, root=0)
+        if done.failed:
+            failed.append(name)
+            say(f"eyemech: study {name}: {len(done.failed)} of {done.cases} cases failed: "
+                f"{'; '.join(done.failed)}", file=sys.stderr)
     if len(chosen) > 1:
-        say(f"{len(chosen)} studies in {time.perf_counter() - began:.0f} s")
-    return 0
+        say(f"{len(chosen)} studies in {time.perf_counter() - began:.0f} s"
+            + (f"; cases failed in {', '.join(failed)}" if failed else ""))
+    return EXIT_CASES_FAILED if failed else 0
 
 
 def parameter_tables(scenes: dict) -> str:
-    """Every scene's parameters as Markdown (the source of docs/parameters.md)."""
-    from eyemech.problems.run.parameters import describe
+    """Every scene's parameters as Markdown by group (the source of docs/parameters.md)."""
+    from eyemech.problems.run.parameters import groups
 
     lines = ["# Scene parameters", "",
              "Generated by `eyemech list --markdown` from the parameter dataclasses; "
              "`--set key=value` and TOML configs use these keys.", ""]
     for name, scene in scenes.items():
-        lines += [f"## `{name}` ({scene.kind})", "", scene.summary, "",
-                  "| key | type | default | unit | meaning |", "|---|---|---|---|---|"]
-        for key, kind, default, unit, text in describe(scene.parameters):
-            lines.append(f"| `{key}` | {kind} | {default} | {unit} | {text} |".replace("\n", " "))
-        lines.append("")
+        lines += [f"## `{name}` ({scene.kind})", "", scene.summary, ""]
+        for group, rows in groups(scene.parameters).items():
+            lines += [f"**{group}**", "", "| key | type | default | unit | meaning |",
+                      "|---|---|---|---|---|"]
+            for key, kind, default, unit, text in rows:
+                lines.append(f"| `{key}` | {kind} | {default} | {unit} | {text} |".replace("\n", " "))
+            lines.append("")
     return "\n".join(lines)
 
 
@@ -329,7 +397,12 @@ def _options(args):
     # `run --resume DIR` names the folder; `sweep --resume` (a flag) resumes case by case
     resume = Path(args.resume) if args.command == "run" and args.resume else None
     checkpoint = CheckpointOptions(every_steps=steps, every_minutes=minutes, resume=resume)
-    return RunOptions(quiet=args.quiet, fields=not args.no_fields, pictures=not args.no_pictures,
+    # a sweep writes fields and pictures only when asked (a case's are megabytes); a run
+    # writes them unless told not to
+    sweep = args.command == "sweep"
+    fields = args.fields and not args.no_fields if sweep else not args.no_fields
+    pictures = args.pictures and not args.no_pictures if sweep else not args.no_pictures
+    return RunOptions(quiet=args.quiet, fields=fields, pictures=pictures, vtx=args.vtx,
                       newton=newton, checkpoint=checkpoint)
 
 
@@ -407,13 +480,33 @@ class _Record:
 
 
 def _summary(result, out: Path, say) -> None:
+    """The result's scalar quantities; a staged scene's as a table, a column per stage
+    (``after_<stage>`` groups), then the quantities that belong to no stage."""
+    from eyemech.problems.run.results import stage_groups
+
     say(f"{result.scene}: {result.status} in {result.timings.get('total', 0):.1f} s "
         f"on {result.mpi_size} rank(s); results in {out}/results.json")
+    stages = stage_groups(result.quantities)
+    staged: list[str] = []
+    for group in stages.values():
+        staged += [k for k, v in group.items() if _scalar(v) and k not in staged]
+    if stages:
+        say(f"  {'by stage':36s}" + "".join(f"{name.replace('_', ' '):>16s}" for name in stages))
+        for key in staged:
+            say(f"  {key:36s}" + "".join(f"{_shown(group.get(key, '—')):>16s}"
+                                         for group in stages.values()))
+        say(f"  at the end of the run (after {list(stages)[-1].removeprefix('after_')}):")
     for key, value in result.quantities.items():
-        if isinstance(value, float):
-            say(f"  {key:32s} {value:.6g}")
-        elif isinstance(value, (int, bool, str)):
-            say(f"  {key:32s} {value}")
+        if _scalar(value) and key not in staged:
+            say(f"  {key:36s} {_shown(value)}")
+
+
+def _scalar(value) -> bool:
+    return isinstance(value, (int, float, bool, str))
+
+
+def _shown(value) -> str:
+    return f"{value + 0.0:.6g}" if isinstance(value, float) else str(value)  # -0.0 as 0
 
 
 def _sweep(scene, overrides, args, options, comm, say) -> int:

@@ -79,7 +79,8 @@ def evaluate(V) -> dict:
     J = dolfinx.fem.petsc.assemble_matrix(dolfinx.fem.form(ufl.inner(w_trial, v) * ufl.dx))
     J.assemble()
     w = dolfinx.fem.Function(V)
-    w.x.array[:] = np.column_stack([np.sin(3 * X[:, 0]), np.cos(2 * X[:, 1]), X[:, 2] + X[:, 0] * X[:, 1]]).ravel()
+    w.x.array[:] = np.column_stack([np.sin(3 * X[:, 0]), np.cos(2 * X[:, 1]),
+                                    X[:, 2] + X[:, 0] * X[:, 1]]).ravel()
     w.x.scatter_forward()
     Mw, Jw = F.duplicate(), F.duplicate()
     J.mult(w.x.petsc_vec, Mw)

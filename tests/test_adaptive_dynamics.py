@@ -6,9 +6,9 @@
     u(t) = A e^{r₁t} + B e^{r₂t},  r = −c/2 ± √(c²/4 − ω²).
 
 The estimates are the leading local error terms; at ω Δt = 0.05 they match the exact one-step
-errors over a period to 0.6 % (backward Euler) and 0.01 % (Newmark), in root mean square. The march runs on a finite-element system
-whose every mode is this oscillator (K = ω² M), so its result is the exact u(t) up to the
-time discretisation.
+errors over a period to 0.6 % (backward Euler) and 0.01 % (Newmark), in root mean square. The march runs on
+a finite-element system whose every mode is this oscillator (K = ω² M), so its result is the exact u(t) up
+to the time discretisation.
 """
 
 from __future__ import annotations

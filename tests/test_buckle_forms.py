@@ -87,7 +87,8 @@ def test_buckle_of_constants_has_the_float_buckles_gap(kind, arc):
     shape = BuckleShape(kind=kind, tire_arc_deg=arc, **SHAPE)
     _, of_constants = _on_points(lambda x, mesh: _buckle_of_constants(shape, mesh).gap(x), seed=3)
     _, of_floats = _on_points(lambda x, mesh: _float_gap(shape, x), seed=3)
-    # the same operations on the same doubles: equal to round-off (measured 0 to 2.0e-15; an uncapped band corner radius differs by 0.06)
+    # the same operations on the same doubles: equal to round-off (measured 0 to 2.0e-15; an uncapped band
+    # corner radius differs by 0.06)
     assert np.allclose(of_constants, of_floats, rtol=0.0, atol=1e-12)
     assert (of_constants < 0).any() and (of_constants > 0).any()  # points inside and out
 

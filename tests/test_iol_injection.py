@@ -369,7 +369,8 @@ def test_p1_injection_writes_its_pictures_and_vtu_frames(tmp_path, monkeypatch):
             last = t
     times, frames = _read_frames(tmp_path, "injection")
     assert times == pytest.approx(expected) and len(expected) >= 3
-    assert [p.name for p in sorted(tmp_path.glob("frame_*.png"))] == [f"frame_{i:03d}.png" for i in range(len(times))]
+    frames = [p.name for p in sorted(tmp_path.glob("frame_*.png"))]
+    assert frames == [f"frame_{i:03d}.png" for i in range(len(times))]
     assert "injection.gif" in result.pictures and "injection.pvd" in result.fields
     assert all(f.n_points == result.quantities["nodes"] for f in frames)
     # the operation's time leaves the frames out
@@ -381,11 +382,11 @@ def test_p1_fold_seeds_the_p2_injection():
     """``fold_seed=p1`` on the coarse lens: the P1 fold (≈ 2 s) carried to the P2 nodes, its
     midpoints relaxed on P2 with the vertices held. The P2 state is the P1 fold's geometry: the
     vertices exactly; the P2 strain energy within 15 % of the P1 fold's (measured 1.08×, the
-    unrelaxed patch-fit midpoints 2.7×, chords 4.7×: the P2 membrane strained by them); the edge midpoints off the P1 fold's
-    chords by at most ℓ²/(8 R) for R = 0.5 mm (half the optic's fold radius; measured: max
-    0.15 mm, at most ℓ²/(8 · 0.77 mm)); no self-intersection; no node through the bore. And the P2 injection proceeds from it: its first
-    Δt = 0.01 s converges (in cut steps: measured 0.16 ms after 6 halvings, then growing back),
-    still without self-intersection."""
+    unrelaxed patch-fit midpoints 2.7×, chords 4.7×: the P2 membrane strained by them); the edge midpoints
+    off the P1 fold's chords by at most ℓ²/(8 R) for R = 0.5 mm (half the optic's fold radius; measured: max
+    0.15 mm, at most ℓ²/(8 · 0.77 mm)); no self-intersection; no node through the bore. And the P2 injection
+    proceeds from it: its first Δt = 0.01 s converges (in cut steps: measured 0.16 ms after 6 halvings, then
+    growing back), still without self-intersection."""
     import dolfinx.fem
     from mpi4py import MPI
     from scipy.spatial import cKDTree
@@ -410,15 +411,16 @@ def test_p1_fold_seeds_the_p2_injection():
         vertex = distance < 1e-9
         assert np.abs(u[vertex] - U[index[vertex]]).max() < 1e-12  # held (round-off of the Dirichlet lifting)
         tri = lens.shell.tri
-        edges = np.unique(np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1), axis=0)
+        edges = np.unique(np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1),
+                          axis=0)
         _, edge = cKDTree(0.5 * (X[edges[:, 0]] + X[edges[:, 1]])).query(nodes[~vertex])
         a, b = edges[edge, 0], edges[edge, 1]
         off_chord = np.linalg.norm(u[~vertex] - 0.5 * (U[a] + U[b]), axis=1)
         length = np.linalg.norm(X[a] - X[b], axis=1)
         assert np.all(off_chord <= length ** 2 / (8 * 0.5))
-        energy = dolfinx.fem.form(shell_energy(shell.u, shell.material, shell.orientation, degree=shell.degree,
-                                               penalty_factor=shell.penalty_factor, dx=shell.dx, dS=shell.dS,
-                                               kinematics="nonlinear"))
+        energy = dolfinx.fem.form(shell_energy(shell.u, shell.material, shell.orientation,
+                                               degree=shell.degree, penalty_factor=shell.penalty_factor,
+                                               dx=shell.dx, dS=shell.dS, kinematics="nonlinear"))
         ratio = assemble_scalar(energy, ctx.comm) / lens.shell.energy(folded)
         assert 0.85 < ratio < 1.15, ratio
 

@@ -61,7 +61,8 @@ def test_counts_and_time_split_are_consistent(runs):
     assert newton["residuals"] == newton["iterations"] + newton["steps"]
     assert newton["jacobians"] == newton["iterations"]
     linearised = runs["linearised"]
-    assert linearised["iterations"] == linearised["residuals"] == linearised["jacobians"] == linearised["steps"]
+    assert (linearised["iterations"] == linearised["residuals"] == linearised["jacobians"]
+            == linearised["steps"])
     assert runs["lagged"]["jacobians"] < runs["lagged"]["iterations"]
     krylov = runs["krylov"]
     # every GMRES product is one residual assembly

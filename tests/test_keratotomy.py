@@ -128,7 +128,8 @@ def test_softer_limbus_lets_the_apex_move_more(intact_clamped):
     moves further out than with the clamped limbus, at t = 0 and after creep."""
     soft = solve(incisions=0, t_end=1800.0, support="elastic", limbus_stiffness=0.04)
     for t in (0, -1):
-        assert soft["intact_apex_displacement_mm"][t] > 1.01 * intact_clamped["intact_apex_displacement_mm"][t]
+        clamped = intact_clamped["intact_apex_displacement_mm"][t]
+        assert soft["intact_apex_displacement_mm"][t] > 1.01 * clamped
 
 
 @pytest.mark.mpi

@@ -69,7 +69,8 @@ def test_p2_release_reports_an_estimate_above_its_true_error():
     assert _error(q, reference) <= q["time_error_estimate_mm"] <= q["unfiltered_time_error_estimate_mm"]
 
 
-@pytest.mark.parametrize("bad", [{"contact": True}, {"model": "p2-c0ip", "method": "linearised"}, {"time_tolerance": 0.0},
+@pytest.mark.parametrize("bad", [{"contact": True}, {"model": "p2-c0ip", "method": "linearised"},
+                                 {"time_tolerance": 0.0},
                                  {"model": "p2-c0ip", "scheme": "generalized-alpha"}])
 def test_adaptive_release_refuses_what_it_cannot_judge(bad):
     with pytest.raises(ParameterError):

@@ -482,9 +482,9 @@ def test_full_steps_in_the_settling_step_save_factorisations():
     (bt, the default) on the coarse eye with the settling step, both from the last converged P
     with the other steps' load steps (``settle_start = converged``, ``settle_step = 0``;
     tests/test_settle.py for the default settling). The first
-    settling load step starts from P's pinned row alone (‖F_0‖ ≈ 1.6e-3 on the default mesh): the full step's second-order
-    remainder in the displacement rows is larger, bt clamps its step at 0.1 and the residual
-    creeps × 0.9 per iteration (there 22 iterations, 21 factorisations) where full steps
+    settling load step starts from P's pinned row alone (‖F_0‖ ≈ 1.6e-3 on the default mesh): the full
+    step's second-order remainder in the displacement rows is larger, bt clamps its step at 0.1 and the
+    residual creeps × 0.9 per iteration (there 22 iterations, 21 factorisations) where full steps
     converge in 6. Measured on the coarse eye at the defaults: 68 factorisations in 25 load
     steps against 87 in 26, step 4's 18 against 37; the settled axial-length change 0.44977
     against 0.44851 mm (0.28 %), the refraction change −0.3155 against −0.3185 D (0.003 D),

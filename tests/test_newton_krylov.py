@@ -7,8 +7,8 @@ On the small problem (tests/krylov_problem.py): Newton's convergence is the full
 method's (quadratic), with fewer factorisations than iterations; a Krylov solve that does
 not converge on the kept factorisation, or is predicted after a few iterations not to,
 refactorises and solves again, never failing the Newton solve; modified Newton on the
-kept factorisation assembles fewer Jacobians; the counts are PETSc's events and the iterations FGMRES did; 2 ranks give
-1 rank's answer. On the coarse eye: the reference method's quantities with fewer
+kept factorisation assembles fewer Jacobians; the counts are PETSc's events and the iterations FGMRES did; 2
+ranks give 1 rank's answer. On the coarse eye: the reference method's quantities with fewer
 factorisations.
 """
 
@@ -105,7 +105,8 @@ def test_an_early_refresh_stops_a_slow_krylov_solve_and_counts_its_iterations(kr
     counts = early["counts"]
     assert counts["factorisations"] == krylov["counts"]["factorisations"] == 2
     assert counts["krylov_iterations"] == early["fgmres_iterations"]
-    assert counts["krylov_iterations"] <= krylov["counts"]["krylov_iterations"] - 15 * early["early_refreshes"]
+    assert (counts["krylov_iterations"]
+            <= krylov["counts"]["krylov_iterations"] - 15 * early["early_refreshes"])
     assert [len(h) for h in early["histories"]] == [len(h) for h in krylov["histories"]]
     assert early["u_squared"] == pytest.approx(krylov["u_squared"], rel=1e-10)
 

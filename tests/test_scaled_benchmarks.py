@@ -186,8 +186,9 @@ PLATE = dict(q=1.0, youngs_modulus=1.092e6, length=10.0, thickness=0.1)
 
 def _plate_cases():
     cases = [("default", {}), ("geometry x0.2", dict(length=2.0, thickness=0.02)),
-             ("geometry x5", dict(length=50.0, thickness=0.5)), ("modulus x0.1", dict(youngs_modulus=1.092e5)),
-             ("modulus x10", dict(youngs_modulus=1.092e7)), ("thickness x0.2", dict(thickness=0.02))]
+             ("geometry x5", dict(length=50.0, thickness=0.5)),
+             ("modulus x0.1", dict(youngs_modulus=1.092e5)), ("modulus x10", dict(youngs_modulus=1.092e7)),
+             ("thickness x0.2", dict(thickness=0.02))]
     return [(module, coefficient, label, scale)
             for module, coefficient in ((plate_clamped, 0.00126532), (plate_simply_supported, 0.00406235))
             for label, scale in cases]

@@ -61,10 +61,10 @@ REFERENCE = {"settle_step": 0.05, "stagnation_window": 0}
 
 def test_the_default_settling_reaches_the_reference_settling_with_fewer_factorisations():
     """The default settling (P starts each load step at its target, load steps of at most
-    1/8 of the step, no stagnation stop, the step-relative contraction test) against the former defaults' (``CONVERGED_START``) and the reference
-    settling (20 equal load steps), on the coarse eye. From the converged P the first
-    settling load step's residual is P's pinned row alone, bt rejects the full Newton step
-    and creeps at its 0.1 floor (20 factorisations in that load step); from the target it
+    1/8 of the step, no stagnation stop, the step-relative contraction test) against the former defaults'
+    (``CONVERGED_START``) and the reference settling (20 equal load steps), on the coarse eye. From the
+    converged P the first settling load step's residual is P's pinned row alone, bt rejects the full Newton
+    step and creeps at its 0.1 floor (20 factorisations in that load step); from the target it
     converges in 6. Measured (1 rank, load 1–4): step 4 takes 21 factorisations in 8 load
     steps (former defaults 44 in 7 with one failed attempt, reference 36 in 20); settled
     axial-length change 0.38815 against the reference's 0.38758 mm (+0.15 %), refraction

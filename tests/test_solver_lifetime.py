@@ -57,6 +57,7 @@ def test_a_run_closes_its_solvers_as_it_ends():
     same point: destroying a MUMPS factorisation is collective, and Python's collector
     would free a solver kept in a cycle at a different moment on each rank."""
     from eyemech.problems import sphere_inflation
+    from eyemech.problems.run import newton
     from eyemech.problems.run.context import RunOptions
     from eyemech.problems.solve import driver
 
@@ -64,7 +65,7 @@ def test_a_run_closes_its_solvers_as_it_ends():
     sphere_inflation.run(sphere_inflation.Parameters(),
                          options=RunOptions(fields=False, pictures=False))
     assert driver.solvers_created() > before, "the run made no solver"
-    assert not [serial for serial in driver._OPEN_SOLVERS if serial > before]
+    assert not [serial for serial in newton._OPEN_SOLVERS if serial > before]
 
 
 @pytest.mark.mpi

@@ -84,7 +84,7 @@ def test_impossible_load_fails_cleanly(tmp_path):
     saved = json.loads((tmp_path / "results.json").read_text())
     assert saved["status"] == "failed" and "Last converged load" in saved["message"]
     assert saved["quantities"]["inner_radius_deformed"] > 10.0  # the last converged state
-    assert (tmp_path / "fields_displacement.bp").exists()
+    assert (tmp_path / "state.pvd").exists()  # the converged steps' fields
 
 
 @pytest.mark.mpi

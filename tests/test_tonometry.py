@@ -80,7 +80,8 @@ def test_two_ranks_give_the_same_reading(tmp_path, nominal):
     parallel = last_json(out)["quantities"]
     for key in ("iop_reading_mmHg", "applanation_depth_mm", "contact_diameter_mm"):
         assert parallel[key] == pytest.approx(nominal[key], rel=CONTACT_RANKS_RTOL)
-    assert parallel["apex_displacement_iop_mm"] == pytest.approx(nominal["apex_displacement_iop_mm"], rel=1e-6)
+    assert parallel["apex_displacement_iop_mm"] == pytest.approx(nominal["apex_displacement_iop_mm"],
+                                                                 rel=1e-6)
 
 
 @pytest.mark.parametrize("key, value", [("iop_mmHg", "-1"), ("youngs_modulus", "0"),

@@ -353,7 +353,8 @@ class SegmentToSegmentContact(NodeToSurfaceContact):
         stiffness = -state.weights * slope
         D = self._segment_vectors(state)
         dofs = self._segment_dofs(state)
-        constrained = np.isin(dofs, list(self._constrained)) if self._constrained else np.zeros(dofs.shape, bool)
+        constrained = np.isin(dofs, list(self._constrained)) if self._constrained \
+            else np.zeros(dofs.shape, bool)
         with self.timings("contact_jacobian"):
             # one block per (slave facet, master facet): the same dofs for all its points
             pair = state.facets.astype(np.int64) * (self.master_facet_id.max() + 1) \

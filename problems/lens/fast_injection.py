@@ -46,6 +46,7 @@ from eyemech.problems.lens.rotation_free import Dynamics, FastLens, MeshInputErr
 from eyemech.problems.lens.surface_contact import NodalObstacles, SurfaceSelfContact
 from eyemech.problems.lens.time_error import TimeErrorTally, rotation_free_step_error
 from eyemech.problems.run.parameters import ParameterError
+from eyemech.problems.solve.stepping import StepController
 
 RTOL, ATOL = 1e-6, 1e-9  # lens_newton's: relative, and N (shell forces ~1e-4 N)
 MAX_ITERATIONS = 25
@@ -67,10 +68,14 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
           on_converged: Callable[[StepRecord], None], stops: tuple[float, ...] = (),
           min_fraction: float = 1e-3, time_error: TimeErrorTally | None = None) -> None:
     """Backward-Euler steps from t = 0 to ``end`` (landing on each of ``stops``): ``apply(t, Δt)``
-    sets the step ending at t, then ``dyn.step()``; a step that fails is undone and halved."""
-    t, dt, cuts = 0.0, time_step, 0
+    sets the step ending at t, then ``dyn.step()``; a step that fails is undone and halved (down
+    to ``min_fraction`` of ``time_step``), an easy one's successor doubled (up to ``time_step``)."""
+    t = 0.0
+    steps = StepController(time_step, largest=time_step, smallest=min_fraction * time_step,
+                           cut_factor=0.5, max_cuts=None, grow_factor=2.0,
+                           easy_effort=EASY_ITERATIONS, grow_after_cut=True)
     while t < end - 1e-9 * time_step:
-        target = min(t + dt, end)
+        target = min(t + steps.step, end)
         for stop in stops:
             if t + 1e-9 * time_step < stop < target - 1e-9 * time_step:
                 target = stop
@@ -82,18 +87,14 @@ def march(dyn: Dynamics, apply: Callable[[float, float], None], end: float, time
             iterations = dyn.step()
         except RuntimeError as err:
             dyn.restore_state(saved)
-            cuts += 1
-            dt = 0.5 * h
-            if dt < min_fraction * time_step:
-                raise StepFailure(f"Δt cut to {dt:.3g} s at t = {t:.4g} s ({err})") from err
+            if not steps.cut(attempted=h):
+                raise StepFailure(f"Δt cut to {steps.step:.3g} s at t = {t:.4g} s ({err})") from err
             continue
         t = target
         if time_error is not None:
             time_error.add(rotation_free_step_error(dyn))
-        on_converged(StepRecord(t, h, iterations, cuts))
-        cuts = 0
-        if iterations <= EASY_ITERATIONS:
-            dt = min(2.0 * dt, time_step)
+        on_converged(StepRecord(t, h, iterations, steps.cuts))
+        steps.accept(iterations)
 
 
 def fast_lens(ctx, params) -> FastLens:
@@ -150,7 +151,8 @@ def self_contact(lens: FastLens, params) -> SurfaceSelfContact | None:
         return None
     require_ipctk()
     return SurfaceSelfContact(lens.shell.X, lens.shell.tri, params.self_contact_distance,
-                              params.self_contact_stiffness, friction=params.friction, slip=params.friction_slip)
+                              params.self_contact_stiffness, friction=params.friction,
+                              slip=params.friction_slip)
 
 
 def save_state(path: Path, lens: FastLens, u: np.ndarray) -> None:
@@ -190,8 +192,8 @@ def p2_displacement(lens: FastLens, u: np.ndarray, nodes: np.ndarray) -> np.ndar
 
     shell = lens.shell
     U = np.asarray(u, dtype=float).reshape(-1, 3)
-    patch_nodes, _, _, _, _, _, fits = patch_operators(shell.X, shell.tri, shell.opposite, shell.boundary_kind,
-                                                       shell.material.poisson_ratio)
+    patch_nodes, _, _, _, _, _, fits = patch_operators(shell.X, shell.tri, shell.opposite,
+                                                       shell.boundary_kind, shell.material.poisson_ratio)
     n_tri = len(shell.tri)
     patch = U[patch_nodes]  # (triangles, 6, 3); a boundary slot's row is a condition with 0 right side
     patch[:, 3:][shell.opposite < 0] = 0.0
@@ -218,8 +220,8 @@ def p2_displacement(lens: FastLens, u: np.ndarray, nodes: np.ndarray) -> np.ndar
     values = np.vstack([U, total])
     distance, index = cKDTree(points).query(np.asarray(nodes, dtype=float))
     if np.max(distance, initial=0.0) > 1e-8:
-        raise ParameterError("fold_seed", f"the P2 lens' nodes are not the P1 lens' vertices and edge midpoints "
-                             f"({np.max(distance):.3g} mm apart)")
+        raise ParameterError("fold_seed", f"the P2 lens' nodes are not the P1 lens' vertices and edge "
+                             f"midpoints ({np.max(distance):.3g} mm apart)")
     return values[index]
 
 
@@ -387,7 +389,8 @@ class Injection:
                  and record.time >= last_time + self.params.frame_interval - 1e-9)
                 or step == 1 or record.time >= self.end - 1e-9):
             self.last_frame = (record.time, step)
-            self.frames.write(record.time, self.dyn.u, f"iol-injection (P1)  t = {record.time:.2f} s", self.drawn)
+            self.frames.write(record.time, self.dyn.u, f"iol-injection (P1)  t = {record.time:.2f} s",
+                              self.drawn)
 
     def run(self) -> InjectionHistory:
         steps = int(np.ceil(self.end / self.params.time_step - 1e-9))
@@ -410,6 +413,8 @@ class Injection:
                  optic_normal_z=float(optic["normal"][2]), optic_flipped=bool(optic["normal"][2] < 0.0),
                  optic_flatness=optic["flatness"], optic_unrolled=bool(optic["flatness"] > 0.9),
                  final_decentration_mm=float(np.hypot(*(center - self.capsule.center)[:2])),
-                 final_optic_center=center.tolist(), end_time_s=self.history.time[-1] if self.history.time else 0.0,
-                 triangles=len(self.lens.shell.tri), nodes=len(self.lens.shell.X), dofs=self.lens.shell.n_dofs)
+                 final_optic_center=center.tolist(),
+                 end_time_s=self.history.time[-1] if self.history.time else 0.0,
+                 triangles=len(self.lens.shell.tri), nodes=len(self.lens.shell.X),
+                 dofs=self.lens.shell.n_dofs)
         return q

@@ -40,17 +40,17 @@ from eyemech.problems.lens.model import (
 from eyemech.problems.lens.time_error import TimeErrorTally, step_error
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.output import PyvistaSeries
-from eyemech.problems.run.parameters import field
+from eyemech.problems.run.parameters import PHYSICS, SOLVER, field
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 from eyemech.problems.solve.time_integration import ImplicitDynamics
 
 
 @dataclasses.dataclass(frozen=True)
 class FoldParameters(LensParameters):
-    fold_time: float = field(0.4, "pseudo time of the folding", "s")
-    time_step: float = field(0.01, "time step", "s")
-    fold_damping: float = field(2.0e4, "mass-proportional damping while folding", "1/s")
-    frames: int = field(10, "PNG frames of the folding")
+    fold_time: float = field(0.4, "pseudo time of the folding", "s", group=PHYSICS)
+    time_step: float = field(0.01, "time step", "s", group=SOLVER)
+    fold_damping: float = field(2.0e4, "mass-proportional damping while folding", "1/s", group=SOLVER)
+    frames: int = field(10, "PNG frames of the folding", group=SOLVER)
 
     def validate(self) -> None:
         LensParameters.validate(self)
@@ -150,8 +150,9 @@ def fold(params: FoldParameters, ctx: RunContext, shell: LensShell, frames_dir: 
 
     start = time.perf_counter()
     with ctx.timings("time_stepping"):
-        follow_path(solver, apply, Stepping(0.0, params.fold_time, quantity="time", unit="s", initial_step=1.0 / steps,
-                                            max_step=1.0 / steps, grow=2.0, min_step=1e-3 / steps,
+        follow_path(solver, apply, Stepping(0.0, params.fold_time, quantity="time", unit="s",
+                                            initial_step=1.0 / steps, max_step=1.0 / steps, grow=2.0,
+                                            min_step=1e-3 / steps,
                                             easy_iterations=EASY_ITERATIONS),
                     on_converged=converged, label="iol-fold", quiet=ctx.options.quiet)
     history["wall"] = time.perf_counter() - start
@@ -172,4 +173,5 @@ def blocked_dofs(dofs: np.ndarray) -> np.ndarray:
 def self_contact_kind(params: LensParameters) -> str:
     if not params.self_contact:
         return "not applied"
-    return f"ipctk barrier (d̂ = {params.self_contact_distance} mm), CCD-limited steps, friction μ = {params.friction}"
+    return (f"ipctk barrier (d̂ = {params.self_contact_distance} mm), CCD-limited steps, "
+            f"friction μ = {params.friction}")

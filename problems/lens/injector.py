@@ -71,7 +71,8 @@ def turn_about_x(axis_point: np.ndarray, angle: float) -> Callable[[np.ndarray],
 
     def turned(x: np.ndarray) -> np.ndarray:
         y, z = x[:, 1] - axis_point[1], x[:, 2] - axis_point[2]
-        return np.column_stack([x[:, 0], axis_point[1] + cos * y - sin * z, axis_point[2] + sin * y + cos * z])
+        return np.column_stack([x[:, 0], axis_point[1] + cos * y - sin * z,
+                                axis_point[2] + sin * y + cos * z])
     return turned
 
 

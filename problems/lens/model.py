@@ -23,7 +23,7 @@ from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.lens.injector import Capsule, Plunger, TaperedBore
 from eyemech.problems.lens.surface_contact import serial_ipctk
 from eyemech.problems.run.context import RunContext
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.solve.driver import NewtonOptions
 
 # every mesh size of the lens (optic, haptics, junctions) times this factor
@@ -32,31 +32,41 @@ RESOLUTIONS = {"paper": 1.0, "coarse": 2.0}
 
 @dataclasses.dataclass(frozen=True)
 class LensParameters(SceneParameters):
-    youngs_modulus: float = field(1.0, "Young's modulus of the acrylic (seed 000, Table 2)", "MPa")
-    poisson_ratio: float = field(0.42, "Poisson's ratio (seed 000, Table 2)")
-    density: float = field(1.2e-9, "mass density, 1.2 g/cm³ (seed 000, Table 2)", "tonne/mm³")
-    optic_thickness: float = field(0.2, "shell thickness of the optic (assumed)", "mm")
-    haptic_thickness: float = field(0.13, "shell thickness of the haptics (seed 000: 0.13 mm)", "mm")
-    optic_diameter: float = field(6.0, "optic diameter", "mm")
-    overall_length: float = field(13.0, "diameter of the circle enclosing the haptics", "mm")
-    mesh_size: float = field(0.6, "triangle size in the optic (0.6: 752 triangles, the paper 743)", "mm")
-    resolution: Literal["paper", "coarse"] = field("paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) or "
-                                     "'coarse' (every size × 2: 250 triangles, a quick run)")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
-    penalty_factor: float = field(1.0, "α in the shell's edge penalty α p(p+1) D / h")
-    bore_radius: float = field(1.25, "cartridge bore radius (loading chamber)", "mm")
-    nozzle_radius: float = field(1.05, "nozzle bore radius (≈ 2.2 mm outer: a ≈ 2 mm incision)", "mm")
-    fold_radius: float = field(1.0, "radius the optic is rolled to about the injector axis", "mm")
-    contact_stiffness: float = field(1.0, "nodal penalty stiffness k of rigid contact", "N/mm")
+    youngs_modulus: float = field(1.0, "Young's modulus of the acrylic (seed 000, Table 2)", "MPa",
+                                  group=PHYSICS)
+    poisson_ratio: float = field(0.42, "Poisson's ratio (seed 000, Table 2)", group=PHYSICS)
+    density: float = field(1.2e-9, "mass density, 1.2 g/cm³ (seed 000, Table 2)", "tonne/mm³", group=PHYSICS)
+    optic_thickness: float = field(0.2, "shell thickness of the optic (assumed)", "mm", group=GEOMETRY)
+    haptic_thickness: float = field(0.13, "shell thickness of the haptics (seed 000: 0.13 mm)", "mm",
+                                    group=GEOMETRY)
+    optic_diameter: float = field(6.0, "optic diameter", "mm", group=GEOMETRY)
+    overall_length: float = field(13.0, "diameter of the circle enclosing the haptics", "mm", group=GEOMETRY)
+    mesh_size: float = field(0.6, "triangle size in the optic (0.6: 752 triangles, the paper 743)", "mm",
+                             group=GEOMETRY)
+    resolution: Literal["paper", "coarse"] = field(
+        "paper", "lens mesh: 'paper' (the sizes as given: 752 triangles by default) or "
+                 "'coarse' (every size × 2: 250 triangles, a quick run)", group=GEOMETRY)
+    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)", group=GEOMETRY)
+    penalty_factor: float = field(1.0, "α in the shell's edge penalty α p(p+1) D / h", group=GEOMETRY)
+    bore_radius: float = field(1.25, "cartridge bore radius (loading chamber)", "mm", group=GEOMETRY)
+    nozzle_radius: float = field(1.05, "nozzle bore radius (≈ 2.2 mm outer: a ≈ 2 mm incision)", "mm",
+                                 group=GEOMETRY)
+    fold_radius: float = field(1.0, "radius the optic is rolled to about the injector axis", "mm",
+                               group=GEOMETRY)
+    contact_stiffness: float = field(1.0, "nodal penalty stiffness k of rigid contact", "N/mm", group=SOLVER)
     damping: float = field(2.0e4, "mass-proportional damping c standing in for the viscoelastic "
-                                  "fluid: c = μ/(δ ρ h), μ ≈ 10 Pa·s over a δ ≈ 2 mm layer", "1/s")
+                                  "fluid: c = μ/(δ ρ h), μ ≈ 10 Pa·s over a δ ≈ 2 mm layer", "1/s",
+                           group=PHYSICS)
     self_contact: bool = field(True, "lens self-contact by ipctk's barrier with CCD-limited Newton steps "
-                                     "(needs ipctk)")
-    self_contact_distance: float = field(0.05, "barrier reach d̂: mid-surfaces closer than this repel", "mm")
+                                     "(needs ipctk)", group=PHYSICS)
+    self_contact_distance: float = field(0.05, "barrier reach d̂: mid-surfaces closer than this repel", "mm",
+                                         group=SOLVER)
     self_contact_stiffness: float = field(1.0, "barrier stiffness κ (Π = κ Σ b(d², d̂²); at d = d̂/2 a pair "
-                                               "pushes with ≈ 4.3 κ d̂³)", "N/mm³")
-    friction: float = field(0.2, "Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion; 0 = none)")
-    friction_slip: float = field(1e-3, "slip per step below which friction is regularised (viscous)", "mm")
+                                               "pushes with ≈ 4.3 κ d̂³)", "N/mm³", group=SOLVER)
+    friction: float = field(0.2, "Coulomb coefficient μ of lens–lens contact (haptic–optic adhesion; "
+                                 "0 = none)", group=PHYSICS)
+    friction_slip: float = field(1e-3, "slip per step below which friction is regularised (viscous)", "mm",
+                                 group=SOLVER)
 
     def validate(self) -> None:
         self.require_positive("youngs_modulus", "density", "optic_thickness", "haptic_thickness",
@@ -349,7 +359,8 @@ def render_frame(shell: LensShell, path: Path, title: str, obstacles: dict,
     render_grid(grid.warp_by_vector(shell.u.name), path, title, obstacles, bounds)
 
 
-def render_grid(deformed, path: Path, title: str, obstacles: dict, bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
+def render_grid(deformed, path: Path, title: str, obstacles: dict,
+                bounds: tuple[float, float] = (-7.0, 21.0)) -> None:
     """``render_frame``'s picture of a deformed lens surface (a pyvista dataset in its deformed
     position; the P1 scenes draw their triangles with it)."""
     import pyvista

@@ -168,8 +168,8 @@ def patch_operators(points: np.ndarray, triangles: np.ndarray, opposite: np.ndar
     d = np.empty((n_tri, 3, 2))
     area = np.empty(n_tri)
     condition = np.empty(n_tri)
-    fits = {"inverse": np.empty((n_tri, 6, 6)), "rhs": np.zeros((n_tri, 6, 3)), "frame": np.empty((n_tri, 2, 3)),
-            "origin": np.empty((n_tri, 3)), "xi": np.empty((n_tri, 3, 2))}
+    fits = {"inverse": np.empty((n_tri, 6, 6)), "rhs": np.zeros((n_tri, 6, 3)),
+            "frame": np.empty((n_tri, 2, 3)), "origin": np.empty((n_tri, 3)), "xi": np.empty((n_tri, 3, 2))}
     nu = poisson_ratio
     for t in range(n_tri):
         v = triangles[t]
@@ -208,7 +208,8 @@ def patch_operators(points: np.ndarray, triangles: np.ndarray, opposite: np.ndar
                 rhs[3 + k] = con @ frame
             else:
                 rows[3 + k] = [0.0, 0.0, 0.0, 2 * (con[0] ** 2 + nu * tau[0] ** 2),
-                               2 * (con[0] * con[1] + nu * tau[0] * tau[1]), 2 * (con[1] ** 2 + nu * tau[1] ** 2)]
+                               2 * (con[0] * con[1] + nu * tau[0] * tau[1]),
+                               2 * (con[1] ** 2 + nu * tau[1] ** 2)]
         # scale ξ to O(1) for the conditioning estimate
         condition[t] = np.linalg.cond(rows @ np.diag(_scaling(xi)))
         inverse = np.linalg.inv(rows)
@@ -243,7 +244,8 @@ def edge_operators(points, triangles, opposite, neighbour, nodes, area, fits):
     def gradient_rows(t, p):
         """∂q/∂ξ_γ at local point p of triangle t's fit: (2 × 6) over the fit rows."""
         inv = fits["inverse"][t]
-        return np.array([inv[1] + 2 * p[0] * inv[3] + p[1] * inv[4], inv[2] + p[0] * inv[4] + 2 * p[1] * inv[5]])
+        return np.array([inv[1] + 2 * p[0] * inv[3] + p[1] * inv[4],
+                         inv[2] + p[0] * inv[4] + 2 * p[1] * inv[5]])
 
     for t in range(n_tri):
         slots = list(nodes[t, :3]) + [j for j in opposite[t] if j >= 0]
@@ -611,10 +613,12 @@ class RotationFreeShell:
             kind[t_b, k_b] = [BOUNDARY_KINDS[k] for k in kinds]
         self.boundary_kind = kind
         (self.nodes, self.B, self.b, self.d, self.area,
-         self.condition, fits) = patch_operators(points, self.tri, self.opposite, kind, material.poisson_ratio)
+         self.condition, fits) = patch_operators(points, self.tri, self.opposite, kind,
+                                                 material.poisson_ratio)
         if not np.all(np.isfinite(self.condition)) or self.condition.max() > 1e10:
             t = int(np.argmax(self.condition))
-            raise MeshInputError(f"the quadratic patch of triangle {t} is singular (its 6 nodes on one conic)")
+            raise MeshInputError(f"the quadratic patch of triangle {t} is singular (its 6 nodes on one "
+                                 "conic)")
         if bending == "edge":
             self.nodes, self.B, self.b = edge_operators(points, self.tri, self.opposite, self.neighbour,
                                                         self.nodes, self.area, fits)
@@ -869,14 +873,16 @@ class Dynamics:
         self.contact = None
         self.obstacles = None
         self._keys = None  # the upper pattern as sorted row · n + col (with contact or obstacles)
-        self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "contact", "other"), 0.0)
+        self.clock = dict.fromkeys(("residual", "jacobian", "factorisation", "solve", "contact", "other"),
+                                   0.0)
         self.counts = dict.fromkeys(("iterations", "residuals", "jacobians", "factorisations", "shifted",
                                      "rejected", "pattern_growths", "step_limits"), 0)
 
     def set_contact(self, contact) -> None:
         """Self-contact (``surface_contact.SurfaceSelfContact``): its barrier joins the energy,
-        its CCD limits every update, the energy line search is on; the Jacobian's pattern starts as the shell's upper triangle
-        and grows by the 3 × 3 blocks of vertex pairs a contact Hessian brings (``_grow``)."""
+        its CCD limits every update, the energy line search is on; the Jacobian's pattern starts as the
+        shell's upper triangle and grows by the 3 × 3 blocks of vertex pairs a contact Hessian brings
+        (``_grow``)."""
         if not self.upper or self.extra:
             raise ValueError("self-contact runs on the upper-triangle Jacobian without extra terms")
         self.contact = contact
@@ -953,9 +959,11 @@ class Dynamics:
                 keep = (h.row <= h.col) & (h.data != 0.0)
                 keys = h.row[keep].astype(np.int64) * self.shell.n_dofs + h.col[keep]
                 pos = np.searchsorted(self._keys, keys)
-                if np.any(pos >= len(self._keys)) or np.any(self._keys[np.minimum(pos, len(self._keys) - 1)] != keys):
+                if np.any(pos >= len(self._keys)) \
+                        or np.any(self._keys[np.minimum(pos, len(self._keys) - 1)] != keys):
                     # a superset: every pair within `pattern_reach` d̂, not only the active ones
-                    self._grow(np.union1d(keys, self.contact.pairs_within(x, self.pattern_reach * self.contact.dhat)))
+                    reach = self.pattern_reach * self.contact.dhat
+                    self._grow(np.union1d(keys, self.contact.pairs_within(x, reach)))
                     pos = np.searchsorted(self._keys, keys)
                 self._contact_entries = (pos, h.data[keep])
             else:
@@ -1252,7 +1260,8 @@ def rectangle_mesh(length: float, width: float, nx: int, ny: int, kind: str = "s
     tris = []
     for i in range(nx):
         for j in range(ny):
-            a, b, c, d = i * (ny + 1) + j, (i + 1) * (ny + 1) + j, (i + 1) * (ny + 1) + j + 1, i * (ny + 1) + j + 1
+            a, b = i * (ny + 1) + j, (i + 1) * (ny + 1) + j
+            c, d = (i + 1) * (ny + 1) + j + 1, i * (ny + 1) + j + 1
             if kind == "structured" or (i + j) % 2 == 0:
                 tris += [[a, b, c], [a, c, d]]
             else:
@@ -1424,7 +1433,8 @@ def release(params, steps: int | None = None, lens: FastLens | None = None, stal
     clock = dict(dyn.clock)
     clock["other"] = cpu - sum(v for k, v in clock.items() if k != "other")
     return {"wall": wall, "cpu": cpu, "phases_cpu": clock, "counts": dict(dyn.counts), "history": history,
-            "time_error": time_error.quantities(), "dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri), "nodes": len(lens.shell.X)}
+            "time_error": time_error.quantities(), "dofs": lens.shell.n_dofs, "cells": len(lens.shell.tri),
+            "nodes": len(lens.shell.X)}
 
 
 # MacNeal & Harder, Finite Elem. Anal. Des. 1 (1985) 3-20: midpoint of the free edge, linear
@@ -1443,7 +1453,8 @@ def scordelis_lo_deflection(divisions: int, kind: str = "structured", bending: s
     points = np.column_stack([L * square[:, 0], R * np.sin(angle), R * np.cos(angle)])
     ends = lambda m: ["simply" if (np.isclose(p[0], 0.0) or np.isclose(p[0], L)) else "free" for p in m]  # noqa: E731
     shell = RotationFreeShell(points, tris, 0.25, Material(4.32e8, 0.0), boundary=ends,
-                              up=lambda c: np.column_stack([0.0 * c[:, 0], c[:, 1], c[:, 2]]), bending=bending)
+                              up=lambda c: np.column_stack([0.0 * c[:, 0], c[:, 1], c[:, 2]]),
+                              bending=bending)
     end_nodes = np.flatnonzero(np.isclose(points[:, 0], 0.0) | np.isclose(points[:, 0], L))
     centre = np.argmin(np.linalg.norm(points - [L / 2, 0.0, R], axis=1))
     fixed = np.concatenate([3 * end_nodes + 1, 3 * end_nodes + 2, [3 * centre]])
@@ -1465,7 +1476,8 @@ def cantilever_frequency(divisions: int = 24, width_divisions: int = 4, kind: st
     L, b, h, E, rho = 6.0, 1.0, 0.13, 1.0, 1.2e-9
     points, tris = rectangle_mesh(L, b, divisions, width_divisions, kind)
     shell = RotationFreeShell(points, tris, h, Material(E, 0.0, rho),
-                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m], bending=bending)
+                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m],
+                              bending=bending)
     data = shell.new_data()
     shell.evaluate(np.zeros(shell.n_dofs), np.zeros(shell.n_dofs), data)
     free = np.setdiff1d(np.arange(shell.n_dofs), (3 * np.flatnonzero(np.isclose(points[:, 0], 0.0))[:, None]
@@ -1516,12 +1528,14 @@ def cantilever_rolling(divisions: int = 32, width_divisions: int = 2, moment_fra
     points, tris = rectangle_mesh(L, b, divisions, width_divisions, kind)
     root = np.isclose(points[:, 0], 0.0)
     shell = RotationFreeShell(points, tris, h, Material(E, 0.0),
-                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m], bending=bending)
+                              boundary=lambda m: ["clamped" if np.isclose(p[0], 0.0) else "free" for p in m],
+                              bending=bending)
     I = b * h ** 3 / 12
     full = 2 * np.pi * E * I / L
     end = np.flatnonzero(np.isclose(points[:, 0], L))
     end = end[np.argsort(points[end, 1])]
-    inner = np.array([np.argmin(np.linalg.norm(points - (points[j] - [L / divisions, 0, 0]), axis=1)) for j in end])
+    inner = np.array([np.argmin(np.linalg.norm(points - (points[j] - [L / divisions, 0, 0]), axis=1))
+                      for j in end])
     weights = np.full(len(end), b / (len(end) - 1))
     weights[[0, -1]] *= 0.5
     state = {"moment": 0.0, "reference": np.zeros(len(end))}

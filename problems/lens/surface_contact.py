@@ -157,7 +157,8 @@ class SurfaceSelfContact:
     def energy(self, x: np.ndarray) -> float:
         value = self.stiffness * float(self.barrier(self.collisions(x), self.mesh, np.asfortranarray(x)))
         if self._tangential is not None:
-            value += float(self.friction_potential(self._tangential, self.mesh, np.asfortranarray(x) - self._x_start))
+            slip = np.asfortranarray(x) - self._x_start
+            value += float(self.friction_potential(self._tangential, self.mesh, slip))
         return value
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
@@ -206,14 +207,15 @@ class SurfaceSelfContact:
                 self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), narrow_phase_ccd=self._ccd))
         else:
             fraction = float(self._ipctk.compute_collision_free_stepsize(
-                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1), broad_phase=self._ipctk.SweepAndPrune(),
-                narrow_phase_ccd=self._ccd))
+                self.mesh, np.asfortranarray(x0), np.asfortranarray(x1),
+                broad_phase=self._ipctk.SweepAndPrune(), narrow_phase_ccd=self._ccd))
         if fraction < 1.0:
             self.step_limits.append(fraction)
         return fraction
 
     def intersecting(self, x: np.ndarray) -> bool:
-        return bool(self._ipctk.has_intersections(self.mesh, np.asfortranarray(x), broad_phase=self._ipctk.SweepAndPrune()))
+        return bool(self._ipctk.has_intersections(self.mesh, np.asfortranarray(x),
+                                                  broad_phase=self._ipctk.SweepAndPrune()))
 
     def min_distance(self, x: np.ndarray) -> float:
         """The smallest distance of the pairs within d̂ (``inf`` when none is)."""

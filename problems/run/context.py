@@ -17,6 +17,7 @@ from eyemech.problems.run import identity, jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding, output_error
 from eyemech.problems.run.identity import run_id
+from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, solvers_created
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
 from eyemech.problems.run.petsc_output import confined
@@ -27,7 +28,6 @@ from eyemech.problems.run.results import (
     peak_memory_mb,
     write_json_atomic,
 )
-from eyemech.problems.solve.driver import NewtonOptions, SolveFailure, close_solvers, solvers_created
 
 log = logging.getLogger("eyemech")
 
@@ -37,7 +37,8 @@ class RunOptions:
     """How to run, as opposed to what to model (the scene's parameters)."""
 
     quiet: bool = True            # no progress bar
-    fields: bool = True           # write VTX fields
+    fields: bool = True           # write fields (.vtu + .pvd)
+    vtx: bool = False             # write them as ADIOS2 VTX (.bp) too (ParaView with ADIOS2)
     pictures: bool = True         # write PNG pictures (pyvista, rank 0)
     newton: NewtonOptions = dataclasses.field(default_factory=NewtonOptions)
     checkpoint: CheckpointOptions = dataclasses.field(default_factory=CheckpointOptions)
@@ -216,9 +217,11 @@ class RunContext:
         """Whether PNG pictures are drawn (an output folder and no ``--no-pictures``)."""
         return self.options.pictures and self.out is not None
 
-    def field_writer(self, functions: list, stem: str = "fields") -> FieldWriter:
-        """ADIOS2 VTX output of ``functions`` (a no-op writer under ``--no-fields``)."""
-        return FieldWriter(self.field_dir, self.comm, functions, stem=stem)
+    def field_writer(self, functions: list, stem: str = "fields", pvd: bool = True) -> FieldWriter:
+        """``functions`` as a ``.pvd`` series (``pvd=False``: a scene with a series of its
+        own), and as ADIOS2 VTX under ``--vtx``; a no-op writer under ``--no-fields``."""
+        return FieldWriter(self.field_dir, self.comm, functions, stem=stem, vtx=self.options.vtx,
+                           pvd=pvd)
 
     def pyvista_series(self, stem: str = "state") -> PyvistaSeries:
         """``<stem>.pvd`` + one gathered ``.vtu`` per frame for pyvista (no-op under ``--no-fields``)."""

@@ -100,8 +100,8 @@ def collective_error(error: BaseException | None) -> bool:
     from eyemech.meshes import MeshError
     from eyemech.problems.run.checkpoint import CheckpointError, Interrupted
     from eyemech.problems.run.lockstep import RanksDiverged
+    from eyemech.problems.run.newton import SolveFailure
     from eyemech.problems.run.parameters import ParameterError
-    from eyemech.problems.solve.driver import SolveFailure
 
     return isinstance(error, (SolveFailure, Interrupted, ParameterError, MeshError,
                               CheckpointError, RanksDiverged, KeyboardInterrupt, SystemExit))

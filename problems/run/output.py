@@ -1,5 +1,8 @@
-"""Fields for ParaView/pyvista (ADIOS2 VTX, one file per element family) and PNG
-pictures rendered off-screen by pyvista on rank 0 from data gathered from all ranks."""
+"""Fields and pictures. By default a run's fields are gathered to rank 0 and written as
+``.vtu`` files indexed by a ``.pvd`` series, which pyvista (``pv.get_reader``) and ParaView
+both read; ADIOS2 VTX (``.bp``, written in parallel, for ParaView with ADIOS2) only on
+request, as well (``--vtx``: the project's pyvista cannot read it). PNG pictures are rendered
+off-screen by pyvista on rank 0 from the gathered grid."""
 
 from __future__ import annotations
 
@@ -15,12 +18,16 @@ from mpi4py import MPI
 
 
 class FieldWriter:
-    """Time series of functions; functions that share an element share a file."""
+    """Time series of functions: when ``pvd``, a gathered ``<stem>.pvd`` series per element
+    (``<stem>_<names>.pvd`` when there are several) with the functions as point data (a
+    scene that writes its own series passes ``pvd=False``); with ``vtx`` also ADIOS2 VTX
+    files (functions that share an element share a file)."""
 
     def __init__(self, out: Path | None, comm: MPI.Comm, functions: Sequence[dolfinx.fem.Function],
-                 stem: str = "fields"):
+                 stem: str = "fields", vtx: bool = True, pvd: bool = True):
         self.files: list[str] = []
         self._writers = []
+        self._series: list[tuple[list, PyvistaSeries]] = []
         self.comm = comm
         if out is None:
             return
@@ -28,16 +35,23 @@ class FieldWriter:
         for function in functions:
             key = function.function_space.element.signature
             groups.setdefault(key, []).append(function)
-        for index, group in enumerate(groups.values()):
-            name = f"{stem}_{'_'.join(f.name for f in group)}.bp"
-            path = Path(out) / name
-            self._writers.append(dolfinx.io.VTXWriter(comm, str(path), group, engine="BP4"))
-            self.files.append(name)
+        for group in groups.values():
+            names = "_".join(f.name for f in group)
+            if vtx:
+                name = f"{stem}_{names}.bp"
+                self._writers.append(dolfinx.io.VTXWriter(comm, str(Path(out) / name), group,
+                                                          engine="BP4"))
+                self.files.append(name)
+            if pvd:
+                series_stem = stem if len(groups) == 1 else f"{stem}_{names}"
+                self._series.append((group, PyvistaSeries(out, comm, stem=series_stem)))
 
     def write(self, time: float) -> None:
         for writer in self._writers:
             with self._failing(writer):
                 writer.write(time)
+        for group, series in self._series:  # collective: every rank gathers
+            series.write(time, gather_grid(group[0], {f.name: f for f in group[1:]}))
 
     def close(self, error: BaseException | None = None) -> None:
         """Collective. Called in a ``finally`` (or ``__exit__``) while an exception raised
@@ -46,6 +60,9 @@ class FieldWriter:
         from eyemech.problems.run.faults import abort_if_stranding
 
         abort_if_stranding(self.comm, error)
+        for _, series in self._series:
+            self.files += [f for f in series.files if f not in self.files]
+        self._series = []
         writers, self._writers = self._writers, []
         for writer in writers:
             with self._failing(writer):
@@ -104,6 +121,26 @@ def _as_os_error(error: RuntimeError) -> Exception:
     if name:
         return OSError(errnos.EIO, "ADIOS2 could not write it (a full disk?)", name.group(1))
     return error
+
+
+def region_data(cell_tags, cells: int) -> np.ndarray:
+    """Each owned cell's region tag (0 where untagged), for ``gather_grid``'s ``cell_data``
+    as ``"tissue"``; :func:`add_legend` names the tags."""
+    tags = np.zeros(cells, dtype=np.int32)
+    if cell_tags is not None:
+        owned = cell_tags.indices < cells
+        tags[cell_tags.indices[owned]] = cell_tags.values[owned]
+    return tags
+
+
+def add_legend(grid, names: dict[str, tuple[int, int]], dim: int, key: str = "tissue") -> None:
+    """The names of ``key``'s tags as field data (``<key>_names``, ``<key>_tags``, same
+    order), saved in the ``.vtu``: ``grid.field_data["tissue_names"]``."""
+    if grid is None:
+        return
+    regions = sorted((tag, name) for name, (d, tag) in names.items() if d == dim)
+    grid.field_data[f"{key}_tags"] = np.array([tag for tag, _ in regions], dtype=np.int32)
+    grid.field_data[f"{key}_names"] = np.array([name for _, name in regions])
 
 
 def gather_grid(function: dolfinx.fem.Function, point_data: dict[str, dolfinx.fem.Function] | None = None,
@@ -184,18 +221,33 @@ def quiet_vtk() -> None:
 
 def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None = None,
                title: str = "", camera: str | Sequence = "iso", clim=None,
-               show_undeformed: bool = True, cmap: str = "viridis") -> None:
-    """Off-screen pyvista picture of ``grid`` (rank 0 only)."""
+               show_undeformed: bool = True, cmap: str = "viridis", extras: Sequence = (),
+               scene: str = "", parameters: dict | None = None) -> None:
+    """Off-screen pyvista picture of ``grid`` (rank 0 only), coloured by ``scalars``: a
+    name with its unit in brackets ("displacement (mm)"), the colour bar's title. A field
+    that is nowhere negative (a magnitude) gets a bar from 0 to its largest value.
+    ``extras``: (pyvista dataset, add_mesh keywords) pairs drawn as well (an instrument).
+    ``scene`` and ``parameters`` are written into the PNG (:func:`tag_picture`)."""
     import pyvista
 
+    if scalars is not None and not scalars.rstrip().endswith(")"):
+        raise ValueError(f"colour bar '{scalars}' names no unit: write it as 'name (unit)' "
+                         "('(1)' for a ratio)")
     pyvista.OFF_SCREEN = True
     quiet_vtk()
     plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
     shown = grid.warp_by_vector(warp, factor=1.0) if warp else grid
     if show_undeformed and warp:
         plotter.add_mesh(grid, style="wireframe", color="grey", opacity=0.25)
+    if clim is None and scalars is not None:
+        values = np.asarray(grid[scalars], dtype=float)
+        values = np.linalg.norm(values, axis=1) if values.ndim > 1 else values
+        if values.size and np.nanmin(values) >= 0.0:
+            clim = (0.0, float(np.nanmax(values)) or 1.0)
     plotter.add_mesh(shown, scalars=scalars, show_edges=True, cmap=cmap, clim=clim,
-                     scalar_bar_args={"title": scalars or ""})
+                     scalar_bar_args={"title": scalars or "", "fmt": "%.3g", "n_labels": 5})
+    for dataset, keywords in extras:
+        plotter.add_mesh(dataset, **keywords)
     if title:
         plotter.add_text(title, font_size=12)
     if camera == "iso":
@@ -204,18 +256,22 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
         getattr(plotter, f"view_{camera}")()
     else:  # a direction to look from
         plotter.view_vector(camera)
+    tag = (lambda tmp: tag_picture(tmp, scene, parameters or {}, title)) if scene else None
     try:
-        save_screenshot(plotter, Path(path))
+        save_screenshot(plotter, Path(path), tag)
     finally:
         plotter.close()
 
 
-def save_screenshot(plotter, path: Path) -> None:
-    """``plotter``'s picture in ``path``, whole or not at all: written beside it and renamed;
-    a failed write (a full disk) leaves no partial file and names ``path``."""
+def save_screenshot(plotter, path: Path, before_rename=None) -> None:
+    """``plotter``'s picture in ``path``, whole or not at all: written beside it (and
+    ``before_rename(tmp)`` applied to it) and renamed; a failed write (a full disk) leaves
+    no partial file and names ``path``."""
     tmp = path.with_suffix(".tmp.png")
     try:
         plotter.screenshot(str(tmp))
+        if before_rename is not None:
+            before_rename(tmp)
         os.replace(tmp, path)
     except BaseException as err:
         with contextlib.suppress(OSError):
@@ -243,10 +299,49 @@ def vtu_bytes(grid) -> bytes:
         if hasattr(writer, "GetOutputStdString") else writer.GetOutputString().encode("latin-1")
 
 
+PICTURE_KEY = "eyemech"
+
+
+def tag_picture(path: Path, scene: str, parameters: dict, caption: str) -> None:
+    """Write the scene, its parameters and the caption into the PNG as a text chunk
+    (``eyemech``), so that a picture in the docs can be checked against the defaults
+    (:func:`picture_record`; tests/test_pictures.py)."""
+    import json
+
+    from PIL import Image, PngImagePlugin
+
+    info = PngImagePlugin.PngInfo()
+    info.add_text(PICTURE_KEY, json.dumps({"scene": scene, "parameters": parameters,
+                                           "caption": caption}, default=str))
+    with Image.open(path) as image:
+        image.load()
+        image.save(path, pnginfo=info)
+
+
+def picture_metadata(scene: str, parameters: dict, caption: str) -> dict[str, str]:
+    """The same record for matplotlib's ``savefig(..., metadata=...)``."""
+    import json
+
+    return {PICTURE_KEY: json.dumps({"scene": scene, "parameters": parameters,
+                                     "caption": caption}, default=str)}
+
+
+def picture_record(path: Path) -> dict | None:
+    """What :func:`tag_picture` wrote into a PNG, or None."""
+    import json
+
+    from PIL import Image
+
+    with Image.open(path) as image:
+        text = image.text.get(PICTURE_KEY)
+    return json.loads(text) if text else None
+
+
 class PyvistaSeries:
     """Converged states as ``.vtu`` files plus a ``.pvd`` index, written by rank 0 from
-    the gathered grid: what notebooks read with ``pyvista.read`` (the VTX ``.bp`` files
-    are for ParaView and parallel I/O; VTK's PyPI wheel cannot read them)."""
+    the gathered grid: what ParaView opens and notebooks read with
+    ``pv.get_reader(path)`` (``reader.set_active_time_value(reader.time_values[-1])`` for
+    the last state: ``pyvista.read`` gives the first)."""
 
     def __init__(self, out: Path | None, comm: MPI.Comm, stem: str = "state"):
         self.out, self.comm, self.stem = (Path(out) if out else None), comm, stem

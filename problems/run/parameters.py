@@ -10,12 +10,15 @@ before any mesh is built or any form compiled.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import os
 import tomllib
 import typing
 from pathlib import Path
 from typing import Any, ClassVar, Literal, get_args, get_origin
+
+import msgspec
 
 MMHG = 1.33322e-4  # MPa per mmHg
 
@@ -192,8 +195,8 @@ def check_cell_count(params: SceneParameters) -> None:
         sized = f"an element size of {size:.3g} mm" if isinstance(size, (int, float)) and size > 0 \
             else f"{key}={getattr(params, key)!r}"
         raise ParameterError(key, f"{sized} gives about {int(cells):,} cells (estimated before "
-                             f"meshing), more than the limit of {limit:,}: coarsen the mesh with {key}, or raise "
-                             f"the limit with {override}")
+                             f"meshing), more than the limit of {limit:,}: coarsen the mesh with {key}, "
+                             f"or raise the limit with {override}")
 
 
 def check_types(params: SceneParameters) -> None:
@@ -224,60 +227,57 @@ def _field_types(cls: type) -> dict[str, Any]:
 
 def convert(cls: type, key: str, raw: Any) -> Any:
     """Convert ``raw`` (a string from the command line, or a TOML value) to the type
-    of field ``key`` of the dataclass ``cls``."""
-    types = _field_types(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    if key not in names:
-        raise ParameterError(key, f"unknown key; valid keys are: {', '.join(names)}")
-    kind = types[key]
+    of field ``key`` of the dataclass ``cls`` (:func:`coerce`)."""
+    if key not in {f.name for f in dataclasses.fields(cls)}:
+        raise ParameterError(key, unknown_key(cls, key))
+    kind = _field_types(cls)[key]
     try:
-        return _convert_value(kind, raw)
-    except (TypeError, ValueError):
+        return coerce(kind, raw)
+    except (TypeError, ValueError, msgspec.ValidationError):
         raise ParameterError(key, f"cannot read {raw!r} as {_type_name(kind)}") from None
+
+
+def coerce(kind: Any, raw: Any) -> Any:
+    """The one reading of a parameter value, whether it comes from ``--set`` (text) or a
+    TOML file (text, numbers, booleans, arrays): a TOML value is read as its command-line
+    text, so ``--set n=2.0`` and ``n = 2.0`` give the same value or the same error.
+    msgspec parses the text (lax mode): an integer accepts ``3``, ``2.0`` and ``1e3`` but
+    not ``0.1`` or ``1_0``; a number accepts what JSON writes (``0.5``, ``5e-1``, not
+    ``.5``); a flag ``true``/``false``/``1``/``0`` in any case; a choice one of its values.
+    A tuple is a comma-separated text or a TOML array."""
+    if get_origin(kind) in (tuple, list):
+        (item,) = get_args(kind)[:1]
+        items = raw.split(",") if isinstance(raw, str) else raw if isinstance(raw, list) else [raw]
+        return tuple(coerce(item, v.strip() if isinstance(v, str) else v) for v in items
+                     if v != "")
+    if isinstance(raw, bool):
+        text = "true" if raw else "false"
+    elif isinstance(raw, (str, int, float)):
+        text = str(raw)
+    else:
+        raise TypeError(f"expected a single value, got {type(raw).__name__}")
+    return text if kind is str else msgspec.convert(text, kind, strict=False)
+
+
+def unknown_key(cls: type, key: str) -> str:
+    """The message for an unknown key: the close ones (difflib), and the valid ones when
+    they are few enough to read (else where they are listed)."""
+    names = [f.name for f in dataclasses.fields(cls)]
+    close = difflib.get_close_matches(key, names, n=3, cutoff=0.6)
+    hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+    if len(names) <= 24:
+        return f"unknown key; {hint}valid keys are: {', '.join(names)}"
+    return (f"unknown key; {hint}the {len(names)} valid keys are listed by group with "
+            f"'eyemech run SCENE --help' and in docs/parameters.md")
 
 
 def _type_name(kind: Any) -> str:
     if get_origin(kind) is Literal:
         return "one of " + ", ".join(repr(a) for a in get_args(kind))
+    if get_origin(kind) in (tuple, list):
+        return "a comma-separated list of " + _type_name(get_args(kind)[0]).removeprefix("a ") + "s"
     plain = {int: "an integer", float: "a number", bool: "true or false", str: "text"}
     return plain.get(kind, getattr(kind, "__name__", str(kind)))
-
-
-def _convert_value(kind: Any, raw: Any) -> Any:
-    origin = get_origin(kind)
-    if origin is Literal:
-        choices = get_args(kind)
-        value = raw if not isinstance(raw, str) else raw.strip()
-        for choice in choices:
-            if value == choice or (isinstance(value, str) and str(choice) == value):
-                return choice
-        raise ValueError(f"not one of {', '.join(repr(c) for c in choices)}")
-    if origin in (tuple, list):
-        (item,) = get_args(kind)[:1]
-        items = raw.split(",") if isinstance(raw, str) else list(raw)
-        return tuple(_convert_value(item, v) for v in items if v != "")
-    if kind is bool:
-        if isinstance(raw, bool):
-            return raw
-        text = str(raw).strip().lower()
-        if text in ("1", "true", "yes", "on"):
-            return True
-        if text in ("0", "false", "no", "off"):
-            return False
-        raise ValueError("expected true or false")
-    if kind is int:
-        if isinstance(raw, bool):
-            raise ValueError("expected an integer")
-        if isinstance(raw, float) and not raw.is_integer():
-            raise ValueError("expected an integer")
-        return int(raw)
-    if kind is float:
-        if isinstance(raw, bool):
-            raise ValueError("expected a number")
-        return float(raw)  # finite unless the field says otherwise: check_finite
-    if kind is str:
-        return str(raw)
-    raise TypeError(f"unsupported parameter type {kind}")
 
 
 def parse_assignments(pairs: list[str]) -> dict[str, str]:
@@ -340,6 +340,15 @@ def describe(cls: type[SceneParameters]) -> list[tuple[str, str, Any, str, str]]
     return rows
 
 
+def groups(cls: type[SceneParameters]) -> dict[str, list[tuple[str, str, Any, str, str]]]:
+    """:func:`describe`'s rows by group (:data:`GROUPS` order; empty groups left out)."""
+    group_of = {f.name: f.metadata.get("group", PHYSICS) for f in dataclasses.fields(cls)}
+    out: dict[str, list] = {group: [] for group in GROUPS}
+    for row in describe(cls):
+        out[group_of[row[0]]].append(row)
+    return {group: rows for group, rows in out.items() if rows}
+
+
 # --petsc names under these prefixes configure parts of a solver that exist only on the
 # scene's real system (fieldsplit blocks, multigrid levels, block-Jacobi blocks): the
 # one-unknown trial solve below cannot read them, so their names are not checked there.
@@ -362,7 +371,7 @@ def check_petsc_options(petsc: dict[str, str]) -> None:
     from mpi4py import MPI  # noqa: F401  (loads the MPI library petsc4py links to)
     from petsc4py import PETSc
 
-    from eyemech.problems.solve.driver import NewtonOptions
+    from eyemech.problems.run.newton import NewtonOptions
 
     prefix = "eyemechcheck_"
     values = NewtonOptions(petsc=dict(petsc)).as_petsc()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import datetime
 import json
 import os
 import platform
@@ -62,6 +63,14 @@ def versions() -> dict[str, str]:
 
         out["petsc"] = ".".join(str(v) for v in PETSc.Sys.getVersion())
     return out
+
+
+def stamp() -> str:
+    """One line for a chart footer and a CSV comment: what measured this, where, when."""
+    v = versions()
+    return (f"{datetime.date.today().isoformat()} · {platform.node()} ({platform.machine()}, "
+            f"{os.cpu_count()} cpus) · eyemech {v.get('eyemech', '?')} · "
+            f"DOLFINx {v.get('dolfinx', '?')} · PETSc {v.get('petsc', '?')}")
 
 
 def machine() -> dict[str, Any]:
@@ -186,12 +195,31 @@ class Result:
 
     def as_json(self) -> dict[str, Any]:
         counts = self.counts()
-        data = dataclasses.asdict(self)
+        data = {"schema_version": SCHEMA_VERSION, **dataclasses.asdict(self)}
         data["solver_counts"] = counts
         data["newton_tolerances"] = self.stopping_criteria()
         data["versions"] = versions()
         data["machine"] = machine()
         return to_jsonable(data)
+
+
+# results.json's layout: problems/run/results.schema.json (a JSON Schema) describes it;
+# this number changes with it, so a reader can tell which layout a file has
+SCHEMA_VERSION = 1
+SCHEMA_PATH = Path(__file__).with_name("results.schema.json")
+# a staged scene (scleral-buckling) reports each stage's quantities as a group
+# ``quantities["after_<stage>"]``; the top-level quantities are the last stage's
+STAGE_PREFIX = "after_"
+
+
+def stage_groups(quantities: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The per-stage quantity groups of a result, in order (empty for unstaged scenes)."""
+    return {key: value for key, value in quantities.items()
+            if key.startswith(STAGE_PREFIX) and isinstance(value, dict)}
+
+
+def schema() -> dict[str, Any]:
+    return json.loads(SCHEMA_PATH.read_text())
 
 
 def to_jsonable(value: Any) -> Any:

@@ -22,9 +22,10 @@ from eyemech.problems.run.checkpoint import Interrupted, latest
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.faults import abort_if_stranding
 from eyemech.problems.run.identity import run_id
+from eyemech.problems.run.newton import SolveFailure
 from eyemech.problems.run.parameters import ParameterError, build
-from eyemech.problems.run.results import OutputFolder, write_text_atomic
-from eyemech.problems.solve.driver import SolveFailure
+from eyemech.problems.run.progress import case_ended, case_started
+from eyemech.problems.run.results import OutputFolder, stage_groups, write_text_atomic
 
 log = logging.getLogger("eyemech")
 
@@ -180,6 +181,8 @@ def _run_cases(scene, all_cases, ids, grid, out: Path, ranks_per_case: int,
                 rows.append({**row, **previous})
             continue
         params = build(scene.parameters, overrides)
+        quiet = sub.rank != 0 or (options.quiet if options is not None else True)
+        started = case_started(index, len(all_cases), {k: overrides[k] for k in grid}, quiet)
         try:
             result = scene.run(params, comm=sub, out=case_dir,
                                options=_case_options(options, case_dir, resume_from))
@@ -192,6 +195,7 @@ def _run_cases(scene, all_cases, ids, grid, out: Path, ranks_per_case: int,
         except Exception as err:  # one case's error must not stop the others ...
             abort_if_stranding(sub, err)  # ... unless the case's other ranks wait for this one
             row.update(status="error", error="".join(traceback.format_exception_only(err)).strip())
+        case_ended(index, len(all_cases), row["status"], started, quiet)
         if sub.rank == 0:
             rows.append(row)
     sub.Free()
@@ -243,7 +247,13 @@ def _case_timings(timings: dict[str, float]) -> dict[str, float | None]:
 
 
 def _scalars(quantities: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in quantities.items() if isinstance(v, (int, float, bool, str))}
+    """A case's CSV columns: its scalar quantities (a staged scene's are its last
+    stage's), then one column group per stage, ``after_<stage>.<quantity>``."""
+    row = {k: v for k, v in quantities.items() if isinstance(v, (int, float, bool, str))}
+    for stage, group in stage_groups(quantities).items():
+        row.update({f"{stage}.{k}": v for k, v in group.items()
+                    if isinstance(v, (int, float, bool, str))})
+    return row
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:

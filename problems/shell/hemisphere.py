@@ -19,7 +19,7 @@ from mpi4py import MPI
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
-from eyemech.problems.run.parameters import SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, SceneParameters, field
 from eyemech.problems.shell.model import (
     Shell,
     ShellDiscretisation,
@@ -35,15 +35,16 @@ REFERENCE = 0.093
 
 @dataclasses.dataclass(frozen=True)
 class HemisphereParameters(SceneParameters, ShellDiscretisation):
-    radius: float = field(10.0, "sphere radius", "mm")
-    hole_angle: float = field(18.0, "half angle of the hole at the pole", "deg")
-    thickness: float = field(0.04, "shell thickness", "mm")
-    youngs_modulus: float = field(6.825e7, "Young's modulus", "MPa")
-    poisson_ratio: float = field(0.3, "Poisson's ratio")
-    force: float = field(2.0, "each point load (whole shell)", "N")
-    divisions: int = field(24, "divisions from the equator to the hole (5× as many around)")
-    kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear")
-    load_steps: int = field(10, "initial number of load steps (nonlinear; cut and grown as needed)")
+    radius: float = field(10.0, "sphere radius", "mm", group=GEOMETRY)
+    hole_angle: float = field(18.0, "half angle of the hole at the pole", "deg", group=GEOMETRY)
+    thickness: float = field(0.04, "shell thickness", "mm", group=GEOMETRY)
+    youngs_modulus: float = field(6.825e7, "Young's modulus", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.3, "Poisson's ratio", group=PHYSICS)
+    force: float = field(2.0, "each point load (whole shell)", "N", group=PHYSICS)
+    divisions: int = field(24, "divisions from the equator to the hole (5× as many around)", group=GEOMETRY)
+    kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear", group=PHYSICS)
+    load_steps: int = field(10, "initial number of load steps (nonlinear; cut and grown as needed)",
+                            group=SOLVER)
 
     RESOLUTION_KEY: ClassVar[str] = "divisions"
 

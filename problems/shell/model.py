@@ -25,7 +25,7 @@ from eyemech.meshes.surface import (
 from eyemech.meshes.tagged import TaggedMesh
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.output import gather_grid, render_png
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.solve.driver import (
     NewtonOptions,
     NonlinearSolver,
@@ -150,9 +150,10 @@ class ShellDiscretisation:
     """Parameter mixin of the shell benchmarks (``class Parameters(SceneParameters,
     ShellDiscretisation)``): the triangulation and the C0 interior-penalty discretisation."""
 
-    diagonal: Diagonal = field("crossed", "triangulation of each square: crossed|right|left|alternating")
-    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)")
-    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h")
+    diagonal: Diagonal = field("crossed", "triangulation of each square: crossed|right|left|alternating",
+                               group=GEOMETRY)
+    degree: int = field(2, "Lagrange degree of the displacement (2 or 3)", group=GEOMETRY)
+    penalty_factor: float = field(1.0, "α in the edge penalty α p(p+1) D / h", group=GEOMETRY)
 
     def grid_triangles(self, nx: int, ny: int) -> int:
         """Triangles of the structured nx × ny grid (meshes/surface.py: 4 per square when
@@ -162,17 +163,19 @@ class ShellDiscretisation:
 
 @dataclasses.dataclass(frozen=True)
 class PlateParameters(SceneParameters, ShellDiscretisation):
-    q: float = field(1.0, "uniform transverse load (dead load, per reference area)", "MPa")
-    youngs_modulus: float = field(1.092e6, "Young's modulus (the shell paper's test)", "MPa")
-    poisson_ratio: float = field(0.3, "Poisson's ratio")
-    length: float = field(10.0, "side of the square plate", "mm")
-    thickness: float = field(0.1, "plate thickness", "mm")
-    divisions: int = field(32, "squares per side (each split in 4 triangles when crossed)")
+    q: float = field(1.0, "uniform transverse load (dead load, per reference area)", "MPa", group=PHYSICS)
+    youngs_modulus: float = field(1.092e6, "Young's modulus (the shell paper's test)", "MPa", group=PHYSICS)
+    poisson_ratio: float = field(0.3, "Poisson's ratio", group=PHYSICS)
+    length: float = field(10.0, "side of the square plate", "mm", group=GEOMETRY)
+    thickness: float = field(0.1, "plate thickness", "mm", group=GEOMETRY)
+    divisions: int = field(32, "squares per side (each split in 4 triangles when crossed)", group=GEOMETRY)
     kinematics: Kinematics = field("linear", "linear (small displacement) or nonlinear "
-                                                        "(total Lagrangian)")
-    load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)")
+                                                        "(total Lagrangian)", group=PHYSICS)
+    load_steps: int = field(4, "initial number of load steps (nonlinear; cut and grown as needed)",
+                            group=SOLVER)
     in_plane: InPlane = field("immovable", "in-plane edge condition: immovable (u = 0) or sliding "
-                                           "(normal in-plane displacement 0, tangential free: Levy 1942)")
+                                           "(normal in-plane displacement 0, tangential free: Levy 1942)",
+                              group=PHYSICS)
 
     RESOLUTION_KEY: ClassVar[str] = "divisions"
 
@@ -340,5 +343,6 @@ def picture(u: dolfinx.fem.Function, ctx: RunContext, title: str, label: str,
     grid.point_data["shown"] = displacement * scale
     path = Path(ctx.out) / name
     suffix = f" (displacement × {scale:.3g})" if not np.isclose(scale, 1.0) else ""
-    render_png(grid, path, scalars=label, warp="shown", title=title + suffix, camera=camera)
+    render_png(grid, path, scalars=label, warp="shown", title=title + suffix, camera=camera,
+               scene=ctx.result.scene, parameters=ctx.result.parameters)
     ctx.result.pictures.append(path.name)

@@ -50,7 +50,7 @@ from mpi4py import MPI
 from eyemech.forms import viscoelastic as ve
 from eyemech.forms.kinematics import deformation_gradient, without_variables
 from eyemech.problems.run.context import RunContext
-from eyemech.problems.run.parameters import ParameterError, SceneParameters, field
+from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, ParameterError, SceneParameters, field
 from eyemech.problems.solid.spaces import ELEMENTS, mixed_displacement_pressure
 from eyemech.problems.solve.driver import (
     NonlinearSolver,
@@ -60,27 +60,32 @@ from eyemech.problems.solve.driver import (
     follow_path,
 )
 from eyemech.problems.solve.scalars import assemble_scalar
+from eyemech.problems.solve.stepping import StepController
 
 LOADED_FACE = 1  # facet tag of x = L
 
 
 @dataclasses.dataclass(frozen=True)
 class BarParameters(SceneParameters):
-    mu_inf: float = field(0.05, "equilibrium shear modulus μ∞ (Ψ∞ = μ∞/2 (tr C̄ − 3))", "MPa")
-    mu_v: float = field(0.05, "viscous-branch shear modulus μv (Ψv = μv/2 (tr(C̄ Cv⁻¹) − 3))", "MPa")
-    tau: float = field(100.0, "relaxation time τ of the evolution τ Ċv = C̄ − ⅓ tr(C̄ Cv⁻¹) Cv", "s")
-    t_end: float = field(300.0, "end time", "s")
-    dt: float = field(1.0, "time step (fixed mode; the first step in adaptive mode)", "s")
+    mu_inf: float = field(0.05, "equilibrium shear modulus μ∞ (Ψ∞ = μ∞/2 (tr C̄ − 3))", "MPa", group=PHYSICS)
+    mu_v: float = field(0.05, "viscous-branch shear modulus μv (Ψv = μv/2 (tr(C̄ Cv⁻¹) − 3))", "MPa",
+                        group=PHYSICS)
+    tau: float = field(100.0, "relaxation time τ of the evolution τ Ċv = C̄ − ⅓ tr(C̄ Cv⁻¹) Cv", "s",
+                       group=PHYSICS)
+    t_end: float = field(300.0, "end time", "s", group=PHYSICS)
+    dt: float = field(1.0, "time step (fixed mode; the first step in adaptive mode)", "s", group=SOLVER)
     time_stepping: Literal["adaptive", "fixed"] = field(
-        "adaptive", "adaptive: steps from a local error estimate of Cv; fixed: every step dt")
+        "adaptive", "adaptive: steps from a local error estimate of Cv; fixed: every step dt", group=SOLVER)
     time_tolerance: float = field(1e-2, "adaptive mode: allowed relative stress error from the time "
-                                        "steps (embedded BE/FE estimate, module viscous_bar)")
-    max_steps: int = field(20000, "most time steps a run may take (adaptive or fixed)")
+                                        "steps (embedded BE/FE estimate, module viscous_bar)", group=SOLVER)
+    max_steps: int = field(20000, "most time steps a run may take (adaptive or fixed)", group=SOLVER)
     time_scheme: Literal["backward-euler", "forward-euler"] = field(
-        "backward-euler", "integration of the evolution law (forward Euler: stability study only)")
-    element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)")
-    mesh_divisions: int = field(1, "elements (hexahedra; ×6 tetrahedra) along each edge of the cube")
-    length: float = field(1.0, "edge of the cube", "mm")
+        "backward-euler", "integration of the evolution law (forward Euler: stability study only)",
+        group=SOLVER)
+    element: Literal["Q2P1", "P2P1"] = field("Q2P1", "element family (displacement/pressure)", group=GEOMETRY)
+    mesh_divisions: int = field(1, "elements (hexahedra; ×6 tetrahedra) along each edge of the cube",
+                                group=GEOMETRY)
+    length: float = field(1.0, "edge of the cube", "mm", group=GEOMETRY)
 
     RESOLUTION_KEY: ClassVar[str] = "mesh_divisions"
 
@@ -210,9 +215,9 @@ class ViscousHistory:
     def _moduli(self) -> tuple[float, float, float]:
         """μ∞, μv and the retardation time as numbers (the material may hold Constants)."""
         number = lambda x: float(np.asarray(getattr(x, "value", x)))
-        mu_inf, mu_v, tau = (number(x) for x in (self.material.mu_inf, self.material.mu_v,
-                                                 self.material.tau))
-        return mu_inf, mu_v, tau * (mu_inf + mu_v) / mu_inf
+        numbers = ve.Viscoelastic(*(number(x) for x in (self.material.mu_inf, self.material.mu_v,
+                                                        self.material.tau)))
+        return numbers.mu_inf, numbers.mu_v, numbers.retardation_time
 
     def update(self) -> float:
         """Cv_n ← Cv_{n+1}(u) (and C̄_n ← C̄(u) for forward Euler) after a converged step.
@@ -380,8 +385,8 @@ def march(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver, params: Bar
 
     explicit = params.time_scheme == "forward-euler"
     fraction = params.dt / params.t_end
-    stepping = Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=fraction, max_step=fraction,
-                        min_step=fraction / 64, max_cuts=0 if explicit else 6,
+    stepping = Stepping(start=0.0, end=params.t_end, quantity="time", unit="s", initial_step=fraction,
+                        max_step=fraction, min_step=fraction / 64, max_cuts=0 if explicit else 6,
                         stops=time_stops(params, extra_stops))
 
     def apply(t: float, increment: float) -> None:
@@ -428,26 +433,27 @@ def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: Adap
     t_end, tol = steps.t_end, steps.tolerance
     retardation = history.retardation_time()
     stops = sorted({t for t in steps.stops if 0 < t < t_end} | {t_end})
-    t, dt, step, cuts = 0.0, min(steps.first_dt, t_end), 0, 0
+    t, step = 0.0, 0
+    # a failed Newton solve halves the step (at most 6 times in a row); the error
+    # estimate proposes every other length
+    controller = StepController(min(steps.first_dt, t_end), cut_factor=0.5, max_cuts=6,
+                                easy_effort=None)
     resumed = checkpoints.enter_path(label) if checkpoints is not None else None
     if resumed is not None:
         if "skip" in resumed:  # finished before the checkpoint: its state comes later
             checkpoints.leave_path([])
             return
-        t, dt, step = resumed["value"], resumed["increment"], resumed["step"]
+        t, controller.step, step = resumed["value"], resumed["increment"], resumed["step"]
     fresh = True
     while t < t_end * (1 - 1e-12):
         if fresh:  # a new step: its start state and the work counted from here
             if step >= steps.max_steps:
-                raise TooManySteps(step, t, dt, steps.max_steps)
+                raise TooManySteps(step, t, controller.step, steps.max_steps)
             state, counts_before = solver.save_state(), solver.counts.copy()
             if checkpoints is not None:
                 checkpoints.watch_step(solver)
             fresh = False
-        next_stop = next(s for s in stops if s > t * (1 + 1e-12) + 1e-300)
-        target = min(t + dt, next_stop)
-        if next_stop - target < 1e-3 * dt:  # no sliver before a stop
-            target = next_stop
+        target = controller.target(t, next(s for s in stops if s > t * (1 + 1e-12) + 1e-300))
         h = target - t
         history.dt.value = h
         apply_load(target)
@@ -455,9 +461,7 @@ def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: Adap
         if not converged:
             residuals, reason = list(solver.residual_history), solver.reason()
             solver.restore_state(state)
-            cuts += 1
-            dt = 0.5 * h
-            if cuts > 6:
+            if not controller.cut(attempted=h):
                 history.dt.value = 0.0
                 apply_load(t)
                 raise SolveFailure(step + 1, target, t, residuals, reason)
@@ -468,19 +472,20 @@ def march_adaptive(history: ViscousHistory, solver: NonlinearSolver, steps: Adap
         ratio = np.sqrt(allowed / relative) if relative > 0 else np.inf
         if ratio < 1.0:
             solver.restore_state(state)
-            summary["rejected_steps"] += 1
-            dt = h * max(0.2, 0.9 * ratio)
+            controller.reject(h * max(0.2, 0.9 * ratio))
+            summary["rejected_steps"] += 1  # kept in the checkpoints: a resume continues it
             continue
         step += 1
         work = StepRecord.work(solver.counts - counts_before)
+        cuts = controller.cuts
         record = StepRecord(step, target, h, iterations, cuts, list(solver.residual_history),
                             solver.linear_iterations, **work)
         accept(step, target, h, iterations, cuts, record.residuals, errors, record.counts())
-        t, cuts, fresh = target, 0, True
-        dt = h * min(2.0, max(0.2, 0.9 * ratio))
+        t, fresh = target, True
+        controller.accept(next_step=h * min(2.0, max(0.2, 0.9 * ratio)))
         if checkpoints is not None:
-            checkpoints.step_done({"label": label, "step": step, "value": t, "increment": dt,
-                                   "records": []})
+            checkpoints.step_done({"label": label, "step": step, "value": t,
+                                   "increment": controller.step, "records": []})
     if checkpoints is not None:
         checkpoints.leave_path([])
 
@@ -496,7 +501,7 @@ def load_instantly(ctx: RunContext, bar: ViscousBar, solver: NonlinearSolver,
 
 
 def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
-                 reference_label: str = "reference") -> None:
+                 reference_label: str = "reference", metadata: dict | None = None) -> None:
     """A small PNG of a quantity over time, with its reference when there is one."""
     import matplotlib
 
@@ -513,5 +518,5 @@ def plot_history(path: Path, times, values, reference, ylabel: str, title: str,
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, metadata=metadata)
     plt.close(fig)

@@ -11,7 +11,8 @@ is repeated shorter, an accepted one sets the next Δt = Δt · clip(safety · (
 shrink_limit, grow_limit) (p the scheme's order: e ∝ Δt^{p+1}, e_allowed ∝ Δt). Error per
 unit step keeps the sum of the local errors, reported as ``time_error_estimate``, below
 ``tolerance`` over ``time_scale`` (the run's length). A Newton failure halves the step (at
-most 6 times in a row). Verified on the damped oscillator, whose exact solution is known:
+most 6 times in a row): the step controller (:mod:`~eyemech.problems.solve.stepping`), told
+each attempt's outcome. Verified on the damped oscillator, whose exact solution is known:
 tests/test_adaptive_dynamics.py.
 """
 
@@ -23,6 +24,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 from eyemech.problems.solve.driver import NonlinearSolver, SolveFailure
+from eyemech.problems.solve.stepping import StepController
 from eyemech.problems.solve.time_integration import ImplicitDynamics
 
 MAX_CUTS = 6  # Newton failures in a row before the march gives up
@@ -53,6 +55,12 @@ class TimeErrorControl:
     def allowed(self, dt: float) -> float:
         return self.tolerance * dt / self.time_scale
 
+    def controller(self) -> StepController:
+        """The step controller of a march: the first step, halved on a Newton failure at
+        most ``MAX_CUTS`` times in a row; the error estimate proposes every other length."""
+        return StepController(min(self.first_dt, self.max_dt), cut_factor=0.5, max_cuts=MAX_CUTS,
+                              easy_effort=None)
+
     def judge(self, dt: float, error: float, order: int) -> tuple[bool, float]:
         """(accepted, next Δt) for a step of length ``dt`` with estimate ``error``."""
         allowed = self.allowed(dt)
@@ -75,6 +83,10 @@ class MarchSummary:
     min_dt: float = np.inf
     max_dt: float = 0.0
 
+    def count(self, controller: StepController) -> None:
+        """The failed and rejected attempts, as the controller counted them."""
+        self.cuts, self.rejected_steps = controller.failed_attempts, controller.rejected_attempts
+
 
 def march_dynamics(solver: NonlinearSolver, dynamics: ImplicitDynamics,
                    apply: Callable[[float, float], None], t_end: float, control: TimeErrorControl,
@@ -90,17 +102,14 @@ def march_dynamics(solver: NonlinearSolver, dynamics: ImplicitDynamics,
     summary = MarchSummary()
     order = dynamics.order
     ends = sorted({t for t in stops if t_start < t < t_end} | {t_end})
-    t, dt, cuts_in_row = t_start, min(control.first_dt, control.max_dt), 0
+    t, steps = t_start, control.controller()
     state = solver.save_state()
     while t < t_end * (1 - 1e-12):
         if summary.time_steps >= control.max_steps:
-            raise SolveFailure(summary.time_steps + 1, t + dt, t, [],
+            raise SolveFailure(summary.time_steps + 1, t + steps.step, t, [],
                                f"more than max_steps = {control.max_steps} time steps at the "
                                f"tolerance {control.tolerance:g}", quantity="time", unit="s")
-        next_stop = next(s for s in ends if s > t * (1 + 1e-12))
-        target = min(t + dt, next_stop)
-        if next_stop - target < 1e-3 * dt:  # no sliver before a stop
-            target = next_stop
+        target = steps.target(t, next(s for s in ends if s > t * (1 + 1e-12)))
         h = target - t
         dynamics.set_step(h)
         apply(target, h)
@@ -108,20 +117,20 @@ def march_dynamics(solver: NonlinearSolver, dynamics: ImplicitDynamics,
         if not converged:
             residuals, reason = list(solver.residual_history), solver.reason()
             solver.restore_state(state)
-            summary.cuts += 1
-            cuts_in_row += 1
-            if cuts_in_row > MAX_CUTS:
+            retry = steps.cut(attempted=h)
+            summary.count(steps)
+            if not retry:
                 raise SolveFailure(summary.time_steps + 1, target, t, residuals, reason,
                                    quantity="time", unit="s")
-            dt = 0.5 * h
             continue
-        cuts_in_row = 0
         error = dynamics.local_error()
-        accepted, dt = control.judge(h, error, order)
+        accepted, next_dt = control.judge(h, error, order)
         if not accepted:
             solver.restore_state(state)
-            summary.rejected_steps += 1
+            steps.reject(next_dt)
+            summary.count(steps)
             continue
+        steps.accept(next_step=next_dt)
         summary.time_steps += 1
         summary.time_error_estimate += error
         summary.min_dt, summary.max_dt = min(summary.min_dt, h), max(summary.max_dt, h)
@@ -162,35 +171,33 @@ def march_steps(stepper: Stepper, t_end: float, control: TimeErrorControl,
     then :class:`SolveFailure`). ``accept(step, t, dt, iterations, error)`` sees each
     accepted step after ``advance()``."""
     summary = MarchSummary()
-    t, dt, cuts_in_row = t_start, min(control.first_dt, control.max_dt), 0
+    t, steps = t_start, control.controller()
     state = stepper.save()
     while t < t_end * (1 - 1e-12):
         if summary.time_steps >= control.max_steps:
-            raise SolveFailure(summary.time_steps + 1, t + dt, t, [],
+            raise SolveFailure(summary.time_steps + 1, t + steps.step, t, [],
                                f"more than max_steps = {control.max_steps} time steps at the "
                                f"tolerance {control.tolerance:g}", quantity="time", unit="s")
-        target = min(t + dt, t_end)
-        if t_end - target < 1e-3 * dt:  # no sliver before the end
-            target = t_end
+        target = steps.target(t, t_end)
         h = target - t
         try:
             iterations = stepper.solve_step(h)
         except RuntimeError as err:
             stepper.restore(state)
-            summary.cuts += 1
-            cuts_in_row += 1
-            if cuts_in_row > MAX_CUTS:
+            retry = steps.cut(attempted=h)
+            summary.count(steps)
+            if not retry:
                 raise SolveFailure(summary.time_steps + 1, target, t, [], str(err),
                                    quantity="time", unit="s") from err
-            dt = 0.5 * h
             continue
-        cuts_in_row = 0
         error = stepper.local_error()
-        accepted, dt = control.judge(h, error, stepper.order)
+        accepted, next_dt = control.judge(h, error, stepper.order)
         if not accepted:
             stepper.restore(state)
-            summary.rejected_steps += 1
+            steps.reject(next_dt)
+            summary.count(steps)
             continue
+        steps.accept(next_step=next_dt)
         stepper.advance()
         summary.time_steps += 1
         summary.time_error_estimate += error

@@ -48,7 +48,7 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from eyemech.problems.run.parameters import field
+from eyemech.problems.run.parameters import SOLVER, field
 from eyemech.problems.solve.scalars import assemble_scalar
 
 LinearSolverName = Literal["direct", "iterative"]
@@ -110,7 +110,7 @@ class SolverChoice:
     ``class Parameters(SceneParameters, SolverChoice)``. ``solver`` is a Literal, checked on
     construction by :class:`SceneParameters`."""
 
-    solver: LinearSolverName = field("direct", SOLVER_HELP)
+    solver: LinearSolverName = field("direct", SOLVER_HELP, group=SOLVER)
 
     def linear_solver(self, shear_modulus=1.0, measure=None) -> "IterativeSolver | None":
         """What ``solver`` selects for NonlinearSolver(..., iterative=...): None (MUMPS

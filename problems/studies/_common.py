@@ -1,58 +1,128 @@
 """Shared pieces of studies: a stamp naming machine, versions and date on every chart,
-the CSV writer, and the quiet run options every study uses."""
+the CSV writer with its sidecar of settings, and the quiet run options every study uses."""
 
 from __future__ import annotations
 
+import ast
 import csv
-import datetime
-import os
-import platform
+import dataclasses
+import hashlib
+import importlib
+import json
+import sys
 from pathlib import Path
+from typing import Any
 
 from eyemech.problems.run.context import RunOptions
-from eyemech.problems.run.results import versions
+from eyemech.problems.run.results import stamp
 
 # studies measure quantities, not pictures: no fields, no PNGs from the scenes
 QUIET = RunOptions(fields=False, pictures=False)
 
 
-def stamp() -> str:
-    """One line for a chart footer and a CSV comment: what measured this, where, when."""
-    v = versions()
-    return (f"{datetime.date.today().isoformat()} · {platform.node()} ({platform.machine()}, "
-            f"{os.cpu_count()} cpus) · eyemech {v.get('eyemech', '?')} · "
-            f"DOLFINx {v.get('dolfinx', '?')} · PETSc {v.get('petsc', '?')}")
+def sidecar(path: Path) -> Path:
+    """Where a study CSV's metadata go: ``<stem>.meta.json`` beside it."""
+    return Path(path).with_name(Path(path).stem + ".meta.json")
 
 
 def write_csv(path: Path, rows: list[dict], *notes: str) -> Path:
-    """``rows`` as CSV under comment lines: the notes, then the stamp. Columns are the
-    union of the rows' keys in first-seen order (a failed case may lack some)."""
+    """``rows`` as a plain CSV (a header line, then the rows; columns are the union of the
+    rows' keys in first-seen order: a failed case may lack some), and its sidecar
+    (:func:`settings`, the notes, the stamp). Within ``eyemech study`` each row with a
+    ``status`` is a case: one line per case on stderr, failed ones counted."""
+    from eyemech.problems.studies import running
+
     keys: list[str] = []
     for row in rows:
         keys += [k for k in row if k not in keys]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as handle:
-        for note in (*notes, stamp()):
-            handle.write(f"# {note}\n")
         writer = csv.DictWriter(handle, fieldnames=keys)
         writer.writeheader()
         writer.writerows(rows)
+    study = running()
+    meta = {"study": study.name if study else None, "quick": study.quick if study else None,
+            "made": stamp(), "notes": list(notes)}
+    if study is not None:
+        meta.update(settings(study.module))
+        _count_cases(study, path, rows)
+    sidecar(path).write_text(json.dumps(meta, indent=1, default=str) + "\n")
     return path
 
 
+def with_units(rows: list[dict], parameters: type) -> list[dict]:
+    """The rows with each column that is a parameter of ``parameters`` (a scene's dataclass)
+    named with its unit: ``indentation`` -> ``indentation_mm``."""
+    units = {f.name: f.metadata.get("unit", "") for f in dataclasses.fields(parameters)}
+    named = {k: f"{k}_{units[k]}" for k in units if units[k] and units[k] not in ("deg",)
+             and not k.endswith(f"_{units[k]}")}
+    named.update({k: f"{k}_deg" for k in units if units[k] == "deg" and not k.endswith("_deg")})
+    return [{named.get(k, k): v for k, v in row.items()} for row in rows]
+
+
+def _count_cases(study, path: Path, rows: list[dict]) -> None:
+    from eyemech.problems.studies import FAILED
+
+    cases = [r for r in rows if "status" in r]
+    study.cases += len(cases)
+    for number, row in enumerate(cases, start=1):
+        label = ", ".join(f"{k}={row[k]}" for k in [k for k in row if k not in ("status", "error")][:3])
+        if row["status"] in FAILED:
+            study.failed.append(f"{path.stem} {label}")
+        why = f" ({str(row['error'])[:160]})" if row.get("error") else ""
+        print(f"{study.name}: {path.name} case {number}/{len(cases)} ({label}): {row['status']}{why}",
+              file=sys.stderr, flush=True)
+
+
+def settings(module_name: str) -> dict[str, Any]:
+    """What a study's numbers depend on besides the code: the defaults of every scene its
+    module imports, and the module's own constants (upper-case names bound to literals:
+    its grids, base settings), with their hash. A committed table whose sidecar holds
+    another hash was made with other settings than the code's."""
+    module = importlib.import_module(module_name)
+    tree = ast.parse(Path(module.__file__).read_text())
+    from eyemech.problems import scenes
+
+    by_module = {scene.run.__module__: name for name, scene in scenes().items()}
+    used = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names = [f"{node.module}.{a.name}" for a in node.names] + [node.module]
+            used.update(by_module[n] for n in names if n in by_module)
+    defaults = {name: dataclasses.asdict(scenes()[name].parameters()) for name in sorted(used)}
+    constants = {}
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and len(node.targets) == 1 \
+                and isinstance(node.targets[0], ast.Name) and node.targets[0].id.isupper():
+            try:
+                constants[node.targets[0].id] = ast.literal_eval(node.value)
+            except ValueError:
+                continue
+    content = {"scene_defaults": defaults, "study_constants": constants}
+    digest = hashlib.sha256(json.dumps(content, sort_keys=True, default=repr).encode()).hexdigest()
+    return {"settings_hash": digest[:16], **content}
+
+
 def read_csv(path: Path) -> list[dict]:
-    """A study CSV back (comment lines skipped), values as strings."""
+    """A study CSV back (comment lines, which older tables had, skipped), values as strings."""
     with open(path, newline="") as handle:
         return list(csv.DictReader(line for line in handle if not line.startswith("#")))
 
 
 def save_chart(fig, path, *, dpi: int = 110, rect=(0, 0.03, 1, 1)) -> None:
-    """Stamp the chart (machine, versions, date), lay it out, save it, free it."""
+    """Stamp the chart (machine, versions, date; within ``eyemech study`` the failed cases
+    in red), lay it out, save it, free it."""
     import matplotlib.pyplot as plt
+
+    from eyemech.problems.studies import running
 
     line = stamp()
     fig.text(0.01, 0.01, line, fontsize=7, color="grey")
+    study = running()
+    if study is not None and study.failed:
+        fig.text(0.99, 0.01, f"✗ {len(study.failed)} of {study.cases} cases failed: "
+                 + "; ".join(study.failed)[:160], fontsize=7, color="tab:red", ha="right")
     fig.tight_layout(rect=rect)
     # the stamp also as PNG text, so that tests (and readers) can check it without OCR
     fig.savefig(path, dpi=dpi, metadata={"Comment": line})

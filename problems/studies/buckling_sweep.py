@@ -1,6 +1,6 @@
 """How the buckle's indentation and the band's width drive the outcome of scleral
-buckling (issue 5, item 5): axial length change after buckling and after suturing,
-the remaining retina–choroid gap and whether the tear closed.
+buckling: the axial length change and the mean retina–choroid gap after suturing (acute)
+and after settling (the IOP back to its value before surgery), and whether the tear closed.
 
 The cases run through :func:`eyemech.problems.run.sweep.run_sweep`, so under
 ``mpiexec -n N`` they run side by side (one rank each) and a failed case is recorded,
@@ -18,7 +18,7 @@ from eyemech.problems import scleral_buckling
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.sweep import run_sweep
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, write_csv
+from eyemech.problems.studies._common import save_chart, with_units, write_csv
 
 # an encircling band alone (no tire), so that its width is what touches the sclera:
 # the clinical comparison (myopic shift for band widths 1–2.5 mm) is for bands
@@ -26,7 +26,8 @@ BASE = {"resolution": "coarse", "tire_height": "0", "suture_width": "4.0"}
 # a band narrower than about two elements is not resolved by the coarse eye (1 mm bands
 # needed hundreds of cut steps and failed at 1 mm indentation): widths from 2.5 mm
 GRID = {"indentation": ["0.5", "1.0", "1.5"], "band_width": ["2.5", "4.0"]}
-QUICK_GRID = {"indentation": ["0.5", "1.0"], "band_width": ["2.5"]}
+# one case: the coarse eye's runs take minutes each on a loaded machine
+QUICK_GRID = {"indentation": ["1.0"], "band_width": ["2.5"]}
 
 
 def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
@@ -37,11 +38,18 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                      comm=comm)
     if comm.rank != 0:
         return []
-    # a failed case's row has an ``error`` column and no quantities: union of the keys
-    table = write_csv(out / "buckling_sweep.csv", rows)
+    # a failed case's row has an ``error`` column and no quantities: union of the keys;
+    # the acute and settled values are the stage columns (after_suturing., after_settling.)
+    table = write_csv(out / "buckling_sweep.csv", with_units(rows, scleral_buckling.Parameters),
+                      "scleral-buckling: an encircling band alone (tire_height 0), coarse eye, "
+                      "Q1P0; acute = after_suturing.*, settled = after_settling.*")
     chart = out / "buckling_sweep.png"
     _chart(rows, grid, chart)
     return [table, chart]
+
+
+STAGES = (("after_suturing", "acute (after suturing)", "o-"),
+          ("after_settling", "settled (IOP back)", "s--"))
 
 
 def _chart(rows: list[dict], grid: dict, path: Path) -> None:
@@ -51,28 +59,29 @@ def _chart(rows: list[dict], grid: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for width in grid["band_width"]:
-        cases = [r for r in rows if str(r["band_width"]) == width and r.get("status") == "ok"]
-        depth = [float(r["indentation"]) for r in cases]
-        axes[0].plot(depth, [float(r["axial_length_change_mm"]) for r in cases], "o-",
-                     label=f"band {width} mm")
-        axes[1].plot(depth, [float(r["retina_choroid_gap_mean_mm"]) for r in cases], "o-",
-                     label=f"band {width} mm")
-        for r in cases:
-            if str(r.get("tear_closed")) == "True":
-                axes[1].annotate("tear closed", (float(r["indentation"]),
-                                                 float(r["retina_choroid_gap_mean_mm"])))
-    failed = [r for r in rows if r.get("status") != "ok"]
-    for r in failed:  # where the method failed: marked on the x axis
-        axes[0].plot(float(r["indentation"]), 0.0, "rx", ms=10, mew=2)
-    if failed:
-        widths = sorted({str(r["band_width"]) for r in failed})
-        axes[0].plot([], [], "rx", label=f"Newton failed (band {', '.join(widths)} mm)")
-    axes[0].set(xlabel="buckle indentation (mm)", ylabel="axial length change after suturing (mm)")
-    axes[1].set(xlabel="buckle indentation (mm)", ylabel="mean retina–choroid gap (mm)")
-    for ax in axes:
-        ax.legend(fontsize=8)
+    quantities = (("axial_length_change_mm", "axial length change (mm)"),
+                  ("retina_choroid_gap_mean_mm", "mean retina–choroid gap (mm)"))
+    for ax, (key, label) in zip(axes, quantities):
+        for width in grid["band_width"]:
+            mine = [r for r in rows if str(r["band_width"]) == width]
+            for stage, name, style in STAGES:
+                done = [r for r in mine if f"{stage}.{key}" in r]
+                ax.plot([float(r["indentation"]) for r in done],
+                        [float(r[f"{stage}.{key}"]) for r in done], style,
+                        label=f"band {width} mm, {name}")
+        failed = [r for r in rows if r.get("status") != "ok"]
+        for r in failed:  # where the solve failed: a cross on the axis, in both panels
+            ax.plot(float(r["indentation"]), 0.0, "rx", ms=10, mew=2)
+        if failed:
+            ax.plot([], [], "rx", label="solve failed (settled value missing)")
+        ax.set(xlabel="buckle indentation (mm)", ylabel=label)
+        ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
+    for r in rows:
+        if str(r.get("after_suturing.tear_closed")) == "True":
+            axes[1].annotate("tear closed", (float(r["indentation"]),
+                                             float(r["after_suturing.retina_choroid_gap_mean_mm"])),
+                             fontsize=7)
     fig.suptitle("scleral-buckling: encircling band alone, coarse eye, Q1P0")
     save_chart(fig, path, dpi=110, rect=(0, 0.04, 1, 0.95))
 

@@ -72,7 +72,8 @@ THIN_FLUID_THICKNESSES = (0.13, 0.35)  # does stiffness matter where the fluid l
 # external moments: friction on the capsular bag (the leading haptic may stick there while the
 # plunger pushes on) and in the cartridge (an uncoated bore twists the rolled lens), thin and
 # thick haptics
-WALL_FRICTION_CASES = [{**BASE, "capsule_friction": 1.0}, {**BASE, "haptic_thickness": 0.35, "capsule_friction": 1.0},
+WALL_FRICTION_CASES = [{**BASE, "capsule_friction": 1.0},
+                       {**BASE, "haptic_thickness": 0.35, "capsule_friction": 1.0},
                        {**BASE, "cartridge_friction": 0.3}]
 # the surgeon's twist of the injector (turned in step with the plunger): the round bore can
 # only drag the lens round by friction (μ_cartridge = 0: the twist does nothing). The plunger
@@ -159,7 +160,8 @@ def _stopped_by_hand(saved: dict) -> bool:
 
 def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None = None) -> tuple[dict, Path]:
     """The case's CSV row and its run folder (run now unless a saved run matches)."""
-    params = iol_injection.Parameters(resolution="coarse", folded_state=str(folded), **case, **(settings or {}))
+    params = iol_injection.Parameters(resolution="coarse", folded_state=str(folded), **case,
+                                      **(settings or {}))
     folder = runs / case_name({**case, **(settings or {})})
     if not _same_run(folder / "results.json", params):
         start = time.perf_counter()
@@ -190,7 +192,8 @@ def case_row(case: dict, folder: Path) -> dict:
         row.update(angular_balance(folder, params, torque))
     if saved["status"] != "ok":
         steps = saved.get("steps", [])
-        row.update(finished=False, stopped="by hand (time budget)" if _stopped_by_hand(saved) else "Newton failed",
+        row.update(finished=False,
+                   stopped="by hand (time budget)" if _stopped_by_hand(saved) else "Newton failed",
                    reached_time_s=steps[-1]["time"] if steps else 0.0,
                    steps=len(steps), wall_seconds=saved["timings"]["total"],
                    last_frame_optic_normal_z=last_optic_normal_z(folder))
@@ -306,11 +309,12 @@ def angular_balance(folder: Path, params: iol_injection.Parameters, torque: np.n
         return {}
     _t, X, x, grid = frames[0]
     cells = grid.cells.reshape(grid.n_cells, -1)[:, 1:]
-    area = 0.5 * np.linalg.norm(np.cross(X[cells[:, 1]] - X[cells[:, 0]], X[cells[:, 2]] - X[cells[:, 0]]), axis=1)
+    area = 0.5 * np.linalg.norm(np.cross(X[cells[:, 1]] - X[cells[:, 0]], X[cells[:, 2]] - X[cells[:, 0]]),
+                                axis=1)
     mass = np.zeros(len(X))
     # P2 row-sum lumping: the vertices get 0, each mid-edge node a third of the cell
-    np.add.at(mass, cells[:, 3:].ravel(), np.repeat(params.density * np.asarray(grid.cell_data["thickness (mm)"])
-                                                      * area / 3.0, 3))
+    thickness = np.asarray(grid.cell_data["thickness (mm)"])
+    np.add.at(mass, cells[:, 3:].ravel(), np.repeat(params.density * thickness * area / 3.0, 3))
     optic = np.zeros(len(X), bool)
     optic[cells[np.asarray(grid.cell_data["optic"]) > 0.5].ravel()] = True
     axis = params.axis_point()
@@ -349,7 +353,8 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
     histories = [roll_history(folder) for _row, folder in done]
     inside = [not _on_the_walls(row) for row in rows]
     charts = [chart([r for r, keep in zip(rows, inside) if keep],
-                    [h for h, keep in zip(histories, inside) if keep], out / "iol_flip.png", note if quick else "")]
+                    [h for h, keep in zip(histories, inside) if keep], out / "iol_flip.png",
+                    note if quick else "")]
     if not quick:
         charts.append(walls_chart(rows, histories, out / "iol_flip_walls.png"))
     return [csv, *charts]
@@ -357,7 +362,8 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
 
 def _on_the_walls(row: dict) -> bool:
     """A case with friction on the capsule or the cartridge, or a twisted injector."""
-    return any(float(row.get(key) or 0.0) for key in ("capsule_friction", "cartridge_friction", "injector_twist"))
+    return any(float(row.get(key) or 0.0)
+               for key in ("capsule_friction", "cartridge_friction", "injector_twist"))
 
 
 def _wall_label(row: dict) -> str:
@@ -393,11 +399,12 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     for row, h in walls:
         if len(h):
             twisted = float(row.get("injector_twist") or 0.0)
-            ax.plot(h[:, 0], h[:, 1], lw=1.4 if twisted else 1.0, ls="-" if twisted else "--", label=_wall_label(row))
+            ax.plot(h[:, 0], h[:, 1], lw=1.4 if twisted else 1.0, ls="-" if twisted else "--",
+                    label=_wall_label(row))
     for sign in (1, -1):
         ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
-    ax.annotate("beyond ±90° while rolled: lands upside down", xy=(0.01, -FLIP_ANGLE), xycoords=("axes fraction", "data"),
-                fontsize=7, color="tab:red", va="bottom")
+    ax.annotate("beyond ±90° while rolled: lands upside down", xy=(0.01, -FLIP_ANGLE),
+                xycoords=("axes fraction", "data"), fontsize=7, color="tab:red", va="bottom")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("roll φ of the optic about the injector axis (°)")
     ax.set_title("roll over time (μ = 0.2 lens–lens; coarse lens)", fontsize=10)
@@ -428,7 +435,8 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     outcome.set_xlabel("cartridge friction μ_cartridge (μ = 0: the twist does nothing)")
     outcome.set_ylabel("final optic normal z (< 0: upside down)")
     outcome.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13))  # off the points
-    fig.suptitle("External moments about the injector axis: wall friction and a twisted injector", fontsize=11)
+    fig.suptitle("External moments about the injector axis: wall friction and a twisted injector",
+                 fontsize=11)
     save_chart(fig, path)
     return path
 
@@ -504,7 +512,8 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
             z = row.get("last_frame_optic_normal_z")
             z = 0.0 if z is None else z
             top.scatter(row[key], z, marker="x", color="grey", s=80, zorder=3)
-            top.annotate(f"{row.get('stopped', 'stopped')} at\nt = {row.get('reached_time_s', float('nan')):.3g} s;\n"
+            reached = row.get("reached_time_s", float("nan"))
+            top.annotate(f"{row.get('stopped', 'stopped')} at\nt = {reached:.3g} s;\n"
                          f"last frame n_z {z:.3f}", (row[key], z), textcoords="offset points",
                          xytext=(-30, -36), fontsize=7)
             continue
@@ -528,8 +537,9 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
         bottom.annotate(text, (r[key], r["max_roll_rolled_deg"]), textcoords="offset points",
                         xytext=(4, 4), fontsize=7)
     landed = [r for r in rows if "max_roll_deg" in r]
-    bottom.plot([r[key] for r in landed], [r["max_roll_deg"] for r in landed], "v" + style, color="tab:purple",
-                ms=5, lw=1, label=f"largest |φ| over the run (open: ≤ 43° fits the capsule), {fluid}")
+    bottom.plot([r[key] for r in landed], [r["max_roll_deg"] for r in landed], "v" + style,
+                color="tab:purple", ms=5, lw=1,
+                label=f"largest |φ| over the run (open: ≤ 43° fits the capsule), {fluid}")
     if not thin:
         for name, marker, text in (("haptic_swirl_deg", "s:", "from the haptics' unwinding, while rolled"),
                                    ("capsule_roll_deg", "o:", "from the capsule's torque, while rolled")):
@@ -541,7 +551,8 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
         if fa is not None and fb is not None and fa != fb:
             for ax in (top, bottom):
                 ax.axvspan(a, b, color="tab:red", alpha=0.12)
-            top.text(0.5 * (a + b), -0.5, f"outcome\nchanges\n({fluid})", ha="center", fontsize=8, color="tab:red")
+            top.text(0.5 * (a + b), -0.5, f"outcome\nchanges\n({fluid})", ha="center", fontsize=8,
+                     color="tab:red")
             changed = True
     if not changed and len(outcomes) > 1:
         top.text(0.02, 0.05 + (0.1 if thin else 0.0), f"no change of outcome over this range, {fluid}",

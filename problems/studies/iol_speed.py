@@ -148,7 +148,8 @@ def _chart(rows: list[dict], path: Path) -> Path:
         if not diverged:
             ax.scatter(row["steps_per_second_wall"], deviation, marker=marker, s=18, facecolors="none",
                        edgecolors="grey")
-        ax.annotate(row["variant"] + (" — diverged" if diverged else ""), (row["steps_per_second_cpu"], deviation),
+        ax.annotate(row["variant"] + (" — diverged" if diverged else ""),
+                    (row["steps_per_second_cpu"], deviation),
                     fontsize=7, xytext=(4, 3), textcoords="offset points")
     for target, text in ((10, "paper: deformation 10/s"), (5, "paper: with contact 5/s"),
                          (100, "issue aim 100/s"), (30, "issue aim with contact 30/s")):

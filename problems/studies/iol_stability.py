@@ -195,7 +195,8 @@ def _chart(rows: list[dict], path: Path) -> Path:
             if not r["stable"]:
                 twin.scatter(r["penalty"], 1.0, color="tab:red", marker="x")
             else:
-                twin.annotate(f"pen. {1e3 * r['max_penetration_mm']:.0f} µm", (r["penalty"], r["newton_per_step"]),
+                twin.annotate(f"pen. {1e3 * r['max_penetration_mm']:.0f} µm",
+                              (r["penalty"], r["newton_per_step"]),
                               fontsize=7, xytext=(3, 4), textcoords="offset points")
     twin.set_ylabel("Newton iterations per step (implicit)")
     lines = right.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]

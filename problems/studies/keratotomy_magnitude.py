@@ -127,7 +127,8 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
     else:  # the CSV is rewritten after each part: a partial study keeps what it measured
         convergence = [{"case": label, **_case(comm, **changes)} for label, changes in CONVERGENCE]
         _write(out, comm, convergence, [], [])
-        magnitude = [{"case": label, **_case(comm, **{**SWEEP_MESH, **changes})} for label, changes in MAGNITUDE]
+        magnitude = [{"case": label, **_case(comm, **{**SWEEP_MESH, **changes})}
+                     for label, changes in MAGNITUDE]
         _write(out, comm, convergence, magnitude, [])
         creep = [{"case": f"OZ {zone:g} mm, 4 h", **_case(comm, optical_zone=zone, t_end=4 * 3600.0,
                                                           first_dt=1800.0, dt_growth=2.0, **CREEP_MESH)}
@@ -138,7 +139,8 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
 def _write(out: Path, comm, convergence: list[dict], magnitude: list[dict], creep: list[dict]) -> list[Path]:
     if comm.rank != 0:
         return []
-    rows = ([{"part": "convergence", **r} for r in convergence] + [{"part": "magnitude", **r} for r in magnitude]
+    rows = ([{"part": "convergence", **r} for r in convergence]
+            + [{"part": "magnitude", **r} for r in magnitude]
             + [{"part": "creep", **r} for r in creep])
     csv = write_csv(out / "keratotomy_magnitude.csv", rows,
                     "keratotomy: flattening (= -power_change_D) of 8 incisions, 90 % depth, 15 mmHg; "

@@ -9,12 +9,12 @@ its defaults, which factor the P2P1 Jacobian with MUMPS LDLᵀ (docs/atlas/peer-
 Wall time is that of the whole process, as a user meets it: ``eyemech run ... --no-fields
 --no-pictures`` against ``python -m ...plain_dolfinx_sphere``, start-up and imports
 included, with Python's bytecode cache on (a folder of the study's). Every case runs once
-untimed first (compiled forms and bytecode in their caches, files in the page cache), then ``repeats`` times alternating the two, one process at a time; the
-median is reported, of the wall time and of the CPU time (user + system, the work done:
-less disturbed by other jobs on a shared machine). Each row records the 1-minute load average before and after its
-runs (the machine is shared) and the number of files in FFCx's JIT cache folder: FFCx 0.11
-lists that folder for every form it looks up (35 ms at 13,000 files), which eyemech's run
-contract avoids (problems/run/jit_cache.py) and the plain script, as the DOLFINx demos
+untimed first (compiled forms and bytecode in their caches, files in the page cache), then ``repeats`` times
+alternating the two, one process at a time; the median is reported, of the wall time and of the CPU time
+(user + system, the work done: less disturbed by other jobs on a shared machine). Each row records the
+1-minute load average before and after its runs (the machine is shared) and the number of files in FFCx's
+JIT cache folder: FFCx 0.11 lists that folder for every form it looks up (35 ms at 13,000 files), which
+eyemech's run contract avoids (problems/run/jit_cache.py) and the plain script, as the DOLFINx demos
 write it, pays once per form.
 """
 

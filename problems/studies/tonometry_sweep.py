@@ -56,7 +56,8 @@ def _reading(comm, **changes) -> dict:
                 "youngs_modulus_MPa": params.youngs_modulus, "iop_mmHg": params.iop_mmHg,
                 "iop_reading_mmHg": float("nan"), "failed": str(failure)[:120]}
     q = result.quantities
-    return {"central_thickness_um": 1000 * params.central_thickness, "youngs_modulus_MPa": params.youngs_modulus,
+    return {"central_thickness_um": 1000 * params.central_thickness,
+            "youngs_modulus_MPa": params.youngs_modulus,
             "mesh_size_mm": params.mesh_size, "azimuthal_divisions": params.azimuthal_divisions,
             "layers": params.layers, "geometry_degree": params.geometry_degree, "penalty": params.penalty,
             "cells": q["cells"], "dofs": q["dofs"], "iop_mmHg": params.iop_mmHg,
@@ -127,7 +128,8 @@ def _convergence_chart(path: Path, rows: list[dict]) -> Path:
 
     fig, ax = plt.subplots(figsize=(7, 3.8))
     for degree, marker in ((2, "o"), (1, "s")):
-        sel = [r for r in rows if r["geometry_degree"] == degree and r["penalty"] == 30.0 and r["layers"] == 2]
+        sel = [r for r in rows
+               if r["geometry_degree"] == degree and r["penalty"] == 30.0 and r["layers"] == 2]
         ax.plot([r["dofs"] for r in sel], [r["iop_reading_mmHg"] for r in sel], marker,
                 label=f"geometry degree {degree}, 2 layers")
     other = [r for r in rows if r["penalty"] != 30.0 or r["layers"] != 2]
@@ -164,8 +166,8 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
         moduli = [_reading(comm, youngs_modulus=E, **mesh) for E in MODULI]
         E_cal = _calibrated_modulus(moduli)
         default = next(r for r in moduli if r["youngs_modulus_MPa"] == 0.21)
-        thickness = {"model, E = 0.21 MPa": [default if t == NOMINAL_CCT else _reading(comm, **_thick(t, **mesh))
-                                             for t in THICKNESSES]}
+        thickness = {"model, E = 0.21 MPa": [
+            default if t == NOMINAL_CCT else _reading(comm, **_thick(t, **mesh)) for t in THICKNESSES]}
         if E_cal is not None:
             thickness[f"model, E = {E_cal:.3f} MPa (reads true at 520 µm)"] = [
                 _reading(comm, **_thick(t, youngs_modulus=round(E_cal, 4), **mesh)) for t in THICKNESSES]

@@ -1,0 +1,93 @@
+"""Pictures a reader can trust: every colour bar names its unit and a magnitude's starts
+at zero; the tonometer is drawn; and every scene picture in docs/img was made at the
+scene's defaults, so that its caption's values are the defaults (the PNG records the scene
+and parameters it was made with: problems/run/output.py, tag_picture)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eyemech.problems import scenes
+from eyemech.problems.run.output import picture_record, render_png
+
+IMAGES = Path(__file__).resolve().parents[1] / "docs" / "img"
+# scleral-buckling's pictures are made with its own writer (problems/buckling_output.py)
+DOCS_PICTURES = sorted(p for p in IMAGES.glob("*.png") if not p.name.startswith("buckling-"))
+
+
+@pytest.mark.parametrize("path", DOCS_PICTURES, ids=[p.stem for p in DOCS_PICTURES])
+def test_a_docs_picture_shows_the_scenes_defaults(path):
+    record = picture_record(path)
+    assert record is not None, f"{path.name} carries no record of how it was made: run the scene"
+    defaults = dataclasses.asdict(scenes()[record["scene"]].parameters())
+    made = {k: record["parameters"].get(k) for k in defaults}
+    different = {k: (made[k], v) for k, v in defaults.items()
+                 if json.dumps(made[k], default=str) != json.dumps(v, default=str)}
+    assert not different, f"{path.name} ({record['caption']!r}) was made with {different}"
+
+
+def _grid():
+    import pyvista as pv
+
+    grid = pv.ImageData(dimensions=(3, 3, 3)).cast_to_unstructured_grid()
+    grid.point_data["displacement"] = np.zeros((grid.n_points, 3))
+    grid.point_data["displacement (mm)"] = 1e-18 + np.linspace(0.0, 0.4, grid.n_points)
+    grid.point_data["p (MPa)"] = np.linspace(-0.2, 0.4, grid.n_points)
+    grid.point_data["p"] = np.linspace(-0.2, 0.4, grid.n_points)
+    return grid
+
+
+def _bars(monkeypatch) -> list[dict]:
+    import pyvista as pv
+
+    seen: list[dict] = []
+    add_mesh = pv.Plotter.add_mesh
+
+    def spy(self, mesh, **kw):
+        if kw.get("scalars"):
+            seen.append(kw)
+        return add_mesh(self, mesh, **kw)
+
+    monkeypatch.setattr(pv.Plotter, "add_mesh", spy)
+    return seen
+
+
+def test_a_magnitudes_bar_starts_at_zero(tmp_path, monkeypatch):
+    bars = _bars(monkeypatch)
+    render_png(_grid(), tmp_path / "a.png", scalars="displacement (mm)")
+    render_png(_grid(), tmp_path / "b.png", scalars="p (MPa)")
+    assert bars[0]["clim"] == (0.0, pytest.approx(0.4))
+    assert bars[0]["scalar_bar_args"]["title"] == "displacement (mm)"
+    assert bars[1]["clim"] is None  # a signed field keeps its range
+
+
+def test_a_bar_without_a_unit_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="names no unit"):
+        render_png(_grid(), tmp_path / "c.png", scalars="p")
+
+
+def test_the_tonometer_is_drawn():
+    from eyemech.problems.tonometry import PRISM_DIAMETER, _tonometer
+
+    grid = _grid()
+    (prism, _), (rim, style) = _tonometer(grid, 3.06)
+    top = float((grid.points[:, 2] + grid["displacement"][:, 2]).max())
+    assert prism.bounds[4] == pytest.approx(top)
+    assert prism.bounds[1] == pytest.approx(PRISM_DIAMETER / 2, rel=1e-3)
+    radius = np.linalg.norm(rim.points[:, :2], axis=1)
+    assert np.allclose(radius, 3.06 / 2) and style["color"] == "red"
+
+
+def test_a_scene_picture_records_its_parameters(tmp_path):
+    from eyemech.problems import sphere_inflation as si
+    from eyemech.problems.run.context import RunOptions
+
+    si.run(si.Parameters(mesh_size=3.0), out=tmp_path, options=RunOptions(fields=False))
+    record = picture_record(tmp_path / "deformed.png")
+    assert record["scene"] == "sphere-inflation" and record["parameters"]["mesh_size"] == 3.0
+    assert record["caption"] == "sphere-inflation, p = 0.01 MPa"
