@@ -731,13 +731,17 @@ def on_small_disk(tmp_path: Path, size: str, *args: str, ranks: int = 1):
 
 @SMALL_DISK
 @pytest.mark.parametrize("ranks", [1, pytest.param(2, marks=pytest.mark.mpi)])
-@pytest.mark.parametrize("size", ["150k", "200k", "300k"])
-def test_fields_on_a_full_disk_exit_2_naming_the_file(tmp_path, ranks, size):
-    """The disk fills while the VTX (ADIOS2) or .vtu files are written, at three sizes
-    that fill it at different writes. ADIOS2's writer that failed is retired (its
-    destructor would repeat the write and abort with SIGABRT); the .vtu frames are made in
-    memory (VTK's XML writer corrupts the heap when its file write fails)."""
-    done, copy = on_small_disk(tmp_path, size, "run", *SPHERE, "--quiet", ranks=ranks)
+@pytest.mark.parametrize("size, vtx", [("100k", False), ("150k", False), ("100k", True),
+                                       ("120k", True), ("200k", True)])
+def test_fields_on_a_full_disk_exit_2_naming_the_file(tmp_path, ranks, size, vtx):
+    """The disk fills while the .vtu frames or the VTX (ADIOS2, ``--vtx``) files are
+    written, at sizes that fill it at different writes (a frame, a VTX write, a VTX close,
+    a writer the scene never got to close). ADIOS2's writer that failed is retired (its
+    destructor would repeat the write and abort with SIGABRT), and the run context closes
+    the writers a scene left open; the .vtu frames are made in memory (VTK's XML writer
+    corrupts the heap when its file write fails: "double free", SIGSEGV)."""
+    done, copy = on_small_disk(tmp_path, size, "run", *SPHERE, "--quiet",
+                               *(["--vtx"] if vtx else []), ranks=ranks)
     assert done.returncode == 2, done.stderr[-3000:]
     assert "Aborted" not in done.stderr and "Traceback" not in done.stderr
     assert "double free" not in done.stderr and "SEGV" not in done.stderr

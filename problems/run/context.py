@@ -91,6 +91,20 @@ class RunContext:
             self._release()
             raise
         self._solvers_before = solvers_created()
+        self._field_writers: list[FieldWriter] = []
+
+    def _close_field_writers(self, error: BaseException | None) -> None:
+        """The writers a scene left open (an error before its ``finally``), closed on every
+        rank in the order they were made: an ADIOS2 writer left to the garbage collector
+        flushes in its destructor, and on a full disk that aborts the process. A close that
+        fails retires its writer (output.py); the run's own error is the one reported."""
+        for writer in self._field_writers:
+            try:
+                writer.close()
+            except OSError:
+                if error is None:
+                    raise
+        self._field_writers = []
 
     def _release(self, remove_if_empty: bool = False) -> None:
         if self.folder is not None:
@@ -146,6 +160,7 @@ class RunContext:
         abort_if_stranding(self.comm, error)
         # every rank is here (or the error was this rank's alone and the job is ended)
         close_solvers(created_after=self._solvers_before)
+        self._close_field_writers(error)
         self.checkpoints.close()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"
@@ -220,8 +235,10 @@ class RunContext:
     def field_writer(self, functions: list, stem: str = "fields", pvd: bool = True) -> FieldWriter:
         """``functions`` as a ``.pvd`` series (``pvd=False``: a scene with a series of its
         own), and as ADIOS2 VTX under ``--vtx``; a no-op writer under ``--no-fields``."""
-        return FieldWriter(self.field_dir, self.comm, functions, stem=stem, vtx=self.options.vtx,
-                           pvd=pvd)
+        writer = FieldWriter(self.field_dir, self.comm, functions, stem=stem,
+                             vtx=self.options.vtx, pvd=pvd)
+        self._field_writers.append(writer)
+        return writer
 
     def pyvista_series(self, stem: str = "state") -> PyvistaSeries:
         """``<stem>.pvd`` + one gathered ``.vtu`` per frame for pyvista (no-op under ``--no-fields``)."""
