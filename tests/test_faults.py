@@ -753,7 +753,7 @@ def test_fields_on_a_full_disk_exit_2_naming_the_file(tmp_path, ranks, size, vtx
 
 @SMALL_DISK
 def test_pictures_on_a_full_disk_leave_no_partial_file(tmp_path):
-    done, copy = on_small_disk(tmp_path, "600k", "run", *SPHERE, "--quiet")
+    done, copy = on_small_disk(tmp_path, "200k", "run", *SPHERE, "--quiet")
     assert done.returncode == 2, done.stderr[-3000:]
     assert "deformed.png: No space left on device" in done.stderr.strip().splitlines()[-1]
     assert not list(copy.glob("*.png"))
