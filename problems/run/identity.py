@@ -1,7 +1,7 @@
 """A run owns its output folder (docs/cli.md, "A run owns its folder").
 
 A run's identity is its scene and a hash of its full parameters (:func:`run_id`: the
-same on every rank and in every session). It is written to ``DIR/run.json`` when the
+same on every rank and in every new process). It is written to ``DIR/run.json`` when the
 run starts, to ``results.json`` and to every checkpoint's ``meta.json``, so that what a
 folder holds can always be told apart:
 
@@ -38,18 +38,14 @@ ENDED = ("ok", "failed", "error")  # results.json statuses of a run that ended
 
 
 def _encode(value: Any) -> Any:
-    if isinstance(value, Path):
-        return str(value)
-    if hasattr(value, "item"):  # NumPy scalars
-        return value.item()
-    if hasattr(value, "tolist"):
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
         return value.tolist()
-    raise TypeError(f"a parameter of type {type(value).__name__}")
+    return str(value)  # paths, and anything else by its text
 
 
 def run_id(scene: str, parameters: dict[str, Any]) -> str:
     """16 hex digits of the SHA-256 of the scene and its parameters as canonical JSON
-    (sorted keys, floats as Python writes them: the same in every session and on every
+    (sorted keys, floats as Python writes them: the same in every new process and on every
     rank; tuples and lists alike)."""
     text = json.dumps({"scene": scene, "parameters": parameters}, sort_keys=True,
                       separators=(",", ":"), default=_encode)

@@ -170,6 +170,10 @@ class Result:
     solver_counts: dict[str, int] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if not self.run_id:
+            from eyemech.problems.run.identity import run_id
+
+            self.run_id = run_id(self.scene, self.parameters)
         self._counts_at_start = SOLVER_COUNTS.copy()
         self._criteria_at_start = len(STOPPING_CRITERIA)
 
