@@ -426,13 +426,19 @@ def test_a_fault_on_one_rank_ends_the_job(kind, rank, tmp_path, interrupted):
         assert json.loads((out / "results.json").read_text())["status"] == "interrupted"
 
 
-def test_bench_refused_after_meshing_leaves_no_folder(tmp_path):
-    """Bad input found after meshing (hertz's obstacle inside the ball) removes every folder
-    the run made, the bench's --out included."""
+@pytest.mark.parametrize("scene, setting, key", [
+    ("hertz", "initial_gap=-0.1", "initial_gap"),  # the obstacle inside the ball
+    # a fold saved for the coarse lens given to the default lens; its path in the row's
+    # folder name made nested folders
+    ("iol-injection", "folded_state=tests/data/iol_folded_coarse.npz", "folded_state")])
+def test_bench_refused_after_meshing_leaves_no_folder(tmp_path, scene, setting, key):
+    """Bad input found after meshing removes every folder the run made, the bench's --out
+    included, and names the key."""
     out = tmp_path / "new" / "bench"
-    done = eyemech("bench", "hertz", "--set", "initial_gap=-0.1", "--out", str(out))
+    done = eyemech("bench", scene, "--set", setting, "--out", str(out),
+                   cwd=Path(__file__).parents[1])
     assert done.returncode == 2, done.stderr[-3000:]
-    assert "initial_gap" in done.stderr.strip().splitlines()[-1]
+    assert f"'{key}'" in done.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "new").exists()
 
 
