@@ -1,4 +1,4 @@
-"""Buckles as surgeons place them (issue 21), on the coarse eye: the sutured buckle
+"""Buckles as surgeons place them, on the coarse eye: the sutured buckle
 does not slide, a segmental tire lengthens the eye less than an encircling band, deep
 buckles and wide bands run to the end, bad buckles are refused."""
 

@@ -1,4 +1,4 @@
-"""External drainage of the subretinal fluid (issue 21 item 4) on the coarse eye with no
+"""External drainage of the subretinal fluid on the coarse eye with no
 buckle: step 4 removes the liquid pressure from the subretinal faces, the IOP presses
 the blister onto the choroid, and the retina's snap is followed in pseudo-time
 (``drainage_drag_step``; docs/scleral_buckling.md, "Subretinal drainage")."""

@@ -1,5 +1,4 @@
-"""Newton's work counted and PETSc options that reach the objects that read them (issue 22,
-deliverables 1 and 2).
+"""Newton's work counted and PETSc options that reach the objects that read them.
 
 - Every Newton iteration, Jacobian, numeric factorisation and symbolic analysis is counted,
   a cut step's failed attempts included: per step (``attempts``, ``newton_iterations_all``,
@@ -567,7 +566,7 @@ def test_factorisation_choice():
 
 def test_results_state_the_newton_stopping_test():
     """results.json's ``newton_tolerances``: the stopping test the run's Newton solves used
-    (issue 26: a result states the accuracy it was converged to), here SNES's default
+    (a result states the accuracy it was converged to), here SNES's default
     ‖F‖ ≤ max(1e-10, 1e-9 ‖F_0‖), and ``--petsc snes_rtol`` is what it then states."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     params = sphere_inflation.Parameters(mesh_size=4.0)

@@ -1,4 +1,4 @@
-"""The force-driven tire and subretinal drainage (issue 21), on the coarse eye: a suture's
+"""The force-driven tire and subretinal drainage, on the coarse eye: a suture's
 loop over the tire pushes it in until the sclera's contact force balances the pull, and
 its travel grows with the pull; drainage without a detachment (or without the settled
 step it acts in) is refused. Tear closure after suturing at the defaults is checked by
@@ -87,10 +87,10 @@ def test_sutures_lift_the_tire_off_a_shallow_band():
     # The release is checked after each converged step of step 3 and acts from the next
     # one (lagged, as the suture directions): with the budget's stepping step 3 is two load
     # steps and the tire is freed only at its end, too late to move (docs/scleral_buckling.md,
-    # "Not done"); the reference stepping takes three here, which this test pins. With
+    # "Known limits"); the reference stepping takes three here, which this test pins. With
     # 0.3 N the reference stepping's first step of step 3 goes to 0.225 N at once, and the
     # suture directions updated after it turn the loop's pull outward (-0.14 N): the tire
-    # stays on the band (docs/scleral_buckling.md, "Not done").
+    # stays on the band (docs/scleral_buckling.md, "Known limits").
     result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
                                               indentation="0.3", suture_force="0.25",
                                               buckle_position="12.5", settle="false",

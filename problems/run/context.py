@@ -17,9 +17,10 @@ from eyemech.problems.run import identity, jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
 from eyemech.problems.run.faults import abort_if_stranding, output_error
 from eyemech.problems.run.identity import run_id
-from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, solvers_created
+from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, hold_solvers
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
+from eyemech.problems.run.petsc_lifetime import release_run_objects, start_run
 from eyemech.problems.run.petsc_output import confined
 from eyemech.problems.run.results import (
     OutputFolder,
@@ -90,8 +91,11 @@ class RunContext:
             self.checkpoints.close()
             self._release()
             raise
-        self._solvers_before = solvers_created()
         self._field_writers: list[FieldWriter] = []
+        # the run's parallel solvers are kept until it closes them, and its other parallel
+        # PETSc objects destroyed as it ends (problems/run/petsc_lifetime.py)
+        self._solvers_before = hold_solvers()
+        self._first_petsc_object = start_run(self.comm)  # last: it freezes the collector
 
     def _close_field_writers(self, error: BaseException | None) -> None:
         """The writers a scene left open (an error before its ``finally``), closed on every
@@ -159,9 +163,12 @@ class RunContext:
         # an exception on this rank alone: the other ranks wait in a collective call
         abort_if_stranding(self.comm, error)
         # every rank is here (or the error was this rank's alone and the job is ended)
-        close_solvers(created_after=self._solvers_before)
-        self._close_field_writers(error)
-        self.checkpoints.close()
+        try:
+            self._close_field_writers(error)
+        finally:
+            release_run_objects(self.comm, self._first_petsc_object,
+                                lambda: close_solvers(created_after=self._solvers_before))
+            self.checkpoints.close()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"
             self.result.message = str(error)
