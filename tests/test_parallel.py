@@ -324,9 +324,9 @@ def test_default_eye_on_two_ranks_equals_serial(tmp_path):
     """The main job as users run it -- ``mpiexec -n 2 eyemech run scleral-buckling`` at the
     defaults: the default mesh, fields, pictures and the settling step on -- ends, with
     the serial run's numbers. Pictures are drawn on rank 0 from data every rank gathers;
-    a collective call made by one rank only there hung this job (both ranks spinning) until
-    the buckle's outline was computed on every rank (problems/buckling_output.py); the
-    lock-step check (problems/run/lockstep.py) now turns any such hang into an error.
+    a collective call made on one rank only there hangs the job (both ranks spinning), so
+    the buckle's outline is computed on every rank (problems/scleral_buckling/output.py),
+    and the lock-step check (problems/run/lockstep.py) turns any such hang into an error.
 
     Tolerance 1e-8 relative (1e-14 absolute for quantities that are zero): the two runs
     take the same steps with the same Newton iterations, and their quantities differ by

@@ -147,9 +147,9 @@ class RunContext:
             raise ValueError(f"the run in {self.out} has finished (its results.json says ok): "
                              "nothing to resume")
         if not self._fresh:
-            identity.write_run_file(self.out, self.result.scene, self.result.parameters,
-                                    self.result.run_id, self.comm.size)
-            return set(), None
+            before = identity.write_run_file(self.out, self.result.scene, self.result.parameters,
+                                             self.result.run_id, self.comm.size)
+            return set(), before
         identity.check_fresh_start(self.out, self.result.scene)
         previous = identity.outputs(self.out, record.results)
         before = identity.write_run_file(self.out, self.result.scene, self.result.parameters,
@@ -198,8 +198,11 @@ class RunContext:
         # the scene cannot use) is bad input all the same: no results.json, and the
         # folder goes again if this run made it and nothing else is in it (exit 2)
         late_bad_input = isinstance(error, (ParameterError, MeshError))
+        # a resume refused before it reached its checkpoint (another layout of the scene's
+        # state, a checkpoint that does not fit) leaves the folder as it found it
+        refused_resume = error is not None and self.checkpoints.resume_meta is not None
         try:
-            if late_bad_input:
+            if late_bad_input or refused_resume:
                 self._give_folder_back()
             elif not (error is not None and self.checkpoints.resume_meta is not None):
                 try:
@@ -270,6 +273,7 @@ class RunContext:
             log.info("removed the previous run's %s from %s", ", ".join(removed), self.out)
 
     def _give_folder_back(self) -> None:
-        """Bad input found after meshing: run.json as it was before this run."""
-        if self.out is not None and self._fresh and self.rank0:
+        """Bad input found after meshing, or a resume refused before its checkpoint:
+        run.json as it was before this run."""
+        if self.out is not None and self.rank0:
             identity.restore_run_file(self.out, self._previous_run_file)
