@@ -10,7 +10,8 @@ each):
    V_ini = the volume then, bulk modulus K; seed 002 eq. 5 as P's row), the buckle placed
    ``buckle_clearance`` outside the sclera and tied to it.
 2. buckling — the rigid buckle (a tire on an encircling band) moves radially inward by
-   ``indentation`` against the closed liquid; penalty contact on the sclera's outer surface.
+   ``indentation`` against the closed liquid, vented at ``iop_limit_mmHg`` (``venting``:
+   the surgeon's paracentesis); penalty contact on the sclera's outer surface.
 3. suturing — forces at the suture bites, tangent to the buckle's outline, directions from
    the last converged step (seed 002, §2.2), spread over each bite (radius
    ``suture_bite_radius``; a point load's response does not converge under refinement).
@@ -57,7 +58,7 @@ __all__ = ["BENCHMARK", "CALIBRATED_C20_SCLERA", "CORNEA_TO_SCLERA", "DIOPTRES_P
 BENCHMARK = {"resolution": "paper", "settle": False}
 
 # what this scene's checkpoints hold: one written with another state is refused
-STATE_LAYOUT = "terms-and-stages-1"
+STATE_LAYOUT = "terms-and-stages-2"
 
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,

@@ -58,6 +58,16 @@ class EyeParameters(SceneParameters):
            "docs/scleral_buckling.md, Q2P1 and Q1P0 at equal accuracy", group=GEOMETRY)
     iop_mmHg: float = field(15.0, "intra-ocular pressure of step 1", "mmHg", group=PHYSICS)
     bulk_modulus: float = field(2083.3, "bulk modulus of the liquid (seed 002)", "MPa", group=PHYSICS)
+    iop_limit_mmHg: float = field(
+        79.0, "the IOP at which the central retinal artery closes: 48-110 mmHg, mean 79 "
+        "(Gardner et al., Ophthalmology 1993). With venting the IOP is held at it in steps 2-3; "
+        "every stage reports the fraction of its load spent above it; at least iop_mmHg",
+        "mmHg", group=PHYSICS)
+    venting: bool = field(
+        True, "steps 2-3: the surgeon vents the eye (paracentesis, subretinal drainage): the "
+        "liquid is held until the IOP reaches iop_limit_mmHg, then the IOP stays there and the "
+        "liquid the wall displaces leaves; false: the liquid's volume is conserved (the paper's "
+        "law) and the IOP may pass the limit (docs/scleral_buckling.md, Venting)", group=PHYSICS)
     c_cornea: float = field(0.0333, "neo-Hooke c of the cornea (Table 1)", "MPa", group=PHYSICS)
     c_sclera: float = field(0.0833, "neo-Hooke c of the sclera", "MPa", group=PHYSICS)
     c_ciliary_body: float = field(0.01, "neo-Hooke c of the ciliary body", "MPa", group=PHYSICS)
@@ -187,6 +197,12 @@ class Parameters(NumericalSettings, EyeParameters):
                               "augmentation_tolerance", "max_augmentations",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
+        self.require_positive("iop_limit_mmHg")
+        if self.iop_limit_mmHg < self.iop_mmHg:
+            raise ParameterError("iop_limit_mmHg", f"{self.iop_limit_mmHg:g} mmHg is below the "
+                                 f"pre-operative IOP (iop_mmHg = {self.iop_mmHg:g} mmHg): the "
+                                 "artery would be closed before surgery; the limit must be at "
+                                 "least iop_mmHg")
 
     def _validate_material(self) -> None:
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",

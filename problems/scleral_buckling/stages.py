@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Callable, Literal
 
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.scleral_buckling.parameters import Parameters
+from eyemech.problems.scleral_buckling.venting import PressureHistory
 from eyemech.problems.solve.augmentation import Augmentation
 from eyemech.problems.solve.driver import NewtonSettings, Stepping, StepRecord, follow_stages
 
@@ -148,7 +149,8 @@ def operation(params: Parameters) -> list[Stage]:
               end=(close_the_liquid, tie_the_buckle, place_the_buckle,
                    record_the_eye_before_surgery),
               largest_step=largest),
-        # the buckle moves radially inward by ``indentation`` against the closed liquid;
+        # the buckle moves radially inward by ``indentation`` against the closed liquid
+        # (vented at ``iop_limit_mmHg`` with ``venting``, here and in suturing);
         # full Newton steps (a failed solve repeated with bt: plain Newton can cycle
         # between two active sets) or bt, which in the first stage would only cost
         # iterations (12-14 per step instead of 3-4)
@@ -237,6 +239,7 @@ class Operation:
         stages = operation(params) if stages is None else stages
         self.stages = [_Bound(stage, k + 1, self) for k, stage in enumerate(stages)]
         self.results: dict[str, dict] = {}  # the measurements at each stage's end
+        self.pressures = PressureHistory(params.iop_limit_mmHg)
         self.reports: dict = {}             # what the last switches reported
         self.augmentation = None
         multipliers = model.multipliers()
@@ -271,6 +274,8 @@ class Operation:
     def converged(self, record: StepRecord, stage: _Bound, ends: bool) -> None:
         values = self.model.measure() | self.reports
         self.reports = {}
+        values |= self.pressures.passed(stage.number, record.load - (stage.number - 1),
+                                        values["iop_mmHg"], values.get("vented_volume_uL", 0.0))
         self.ctx.record_step(step=record.step, load=record.load, stage=stage.number,
                              newton_iterations=record.iterations, cuts=record.cuts,
                              **record.counts(), krylov_iterations=record.linear_iterations,
@@ -284,6 +289,7 @@ class Operation:
     def register(self, checkpoints) -> None:
         checkpoints.value("stage_results", lambda: self.results,
                           lambda saved: setattr(self, "results", dict(saved)))
+        checkpoints.value("pressure_history", self.pressures.state, self.pressures.restore)
         if self.augmentation is not None:
             # the run's totals in the summary count the updates before the checkpoint too
             checkpoints.value("augmentation_counts", self._augmentation_counts,

@@ -15,20 +15,22 @@ from mpi4py import MPI
 from eyemech.forms import (
     NeoHooke,
     Yeoh,
+    axis_volumes,
     cauchy_stress,
     deformation_gradient,
     enclosed_volume,
     follower_pressure,
-    liquid_law_residual,
     von_mises,
 )
+from eyemech.forms.cavity import held_liquid
 from eyemech.forms.contact import default_penalty
 from eyemech.meshes.eye import zonule_pairs
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.scleral_buckling.body import Body, cell_field
 from eyemech.problems.scleral_buckling.parameters import Parameters
-from eyemech.problems.solid.cavity import check_closed
+from eyemech.problems.scleral_buckling.venting import venting_route
+from eyemech.problems.solid.cavity import VentedCavity, check_closed
 from eyemech.problems.solid.mean_dilatation import MeanDilatation
 from eyemech.problems.solid.probes import CellField
 from eyemech.problems.solid.residual import solid_residual
@@ -105,10 +107,12 @@ class Tissues(Term):
 class CavityLiquid(Term):
     """The vitreous: its pressure P (a Real unknown) pushes on the deformed cavity wall,
     ∫ P J F⁻ᵀN·v dA, and P's row is either pinned to a target (closed off: the IOP ramp,
-    the pressure's return after surgery) or the liquid law P = P_ini − K (V − V_ini)/V_ini
-    with V_ini, P_ini the state where the liquid was closed (seed 002, eq. 5):
+    the pressure's return after surgery) or the liquid law P = P_ini − K (V − V_l)/V_ini
+    with V_ini, P_ini the state where the liquid was closed (seed 002, eq. 5) and V_l the
+    liquid held (V_ini less what was vented), vented at ``iop_limit_mmHg`` with
+    ``venting``: P = min(P_lim, the law's) (:class:`~eyemech.problems.solid.cavity.VentedCavity`):
 
-        c · R_liquid + (1 − c) · R_pin,   c = ``coupled`` ∈ {0, 1}."""
+        c · R_vented + (1 − c) · R_pin,   c = ``coupled`` ∈ {0, 1}."""
 
     def __init__(self, body: Body, params: Parameters):
         self.body = body
@@ -116,7 +120,6 @@ class CavityLiquid(Term):
         self.iop = params.iop_mmHg * MMHG
         self.pressure_target = dolfinx.fem.Constant(mesh, 0.0)
         self.acute_pressure = dolfinx.fem.Constant(mesh, self.iop)  # when the liquid is released
-        self.coupled = dolfinx.fem.Constant(mesh, 0.0)
         self.initial_volume = dolfinx.fem.Constant(mesh, 1.0)
         self.initial_pressure = dolfinx.fem.Constant(mesh, self.iop)
         self.initial_volume.value = check_closed(body.u, body.wall, "cavity wall of the eye")
@@ -125,15 +128,42 @@ class CavityLiquid(Term):
         self.wall_area = dolfinx.fem.Constant(mesh, area)
         self.bulk_modulus = dolfinx.fem.Constant(mesh, params.bulk_modulus)
         self.volume_form = dolfinx.fem.form(enclosed_volume(body.u, body.wall))
+        # the wall's volume by another field of divergence one (x_z e_z, not x/3): the
+        # volume balance reads the wall's displacement through a formula P's row does not use
+        self.wall_volume_form = dolfinx.fem.form(axis_volumes(body.u, body.wall)[2])
+        self.vent = VentedCavity(body.u, body.wall, self.initial_volume, self.initial_pressure,
+                                 self.bulk_modulus, params.iop_limit_mmHg * MMHG if params.venting
+                                 else 0.0)
+        self.coupled = self.vent.held  # 1 while the liquid law acts
+        self.subretinal = self._subretinal_volume_form()
+        self.subretinal_fluid = 0.0  # whole eye, µL, in the eye before surgery
+        self.closed = False  # the liquid was closed (the operation began)
+
+    def _subretinal_volume_form(self):
+        """The subretinal space's volume, by the field x_x e_x over the faces on either
+        side of it: open to the vitreous through the tear's hole, whose normal (radial, in
+        the symmetry plane x = 0 at its centre) is nearly normal to e_x, so the hole adds
+        almost nothing (on the coarse and default eyes x_x e_x and x_z e_z agree to 0.2 µL
+        of 45-51; x/3, through which the hole's flux is ⅓ R times its area, gives 20 µL
+        more). None without a detachment."""
+        eye = self.body.eye
+        if "retina_detached" not in eye.names:
+            return None
+        faces = self.body.ds(tuple(eye.tag(name) for name in ("retina_detached", "choroid_detached")))
+        return dolfinx.fem.form(axis_volumes(self.body.u, faces)[0])
 
     def residual(self, tests):
         body, v, qP = self.body, tests[0], tests[-2]
-        liquid = liquid_law_residual(body.P, qP, body.u, body.wall, self.wall_area,
-                                     self.initial_volume, self.initial_pressure, self.bulk_modulus)
+        liquid = self.vent.residual(body.P, qP, self.wall_area)
         pinned = self.initial_volume / self.bulk_modulus * (body.P - self.pressure_target) \
             / self.wall_area * qP * body.wall
         return (follower_pressure(body.P, body.u, v, body.wall)
                 + self.coupled * liquid + (1 - self.coupled) * pinned)
+
+    def install(self, solver) -> None:
+        if self.vent.enabled:  # the branch chosen before every assembly, undone with a failed solve
+            solver.state_hooks.append(lambda: self.vent.choose_branch(self.pressure()))
+            solver.memory_hooks.append((self.vent.memory, self.vent.restore_memory))
 
     def volume(self) -> float:
         """The cavity's volume (half eye)."""
@@ -143,16 +173,23 @@ class CavityLiquid(Term):
         return self.body.real_value(self.body.P)
 
     def close(self) -> None:
-        """The liquid law from here: V_ini and P_ini of the current state."""
+        """The liquid law from here: V_ini and P_ini of the current state, all of it held."""
         self.initial_volume.value = self.volume()
         self.initial_pressure.value = self.pressure()
-        self.coupled.value = 1.0
+        self.vent.hold(float(self.initial_volume.value))
+        self.closed = True
+        if self.subretinal is not None:
+            self.subretinal_fluid = 2.0 * assemble_scalar(self.subretinal, self.body.comm)
 
     def release(self) -> None:
         """P pinned again, its target ramped from here (``acute_pressure``, the current
         P): the liquid's volume is free."""
         self.acute_pressure.value = self.pressure()
-        self.coupled.value = 0.0
+        self.vent.release()
+
+    def converged(self) -> None:
+        """A converged load step's vented liquid is kept: it does not come back."""
+        self.vent.accept(self.pressure())
 
     def _start_at_target(self) -> None:
         """P starts a load step at its pinned target, as a prescribed travel does. Newton's
@@ -181,9 +218,47 @@ class CavityLiquid(Term):
         for name in ("pressure_target", "coupled", "initial_volume", "initial_pressure",
                      "acute_pressure"):
             checkpoints.constant(name, getattr(self, name))
+        for name in ("liquid_volume", "venting"):
+            checkpoints.constant(f"vent_{name}", getattr(self.vent, name))
+        checkpoints.value("liquid_closed", lambda: [self.closed, self.subretinal_fluid],
+                          self._restore_closed)
+
+    def _restore_closed(self, saved) -> None:
+        self.closed, self.subretinal_fluid = bool(saved[0]), float(saved[1])
 
     def measure(self) -> dict:
-        return {"iop_mmHg": self.pressure() / MMHG, "cavity_volume_mm3": 2.0 * self.volume()}
+        """IOP and volume; from the liquid's closing on (the eye before surgery) the
+        venting's account, whole eye in µL: ``vented_volume_uL`` (left since then, as
+        :meth:`converged` will keep it), the wall's inward displacement (the cavity's
+        volume lost since then, by the x_z e_z field) and the liquid's compression
+        V_ini (P − P_ini)/K while the liquid is held: vented + compression = inward."""
+        pressure, volume = self.pressure(), self.volume()
+        out = {"iop_mmHg": pressure / MMHG, "cavity_volume_mm3": 2.0 * volume}
+        if not self.closed:
+            return out
+        initial_volume = float(self.initial_volume.value)
+        vented = 2.0 * (initial_volume - self._liquid_left(pressure, volume))
+        out |= {"vented_volume_uL": vented, "vent_open": bool(float(self.vent.venting.value)),
+                "venting_route": venting_route(vented, self.subretinal_fluid),
+                "subretinal_fluid_uL": self.subretinal_fluid}
+        if float(self.coupled.value) == 1.0:
+            wall = assemble_scalar(self.wall_volume_form, self.body.comm)
+            out |= {"wall_inward_volume_uL": 2.0 * (initial_volume - wall),
+                    "liquid_compression_uL": 2.0 * initial_volume
+                    * (pressure - float(self.initial_pressure.value))
+                    / float(self.bulk_modulus.value)}
+        return out
+
+    def _liquid_left(self, pressure: float, volume: float) -> float:
+        """The liquid held now (half eye, its volume at P_ini): a venting state's is what
+        :meth:`VentedCavity.accept` will keep (less liquid only: vented liquid does not
+        come back)."""
+        held = float(self.vent.liquid_volume.value)
+        if float(self.coupled.value) == 1.0 and float(self.vent.venting.value) == 1.0:
+            return min(held, held_liquid(volume, pressure, float(self.initial_volume.value),
+                                         float(self.initial_pressure.value),
+                                         float(self.bulk_modulus.value)))
+        return held
 
 
 class Zonules(Term):
