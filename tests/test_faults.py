@@ -473,6 +473,30 @@ def test_new_run_refuses_a_folder_with_an_interrupted_runs_checkpoints(interrupt
     assert listing(folder) == before
 
 
+def test_resume_of_checkpoints_without_a_parameter_names_it_and_changes_nothing(interrupted,
+                                                                               tmp_path):
+    """Checkpoints written before the scene had a parameter (no run.json, no run id, no
+    value of optical_zone in their meta.json): --resume fills it with its default, which
+    makes another run, and is refused with exit 2 naming the parameter and the remedy that
+    the folder's own check accepts; the folder is left as it was (no run.json)."""
+    folder = tmp_path / "run"
+    shutil.copytree(interrupted, folder)
+    for name in ("run.json", "results.json"):
+        (folder / name).unlink(missing_ok=True)
+    for meta_file in (folder / "checkpoints").glob("ckpt_*/meta.json"):
+        meta = json.loads(meta_file.read_text())
+        meta.pop("run_id", None)
+        meta["parameters"].pop("optical_zone")
+        meta_file.write_text(json.dumps(meta))
+    before = listing(folder)
+    done = eyemech("run", "keratotomy", "--resume", str(folder), *QUIET, "--no-fields")
+    assert done.returncode == 2, done.stderr[-3000:]
+    message = done.stderr.strip().splitlines()[-1]
+    assert "'--resume'" in message and "no value of optical_zone" in message, message
+    assert f"remove {folder / 'checkpoints'}" in message and "Traceback" not in done.stderr
+    assert listing(folder) == before
+
+
 def test_a_new_run_keeps_its_own_checkpoints_and_resumes_itself(interrupted, tmp_path):
     """An ended run's checkpoints numbered above the new run's (ckpt_000025/26) neither
     outlive the new run's nor get resumed: pruning keeps the running run's newest, the

@@ -76,6 +76,7 @@ class RunContext:
         self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
             else None
         self._fresh = False  # this run replaces the folder's previous one (not a resume)
+        self._resuming_here = False  # --resume names this run's own --out folder
         self._previous_outputs: set[str] = set()
         self._previous_run_file: bytes | None = None
         try:
@@ -123,8 +124,8 @@ class RunContext:
             return
         # a resume continues its own folder; any other folder is this run's to take
         resume = self.options.checkpoint.resume
-        self._fresh = self.checkpoints.resume_meta is None or resume is None \
-            or Path(resume).resolve() != self.out.resolve()
+        self._resuming_here = resume is not None and Path(resume).resolve() == self.out.resolve()
+        self._fresh = self.checkpoints.resume_meta is None or not self._resuming_here
         error, previous = None, (set(), None)
         if self.rank0:
             try:
@@ -135,8 +136,7 @@ class RunContext:
                 error = f"cannot write in {self.out}: {err.strerror or err}"
         error = self.comm.bcast(error, root=0)
         if error:
-            raise ParameterError("--resume" if self.options.checkpoint.resume is not None
-                                 and not self._fresh else "--out", error)
+            raise ParameterError("--resume" if self._resuming_here else "--out", error)
         self._previous_outputs, self._previous_run_file = previous
 
     def _take_folder_here(self) -> tuple[set[str], bytes | None]:
@@ -150,6 +150,8 @@ class RunContext:
             before = identity.write_run_file(self.out, self.result.scene, self.result.parameters,
                                              self.result.run_id, self.comm.size)
             return set(), before
+        if self._resuming_here:  # and no checkpoint of this run found
+            identity.refuse_other_runs_checkpoints(self.out, self.result.parameters)
         identity.check_fresh_start(self.out, self.result.scene)
         previous = identity.outputs(self.out, record.results)
         before = identity.write_run_file(self.out, self.result.scene, self.result.parameters,

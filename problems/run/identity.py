@@ -174,6 +174,31 @@ def check_fresh_start(folder: Path, scene: str) -> None:
                      f"or choose another folder")
 
 
+def refuse_other_runs_checkpoints(folder: Path, parameters: dict[str, Any]) -> None:
+    """``--resume folder`` found no checkpoint of its run (scene and parameters as this
+    version reads them) while the folder holds an unfinished run's: refused (ValueError)
+    naming the parameters in which they differ (a checkpoint written before the scene had
+    a parameter lacks it)."""
+    unfinished = read_folder(folder).unfinished_checkpoints()
+    if not unfinished:
+        return
+    saved = (_json(unfinished[-1].path / "meta.json") or {}).get("parameters") or {}
+
+    def canonical(value: Any) -> str:
+        return json.dumps(value, sort_keys=True, default=_encode)
+
+    absent = sorted(k for k in parameters if k not in saved)
+    other = sorted(k for k in parameters if k in saved
+                   and canonical(saved[k]) != canonical(parameters[k]))
+    why = "; ".join(part for part in (
+        f"it has no value of {', '.join(absent)}" if absent else "",
+        f"other values of {', '.join(other)}" if other else "") if part) \
+        or "other parameters"
+    raise ValueError(f"the checkpoints in {folder} ({describe_checkpoints(unfinished)}) were "
+                     f"written by a run this version cannot continue ({why}): start the run "
+                     f"again in another folder, or remove {folder / 'checkpoints'}")
+
+
 def write_run_file(folder: Path, scene: str, parameters: dict[str, Any], run: str,
                    mpi_size: int) -> bytes | None:
     """``folder/run.json`` naming this run; returns the previous file's bytes (None: none)."""
