@@ -12,6 +12,7 @@ from eyemech.problems.run.output import (
     gather_grid,
     region_data,
     render_png,
+    save_screenshot,
 )
 
 
@@ -55,18 +56,22 @@ class Writer:
                 # the outline reads distributed unknowns (collective): every rank computes
                 # it, only rank 0 (which holds the gathered grid) draws
                 outline = self.model.buckle.outline()
+                whole, section = self._picture_paths(stage, name)
                 if grid is not None:
                     self._pictures(grid, stage, name, outline)
+                # the names on every rank: the ranks' results agree (docs/parallel.md)
+                self.ctx.result.pictures += [whole.name, section.name]
+
+    def _picture_paths(self, stage: int, name: str):
+        out = self.ctx.out
+        return out / f"step{stage}_{name}_von_mises.png", out / f"step{stage}_{name}_section.png"
 
     def _pictures(self, grid, stage: int, name: str, outline) -> None:
-        out = self.ctx.out
-        whole = out / f"step{stage}_{name}_von_mises.png"
+        whole, section = self._picture_paths(stage, name)
         render_png(grid, whole, scalars="von_mises (MPa)", warp="displacement", camera=(0.6, 1.0, 0.35),
                    title=f"step {stage} ({name}): von Mises stress (MPa)", show_undeformed=False,
                    cmap="inferno")
-        section = out / f"step{stage}_{name}_section.png"
         self._section(grid, section, f"step {stage} ({name}): section through the tear", outline)
-        self.ctx.result.pictures += [whole.name, section.name]
 
     def _section(self, grid, path, title: str, outline) -> None:
         """The symmetry plane x = 0 seen from −x, zoomed on the buckle, with the
@@ -92,8 +97,10 @@ class Writer:
         plotter.camera.parallel_projection = True
         plotter.camera.parallel_scale = 6.0
         plotter.add_text(title, font_size=11)
-        plotter.screenshot(str(path))
-        plotter.close()
+        try:  # whole or not at all; a full disk names the picture
+            save_screenshot(plotter, path)
+        finally:
+            plotter.close()
 
     def close(self) -> None:
         self.vtx.close()
