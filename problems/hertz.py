@@ -237,7 +237,7 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
 # an extrapolated value would be worse than the run's own.
 ESTIMATE = Refinement(keys=("resolution", "far_resolution"), order=2.0,
                       quantities=("contact_force", "contact_radius"),
-                      absolute=(("resolution", "mesh_size"), ("far_resolution", "far_size")),
+                      overrides=(("resolution", "mesh_size"), ("far_resolution", "far_size")),
                       extrapolate=False)
 
 

@@ -36,13 +36,14 @@ def error_estimate_field() -> Any:
 
 @dataclasses.dataclass(frozen=True)
 class Refinement:
-    """How a scene's estimate is made: ``keys`` are the resolution parameters (cells per a
-    length or divisions: the element size ∝ 1/value), each divided by ``ratio`` for the
-    coarse solve, unless its element-size parameter (``absolute``: pairs (key, size key))
-    is set (> 0): that size is multiplied by ``ratio`` instead. ``order`` is the
-    convergence order of ``quantities`` in the element size. ``size(params)``, when given,
-    is the element size the parameters give: the actual ratio is then that of the two
-    sizes (a rounded number of divisions). ``extrapolate`` False leaves out
+    """How a scene's estimate is made: ``keys`` are the parameters that set the mesh, each
+    coarsened by ``ratio`` for the second solve: an element size (a name ending in
+    ``size``) multiplied, a resolution (cells per a length, divisions) divided (an integer
+    rounded, at least 1). ``overrides`` are pairs (key, other): where ``other`` is set
+    (> 0) it sets the mesh instead of ``key`` and is coarsened in its place. ``order`` is
+    the convergence order of ``quantities`` in the element size; ``size(params)``, when
+    given, is the element size the parameters give, and the actual ratio is that of the
+    two sizes (a rounded number of divisions). ``extrapolate`` False leaves out
     ``<quantity>_extrapolated`` where the two solves are not in the asymptotic range (the
     estimate then only bounds the error)."""
 
@@ -50,32 +51,29 @@ class Refinement:
     order: float
     quantities: tuple[str, ...]
     ratio: float = 2.0
-    absolute: tuple[tuple[str, str], ...] = ()
+    overrides: tuple[tuple[str, str], ...] = ()
     size: Callable[[Any], float] | None = None
     extrapolate: bool = True
 
     def coarse(self, params):
         """``params`` on the coarser mesh, without the estimate."""
-        sizes = dict(self.absolute)
+        overrides = dict(self.overrides)
         changes = {}
         for key in self.keys:
-            size = sizes.get(key)
-            if size is not None and getattr(params, size) > 0:
-                changes[size] = getattr(params, size) * self.ratio
-            else:
-                changes[key] = _divide(getattr(params, key), self.ratio)
+            other = overrides.get(key)
+            name = other if other is not None and getattr(params, other) > 0 else key
+            changes[name] = _coarsen(name, getattr(params, name), self.ratio)
         return dataclasses.replace(params, **changes, error_estimate=False)
 
     def actual_ratio(self, params, coarse) -> float:
         if self.size is not None:
             return self.size(coarse) / self.size(params)
-        key = self.keys[0]
-        value = getattr(params, key)
-        return value / getattr(coarse, key) if isinstance(value, int) else self.ratio
+        return self.ratio
 
 
-def _divide(value, ratio: float):
-    """A resolution divided by ``ratio`` (an integer rounded, at least 1)."""
+def _coarsen(name: str, value, ratio: float):
+    if name.endswith("size"):
+        return value * ratio
     return max(1, round(value / ratio)) if isinstance(value, int) else value / ratio
 
 
