@@ -119,3 +119,21 @@ def estimate_errors(ctx, run: Callable, params, refinement: Refinement) -> dict[
 
 def _number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def extrapolate(values, sizes, order: float = 2.0, bounds: tuple[float, float] = (1.0, 4.0)
+                ) -> tuple[float, float]:
+    """(extrapolated value, order) from solutions on meshes of element ``sizes`` (any
+    order of listing): with three or more, the finest three give the observed order
+    (clipped to ``bounds``) where they converge monotonically, else ``order`` is used;
+    with two, ``order``. The reference of a convergence study."""
+    pairs = sorted(zip(sizes, values), reverse=True)[-3:]
+    h = [p[0] for p in pairs]
+    q = [p[1] for p in pairs]
+    if len(q) < 2:
+        raise ValueError("Richardson's extrapolation needs two solutions at least")
+    if len(q) == 3 and (q[0] - q[1]) * (q[1] - q[2]) > 0:
+        observed = math.log((q[0] - q[1]) / (q[1] - q[2])) / math.log(math.sqrt(h[0] / h[2]))
+        order = min(bounds[1], max(bounds[0], observed))
+    value, _ = richardson(q[-1], q[-2], h[-2] / h[-1], order)
+    return value, order

@@ -32,6 +32,7 @@ import numpy as np
 from mpi4py import MPI
 
 from eyemech.problems import hertz
+from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
@@ -103,24 +104,19 @@ def _solve(params) -> dict:
 
 def converged_rows(level_rows: list[dict], indentations) -> list[dict]:
     """Per d/R: Richardson from the augmented-Lagrangian forces of the finest three levels
-    (two: order 2 assumed)."""
+    (two: order 2; :func:`extrapolate`)."""
     rows = []
     for ratio in indentations:
-        ok = sorted((r for r in level_rows if r["d_over_R"] == ratio and r["status"] == "ok"
-                     and r["method"] == "augmented-lagrangian"), key=lambda r: r["level"])
-        forces = [1.0 + r["force_error"] for r in ok][-3:]
-        levels = [r["level"] for r in ok][-3:]
-        if len(forces) < 2:
+        ok = [r for r in level_rows if r["d_over_R"] == ratio and r["status"] == "ok"
+              and r["method"] == "augmented-lagrangian"]
+        if len(ok) < 2:
             rows.append({"d_over_R": ratio, "status": "failed", "error": "fewer than two levels"})
             continue
-        step = levels[-1] / levels[-2]
-        order = 2.0
-        if len(forces) == 3 and (forces[0] - forces[1]) * (forces[1] - forces[2]) > 0:
-            order = float(np.clip(math.log((forces[0] - forces[1]) / (forces[1] - forces[2]))
-                                  / math.log(step), 1.0, 4.0))
-        converged = forces[-1] + (forces[-1] - forces[-2]) / (step ** order - 1.0)
+        forces = [1.0 + r["force_error"] for r in ok]
+        converged, order = extrapolate(forces, [1.0 / r["level"] for r in ok])
+        finest = max(ok, key=lambda r: r["level"])
         rows.append({"d_over_R": ratio, "status": "ok", "a_over_R": math.sqrt(ratio),
-                     "observed_order": order, "finest_force_error": forces[-1] - 1.0,
+                     "observed_order": order, "finest_force_error": finest["force_error"],
                      "converged_force_error": converged - 1.0})
     return rows
 

@@ -15,7 +15,6 @@ problem: tests/test_scaled_benchmarks.py), Cook's is F/μ.
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from mpi4py import MPI
 
 from eyemech.problems import cook_membrane, sphere_inflation
 from eyemech.problems.reference import analytic
+from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
@@ -105,19 +105,16 @@ def cook_row(load: float, sides: int) -> dict:
 
 
 def add_cook_references(rows: list[dict]) -> None:
+    """Per load: the tip extrapolated from the three finest meshes (:func:`extrapolate`,
+    observed order in [0.3, 4]: the corners are singular), each row's error against it."""
     for load in {r["load_factor"] for r in rows}:
-        mine = sorted((r for r in rows if r["load_factor"] == load and r["status"] == "ok"),
-                      key=lambda r: r["elements_per_side"])
+        mine = [r for r in rows if r["load_factor"] == load and r["status"] == "ok"]
         if len(mine) < 2:
             continue
-        tips = [r["tip"] for r in mine][-3:]
-        order = 1.0
-        if len(tips) == 3 and (tips[0] - tips[1]) * (tips[1] - tips[2]) > 0:
-            order = min(4.0, max(0.3, math.log((tips[0] - tips[1]) / (tips[1] - tips[2])) / math.log(2.0)))
-        reference = tips[-1] + (tips[-1] - tips[-2]) / (2.0 ** order - 1.0)
+        reference, order = extrapolate([r["tip"] for r in mine], [1.0 / r["elements_per_side"] for r in mine],
+                                       order=1.0, bounds=(0.3, 4.0))
         for row in mine:
-            row |= {"reference": reference, "observed_order": order,
-                    "error": row["tip"] / reference - 1.0}
+            row |= {"reference": reference, "observed_order": order, "error": row["tip"] / reference - 1.0}
             if "estimate" in row:
                 row["estimate_relative"] = row["estimate"] / abs(reference)
 

@@ -14,13 +14,13 @@ user tries.
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
 from mpi4py import MPI
 
 from eyemech.problems import hemisphere, plate_clamped, plate_simply_supported, scordelis_lo
+from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
@@ -122,22 +122,13 @@ def _solve(module, params):
 
 
 def add_references(rows: list[dict]) -> None:
-    """Per scene and thickness: Richardson from the three finest resolutions (observed
-    order, clipped to [1, 4]; two: order 2), and each row's error against it."""
+    """Per scene and thickness: the value extrapolated from the three finest resolutions
+    (:func:`extrapolate`), and each row's error against it."""
     for key in {(r["scene"], r["thickness"]) for r in rows}:
-        mine = sorted((r for r in rows if (r["scene"], r["thickness"]) == key and r["status"] == "ok"),
-                      key=lambda r: r["divisions"])
+        mine = [r for r in rows if (r["scene"], r["thickness"]) == key and r["status"] == "ok"]
         if len(mine) < 2:
             continue
-        values = [r["value"] for r in mine][-3:]
-        sizes = [1.0 / r["divisions"] for r in mine][-3:]
-        order = 2.0
-        if len(values) == 3 and (values[0] - values[1]) * (values[1] - values[2]) > 0:
-            step = math.sqrt(sizes[0] / sizes[2])
-            order = min(4.0, max(1.0, math.log((values[0] - values[1]) / (values[1] - values[2]))
-                                 / math.log(step)))
-        ratio = sizes[-2] / sizes[-1]
-        reference = values[-1] + (values[-1] - values[-2]) / (ratio ** order - 1.0)
+        reference, order = extrapolate([r["value"] for r in mine], [1.0 / r["divisions"] for r in mine])
         for row in mine:
             row |= {"reference": reference, "observed_order": order, "error": row["value"] / reference - 1.0}
 
