@@ -2,7 +2,7 @@
 defaults.
 
 - ``sphere-inflation`` (exact): the wall from thin to thick (outer/inner radius 1.1 … 2) and
-  the pressure up to 0.9 of the limit point, at 1, 2 and 3 cells across the wall: the
+  the pressure at 0.5 and 0.9 of the limit point, at 1, 2 and 3 cells across the wall: the
   error of the inner wall's displacement and the L² displacement error, and Richardson's
   estimate that ``error_estimate=true`` reports (2 cells: the coarse solve at 1).
 - ``cook-membrane`` (no closed form): load × 0.5, 1 and 2 (the same as μ × 2, 1, 0.5) on
@@ -27,8 +27,8 @@ from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import QUIET, save_chart, write_csv
 
-WALL_RATIOS = (1.1, 1.2, 1.5, 2.0)  # outer / inner radius, inner 10 mm
-LIMIT_FRACTIONS = (0.25, 0.5, 0.9)  # pressure / limit-point pressure
+WALL_RATIOS = (1.1, 1.2, 2.0)  # outer / inner radius, inner 10 mm
+LIMIT_FRACTIONS = (0.5, 0.9)  # pressure / limit-point pressure
 CELLS_ACROSS = (1.0, 2.0, 3.0)
 COOK_LOADS = (0.5, 1.0, 2.0)
 COOK_SIDES = (4, 8, 16, 32)
@@ -37,7 +37,7 @@ QUICK_FRACTIONS = (0.5,)
 QUICK_CELLS = (1.0,)
 QUICK_LOADS = (1.0,)
 QUICK_SIDES = (2, 4)
-MAX_CELLS = 60_000  # finer meshes of the series are left out (thin walls at 3 cells across)
+MAX_CELLS = 25_000  # finer meshes of the series are left out (the thin wall at 3 cells across)
 
 
 def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
