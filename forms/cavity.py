@@ -76,6 +76,44 @@ def liquid_law_residual(pressure, test, u, wall_measure, wall_area, initial_volu
     return (volume_density(u, outward_sign) + constant) * test * wall_measure
 
 
+def held_liquid(volume, pressure, initial_volume, initial_pressure, bulk_modulus):
+    """The liquid a cavity of volume V at pressure P holds, as its volume at P_ini:
+    V_l = V + V_ini (P − P_ini) / K (the liquid law solved for the liquid's amount).
+    Floats or UFL alike."""
+    return volume + initial_volume * (pressure - initial_pressure) / bulk_modulus
+
+
+def vented_law_pressure(volume, liquid_volume, initial_volume, initial_pressure, bulk_modulus):
+    """The pressure the liquid law gives a cavity of volume V holding the liquid V_l (its
+    volume at P_ini): P_ini − K (V − V_l) / V_ini. Floats or UFL alike."""
+    return initial_pressure - bulk_modulus * (volume - liquid_volume) / initial_volume
+
+
+def vented_liquid_law_residual(pressure, test, u, wall_measure, wall_area, initial_volume,
+                               initial_pressure, bulk_modulus, liquid_volume, limit, venting,
+                               outward_sign: float = -1.0):
+    """Row of the cavity pressure P for a cavity vented at the pressure ``limit``: the
+    liquid is held until the law's pressure reaches P_lim, then P stays at P_lim and the
+    liquid the wall displaces leaves (the operating surgeon's paracentesis),
+
+        P = min(P_lim, P_ini − K (V − V_l) / V_ini),
+
+    written as its two branches, a = 1 while the cavity vents (chosen outside the form,
+    before every assembly: :class:`eyemech.problems.solid.cavity.VentedCavity`, semismooth
+    Newton on the min), scaled by V_ini / K as :func:`liquid_law_residual` is:
+
+        r_P = (1 − a) [(V − V_l) + V_ini (P − P_ini) / K] + a V_ini (P − P_lim) / K.
+
+    V_l is the liquid held (its volume at P_ini): V_ini less what has been vented, updated
+    between load steps (:func:`held_liquid`), so vented liquid does not come back. With
+    a = 0 and V_l = V_ini this is :func:`liquid_law_residual`. Constant terms are spread
+    over the reference wall area ``wall_area``."""
+    held = (initial_volume * (pressure - initial_pressure) / bulk_modulus - liquid_volume) / wall_area
+    pinned = initial_volume * (pressure - limit) / bulk_modulus / wall_area
+    law = volume_density(u, outward_sign) + held
+    return ((1 - venting) * law + venting * pinned) * test * wall_measure
+
+
 def follower_pressure(pressure, u, v, wall_measure):
     """Virtual work residual of a cavity pressure acting on the deformed wall.
 

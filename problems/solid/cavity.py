@@ -31,6 +31,7 @@ from eyemech.forms import (
     follower_pressure,
     liquid_pressure,
 )
+from eyemech.forms.cavity import held_liquid, vented_law_pressure, vented_liquid_law_residual
 from eyemech.meshes.tagged import MeshError
 from eyemech.problems.solve.scalars import assemble_scalar
 
@@ -172,3 +173,123 @@ def _facets_of(wall_measure) -> np.ndarray:
     """Facets integrated by ``ds(tag)`` (its subdomain data and id)."""
     tags = wall_measure.subdomain_data()
     return tags.find(wall_measure.subdomain_id())
+
+
+# a venting cavity holds again once the law's pressure at its volume falls this fraction below
+# the limit: after a converged venting step the state sits on the kink (the law's pressure is
+# the limit to round-off), and without a margin the next solve's first assembly flipped it
+# (docs/hyperelastic.md, "The vented cavity")
+HOLD_MARGIN = 1e-3
+
+
+class VentedCavity:
+    """A liquid-filled cavity vented at a pressure limit: the terms and the state of
+    :func:`eyemech.forms.cavity.vented_liquid_law_residual`.
+
+    - :meth:`residual` is P's row; ``held`` (a Constant, 0 or 1) switches it on, the
+      caller's own row (e.g. P pinned to a ramp) takes the complement;
+    - :meth:`choose_branch`, a state hook of the nonlinear solver, sets the row's branch
+      before every assembly (semismooth Newton on P = min(P_lim, P_law(V)), at most one
+      switch a solve; :meth:`memory`/:meth:`restore_memory`, its memory hook, mark a
+      solve's start and undo a failed one);
+    - :meth:`accept`, after every converged load step, keeps the liquid that is left
+      (:func:`eyemech.forms.cavity.held_liquid`): vented liquid does not come back.
+
+    ``limit`` ≤ 0 is no venting: the branch stays 0 and this is the liquid law of seed
+    002 eq. 5. Volumes are those of the modelled part (the half eye's half)."""
+
+    def __init__(self, u, wall_measure, initial_volume, initial_pressure, bulk_modulus,
+                 limit: float):
+        mesh = u.function_space.mesh
+        self.u, self.wall = u, wall_measure
+        self.initial_volume, self.initial_pressure = initial_volume, initial_pressure
+        self.bulk_modulus = bulk_modulus
+        self.liquid_volume = dolfinx.fem.Constant(mesh, float(initial_volume.value))
+        self.limit = dolfinx.fem.Constant(mesh, float(limit))
+        self.venting = dolfinx.fem.Constant(mesh, 0.0)
+        self.held = dolfinx.fem.Constant(mesh, 0.0)  # 1 while the liquid law acts
+        self._volume = dolfinx.fem.form(enclosed_volume(u, wall_measure))
+        self.branch_switches = 0
+        self._switched = False  # this solve's one switch is spent
+
+    @property
+    def enabled(self) -> bool:
+        return float(self.limit.value) > 0.0
+
+    def residual(self, pressure, test, wall_area):
+        return vented_liquid_law_residual(pressure, test, self.u, self.wall, wall_area,
+                                          self.initial_volume, self.initial_pressure,
+                                          self.bulk_modulus, self.liquid_volume, self.limit,
+                                          self.venting)
+
+    def volume(self) -> float:
+        return assemble_scalar(self._volume)
+
+    def hold(self, volume: float) -> None:
+        """The liquid law from here on, holding the cavity's liquid at ``volume`` (the
+        state's volume at P_ini: the start of the coupled steps)."""
+        self.liquid_volume.value = volume
+        self.venting.value = 0.0
+        self.held.value = 1.0
+
+    def release(self) -> None:
+        self.held.value = 0.0
+        self.venting.value = 0.0
+
+    def law_pressure(self, volume: float) -> float:
+        return vented_law_pressure(volume, float(self.liquid_volume.value),
+                                   float(self.initial_volume.value),
+                                   float(self.initial_pressure.value),
+                                   float(self.bulk_modulus.value))
+
+    def choose_branch(self, pressure: float) -> None:
+        """Before every assembly, at most once a solve: a held cavity vents once the
+        iterate's P passes the limit; a venting one holds again once the law's pressure
+        at its V falls below the limit (the wall wants more volume than the liquid left).
+        Holding reads P, not V: with K = 2083 MPa a Newton iterate's volume error of 1 µL is
+        a law pressure of thousands of mmHg. One switch a solve: where the state sits on the
+        kink (little liquid leaves per step) the two tests otherwise flip the branch every
+        iteration (docs/hyperelastic.md, "The vented cavity"). P and V are values every rank shares."""
+        if not (self.enabled and float(self.held.value) == 1.0) or self._switched:
+            return
+        limit = float(self.limit.value)
+        if float(self.venting.value) == 0.0:
+            branch = 1.0 if pressure > limit else 0.0
+        else:  # a venting state after accept() sits on the kink: law = limit to round-off
+            branch = 1.0 if self.law_pressure(self.volume()) >= (1.0 - HOLD_MARGIN) * limit else 0.0
+        if branch != float(self.venting.value):
+            self.venting.value = branch
+            self.branch_switches += 1
+            self._switched = True
+
+    def memory(self) -> tuple[float, float]:
+        """At the start of a solve (the solver's memory hook): the branch and the liquid
+        held, and a new solve's one switch."""
+        self._switched = False
+        return float(self.venting.value), float(self.liquid_volume.value)
+
+    def restore_memory(self, saved: tuple[float, float]) -> None:
+        self.venting.value, self.liquid_volume.value = saved
+        self._switched = False
+
+    def accept(self, pressure: float) -> float:
+        """After a converged load step: the liquid the cavity holds now, V + V_ini (P −
+        P_ini)/K. While venting it can only fall (vented liquid does not come back); a
+        venting state whose wall took more volume than the liquid left (its one switch
+        spent) holds again from the next load step. Returns the volume vented in the step."""
+        self._switched = False
+        if float(self.held.value) != 1.0 or float(self.venting.value) != 1.0:
+            return 0.0
+        before = float(self.liquid_volume.value)
+        now = held_liquid(self.volume(), pressure, float(self.initial_volume.value),
+                          float(self.initial_pressure.value), float(self.bulk_modulus.value))
+        if now > before:
+            self.venting.value = 0.0
+            self.branch_switches += 1
+            return 0.0
+        self.liquid_volume.value = now
+        return before - now
+
+    def vented(self, reference_volume: float) -> float:
+        """The liquid vented since the liquid was held at ``reference_volume``."""
+        return reference_volume - float(self.liquid_volume.value)
