@@ -243,7 +243,9 @@ def test_retina_two_ranks_same_numbers(retina_serial, tmp_path):
 
 @pytest.mark.parametrize("key", ["slave", "master"])
 def test_missing_contact_region_is_refused(key):
-    with pytest.raises(MeshError, match="no region 'nowhere'"):
+    """A region the mesh does not have is refused when the parameters are made, naming the
+    parameter and the regions there are, before any mesh is built."""
+    with pytest.raises(ParameterError, match=f"parameter '{key}': must be one of slave, master"):
         retina.run(retina.Parameters(**{key: "nowhere"}, mesh_size=0.5), options=QUIET)
 
 

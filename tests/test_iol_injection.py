@@ -369,8 +369,8 @@ def test_p1_injection_writes_its_pictures_and_vtu_frames(tmp_path, monkeypatch):
             last = t
     times, frames = _read_frames(tmp_path, "injection")
     assert times == pytest.approx(expected) and len(expected) >= 3
-    frames = [p.name for p in sorted(tmp_path.glob("frame_*.png"))]
-    assert frames == [f"frame_{i:03d}.png" for i in range(len(times))]
+    pngs = [p.name for p in sorted(tmp_path.glob("frame_*.png"))]
+    assert pngs == [f"frame_{i:03d}.png" for i in range(len(times))]
     assert "injection.gif" in result.pictures and "injection.pvd" in result.fields
     assert all(f.n_points == result.quantities["nodes"] for f in frames)
     # the operation's time leaves the frames out

@@ -206,6 +206,7 @@ class NodeToSurfaceContact:
         self.triangle_nodes = np.searchsorted(self.master_nodes, self.triangles)
         if len(self.triangles) == 0:
             raise MeshError(f"the master region '{master}' has no facets")
+        self.triangle_rank = _geometric_rank(self._reference_master()[self.triangle_nodes])
 
     def allow_new_nonzeros(self, matrix: PETSc.Mat) -> None:
         """Contact couples dofs the finite-element pattern does not. With a
@@ -342,7 +343,7 @@ class NodeToSurfaceContact:
             nearest = nearest.reshape(len(slaves), k)
             points, _ = closest_points(slaves[:, None, :], corners[nearest])
             distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
-            best = np.argmin(distance, axis=1)
+            best = self._nearest_of_ties(distance, nearest)
             rows = np.arange(len(slaves))
             tri = self._sticky(slaves, corners, nearest, best, rows)
             self._previous = tri.copy()
@@ -363,6 +364,21 @@ class NodeToSurfaceContact:
             self.slave_gaps = np.where(paired, gaps, np.inf)  # every owned slave node's gap
             return ContactState(active, gaps[active], normal[active], tri[active],
                                 shape[active], min_gap, shifts[active])
+
+    TIE = 1e-9  # distances this close (relative) are one distance: a tie, not a choice
+
+    def _nearest_of_ties(self, distance: np.ndarray, nearest: np.ndarray) -> np.ndarray:
+        """Each slave node's closest candidate, ties broken by the triangles' geometric rank.
+
+        A node over the shared edge of two triangles (the diagonal of a split quadrilateral)
+        is as far from both, to round-off; a plain argmin then picks by the last bits, which
+        differ with the partition, and the two planes give different gaps (1.6 % of the
+        retina-choroid gap on the coarse eye, 1 vs 2 ranks). Among distances equal to
+        ``TIE``, the triangle of lowest rank wins on any partition."""
+        closest = distance.min(axis=1, keepdims=True)
+        tied = distance <= closest * (1.0 + self.TIE) + np.finfo(float).tiny
+        rank = np.where(tied, self.triangle_rank[nearest], np.iinfo(np.int64).max)
+        return np.argmin(rank, axis=1)
 
     def _sticky(self, slaves, corners, nearest, best, rows):
         """Keep the previous triangle while the node's projection on its plane stays
@@ -543,6 +559,18 @@ class NodeToSurfaceContact:
     def min_gap(self) -> float:
         """Smallest gap of any paired slave node (collective; negative = penetration)."""
         return self.comm.allreduce(self.search().min_gap, op=MPI.MIN)
+
+
+def _geometric_rank(corners: np.ndarray) -> np.ndarray:
+    """Each triangle's place (0 … T−1) in an order of its reference corners (T, 3, 3) that
+    no numbering enters: corners sorted within the triangle, triangles sorted by those
+    nine coordinates (exact copies of the mesh's, so every partition agrees)."""
+    within = np.lexsort(corners.transpose(2, 0, 1)[::-1], axis=-1)  # corner order by x, y, z
+    ordered = np.take_along_axis(corners, within[..., None], axis=1).reshape(len(corners), 9)
+    order = np.lexsort(ordered.T[::-1])
+    rank = np.empty(len(corners), dtype=np.int64)
+    rank[order] = np.arange(len(corners))
+    return rank
 
 
 def penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tuple[np.ndarray, np.ndarray]:

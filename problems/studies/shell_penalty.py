@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import dolfinx.fem
@@ -29,7 +28,7 @@ from eyemech.problems import plate_clamped
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.shell.model import Shell
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, stamp
+from eyemech.problems.studies._common import save_chart, write_csv
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -69,11 +68,7 @@ def _condition_number(divisions: int, penalty_factor: float) -> float:
 
 
 def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
-    with open(path, "w", newline="") as handle:
-        handle.write(f"# {stamp()}\n")
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        writer.writerows(rows)
+    write_csv(path, [dict(zip(header, row)) for row in rows])
 
 
 def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
