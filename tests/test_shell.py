@@ -40,6 +40,7 @@ from eyemech.problems import (
 )
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError
+from eyemech.problems.studies._common import read_csv
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -110,8 +111,6 @@ RESOLUTION_CSV = Path(__file__).resolve().parents[1] / "docs" / "studies" / "she
 def _resolution_reference(scene: str, thickness: float) -> float:
     """The study's extrapolated value (Richardson over cells per bending length) for the
     scene at ``thickness`` (docs/atlas/shell-resolution.md)."""
-    from eyemech.problems.studies._common import read_csv
-
     rows = [r for r in read_csv(RESOLUTION_CSV) if r["scene"] == scene and r["status"] == "ok"
             and np.isclose(float(r["thickness"]), thickness)]
     return float(rows[0]["reference"])
@@ -203,13 +202,10 @@ def test_penalty_study_quick(tmp_path):
     files = studies()["shell-penalty"].run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
     names = {f.name for f in files}
     assert {"shell_penalty.csv", "shell_degree.csv", "shell_penalty.png", "shell_degree.png"} <= names
-    rows = [line for line in (tmp_path / "shell_penalty.csv").read_text().splitlines()[2:] if line]
-    conditions = [float(r.split(",")[2]) for r in rows]
+    conditions = [float(r["condition_number"]) for r in read_csv(tmp_path / "shell_penalty.csv")]
     assert conditions[-1] > 5 * conditions[1]  # a large penalty spoils the conditioning
-    degree_rows = [line.split(",") for line in
-                   (tmp_path / "shell_degree.csv").read_text().splitlines()[2:] if line]
-    p3 = [row for row in degree_rows if row[0] == "3"]
-    assert abs(float(p3[0][3])) < 3e-3  # the P3 option: 4 × 4 crossed already within 0.3 %
+    p3 = [r for r in read_csv(tmp_path / "shell_degree.csv") if r["degree"] == "3"]
+    assert abs(float(p3[0]["center_deflection_error"])) < 3e-3  # P3: 4 × 4 crossed within 0.3 %
 
 
 def test_thickness_study_quick_shows_membrane_locking(tmp_path):
@@ -221,7 +217,6 @@ def test_thickness_study_quick_shows_membrane_locking(tmp_path):
 
     files = studies()["shell-thickness"].run(tmp_path, quick=True, comm=MPI.COMM_WORLD)
     assert {f.name for f in files} == {"shell_thickness.csv", "shell_thickness.png"}
-    from eyemech.problems.studies._common import read_csv
 
     scaled = {(int(r["degree"]), int(r["slenderness"])): float(r["scaled_displacement"])
               for r in read_csv(tmp_path / "shell_thickness.csv")}
