@@ -198,9 +198,15 @@ def test_nonlinear_hemisphere_second_thickness_and_load():
 
 
 def test_slit_plate_default_mesh_follows_sze_within_two_percent():
-    """The study's rows on the default 48 × 6 mesh at Sze's 11 load levels q = 0.02 … 0.8."""
-    rows = [r for r in read_csv(SLIT_CSV) if r["divisions"] == "48" and r["deflection_a_sze"] != "nan"]
-    assert len(rows) >= 11
+    """The study's rows on the default 48 × 6 mesh at Sze's 11 load levels q = 0.02 … 0.8
+    (measured −0.52 … −1.60 % at W_A). Between the levels the table's linear interpolation
+    of a curved path is no reference (+3.8 % at q = 0.06)."""
+    from eyemech.problems import slit_annular_plate
+
+    levels = [f * slit_annular_plate.SZE_MAX_LINE_LOAD for f in slit_annular_plate.SZE_LOAD_FRACTION]
+    rows = [r for r in read_csv(SLIT_CSV) if r["divisions"] == "48"
+            and np.isclose(float(r["line_load"]), levels, rtol=1e-6).any()]
+    assert len(rows) == 11
     for row in rows:
         assert float(row["deflection_a"]) == pytest.approx(float(row["deflection_a_sze"]),
                                                            rel=NONLINEAR_TOLERANCE)
