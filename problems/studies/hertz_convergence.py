@@ -173,7 +173,7 @@ def _chart(path: Path, level_rows, converged, fit, range_rows) -> Path:
               label=f"converged: {100 * fit['c1']:.1f} (a/R) + {100 * fit['c2']:.0f} (a/R)² %")
     ok = [r for r in converged if r["status"] == "ok"]
     left.plot([r["d_over_R"] for r in ok], [100 * r["converged_force_error"] for r in ok], "ko",
-              label="Richardson (augmented Lagrangian, 3 meshes)")
+              label=f"Richardson (augmented Lagrangian, {len({r['level'] for r in level_rows})} meshes)")
     default = [r for r in range_rows if r["status"] == "ok"]
     left.plot([r["d_over_R"] for r in default], [100 * r["force_error"] for r in default], "x",
               color="tab:red", label="default resolution, R 2–10 mm, E 0.5–5 MPa")
