@@ -52,8 +52,9 @@ class Parameters(HemisphereParameters):
                               "0 = from cells_per_bending_length", group=GEOMETRY)
     cells_per_bending_length: float = field(
         1.6, "elements per bending length √(R h) along the meridian (divisions = 0): 32 divisions "
-             "on Sze's shell, 15 at h = 0.2 (16 divisions are −3.2 / −5.4 % off Sze's table at "
-             "P = 400, docs/shell.md)", group=GEOMETRY)
+             "on Sze's shell, 15 at h = 0.2 (there −0.38 / −0.30 % from the converged answer; 16 "
+             "divisions on Sze's shell are −3.2 / −5.4 % off the table at P = 400, docs/shell.md)",
+        group=GEOMETRY)
     kinematics: Kinematics = field("nonlinear", "nonlinear (the benchmark) or linear", group=PHYSICS)
     load_steps: int = field(20, "initial number of load steps (cut and grown as needed)", group=SOLVER)
 

@@ -174,7 +174,7 @@ def test_nonlinear_hemisphere_second_thickness_and_load():
     """h = 0.2 (R/h = 50) at P = 12,500 (Sze's P = 100 × (0.2/0.04)³), default resolution
     (15 divisions), against the same model's mesh-converged answer: Richardson's value of
     three resolutions × 1.5 (study shell-hemisphere, shell_hemisphere_thick.csv; no
-    published curve exists for this thickness)."""
+    published curve exists for this thickness). Measured −0.38 % / −0.30 %."""
     reference = read_csv(THICK_CSV)[0]
     params = hemisphere_nonlinear.Parameters(thickness=0.2, force=12_500.0, load_steps=4)
     q = _run(hemisphere_nonlinear, thickness=0.2, force=12_500.0, load_steps=4).quantities
