@@ -13,7 +13,7 @@ OUT    ?= results
 # The main job: the scleral-buckling operation (issue #5).
 MAIN   ?= scleral-buckling
 
-.PHONY: run test bench bench-q2p1 venv clean
+.PHONY: run test bench bench-q2p1 bench-mpi bench-sweep venv clean
 
 venv: $(STAMP)
 
@@ -31,19 +31,33 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(VENV)/bin/eyemech run $(MAIN) --out $(OUT)
 
-# The suite runs in four pytest processes (test files a–m, n–r, s, t–z), all always, and
-# fails if any fails. A test module that leaves a mesh alive fails (tests/conftest.py): a
-# leaked mesh keeps its MPI communicators, MPICH has 2,048 a process, and a process that
-# runs out aborts ("Too many communicators"); long pytest processes ended so, with exit
-# status 15 and no summary (tests/test_solver_lifetime.py). Two earlier ends by a
-# segmentation fault in such long processes were not diagnosed.
-TEST_GROUPS ?= "tests/test_[a-m]*.py" "tests/test_[n-r]*.py" "tests/test_s*.py" "tests/test_[t-z]*.py"
+# The suite runs in one pytest process (TEST_GROUPS: the file patterns of each process;
+# `make test TEST_GROUPS=tests/test_cli.py` runs one file). A process that keeps MPI
+# communicators runs out of MPICH's 2,048 and then aborts or crashes (docs/parallel.md,
+# "Long processes"): a test module that keeps more than a few fails (tests/conftest.py).
+# TEST_LOG records each test as it starts (with the free communicators then), the free
+# communicators and memory after each module, and Python's traceback on a fatal signal;
+# its end is printed when a process fails.
+TEST_GROUPS ?= tests
+TEST_LOG    ?= $(CURDIR)/test-process.log
 
 test: $(STAMP)
-	@status=0; for group in $(TEST_GROUPS); do \
-	  PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m pytest -ra --timeout=1800 $(PYTEST_ARGS) $$group \
-	    || status=$$?; \
-	done; exit $$status
+	@rm -f $(TEST_LOG); status=0; for group in $(TEST_GROUPS); do \
+	  EYEMECH_TEST_LOG=$(TEST_LOG) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" \
+	    $(PY) -m pytest -ra --timeout=1800 $(PYTEST_ARGS) $$group || status=$$?; \
+	done; \
+	if [ $$status -ne 0 ]; then echo "--- end of $(TEST_LOG)"; tail -n 60 $(TEST_LOG); fi; \
+	exit $$status
+
+# A sweep of 1,000 cases in one 2-rank process (each case on both ranks) of a scene that runs in well
+# under a second (the clamped strip's vibration, one time step): MPI communicators free
+# and resident memory before and after, a row appended to docs/bench/sweep-lifetime.md
+# (docs/parallel.md, "Long processes").
+bench-sweep: $(STAMP)
+	rm -rf $(OUT)/sweep-lifetime
+	$(VENV)/bin/mpiexec -n 2 $(PY) -m eyemech.scripts.sweep_lifetime cantilever-vibration \
+	  --cases 1000 --vary amplitude=0.005:0.015 --set divisions=2 --set periods=0.125 \
+	  --set steps_per_period=8 --out $(OUT)/sweep-lifetime --record docs/bench/sweep-lifetime.md
 
 # Performance of the main job at the paper's resolution (its three steps), on 1 and 2 ranks
 # with the defaults, and on 2 ranks with Newton directions by FGMRES on a kept
@@ -61,5 +75,11 @@ bench: $(STAMP)
 bench-q2p1: $(STAMP)
 	$(VENV)/bin/eyemech bench scleral-buckling --set element=Q2P1 --set resolution=coarse --out docs/bench
 
+# Every scene at its defaults on 1, 2 and 3 ranks: wall time and the largest relative
+# difference from the serial quantities (docs/parallel.md, "Every scene on 1, 2 and 3
+# ranks"); about an hour on the loaded 2-core VM.
+bench-mpi: $(STAMP)
+	nice -n 10 $(PY) scripts/bench_mpi.py --out docs/bench
+
 clean:
-	rm -rf $(VENV) results .pytest_cache
+	rm -rf $(VENV) results .pytest_cache test-process.log

@@ -1,6 +1,6 @@
-"""Scenes and benchmarks. Each scene module exposes ``SCENE`` (name, parameter
-dataclass, ``run``); :func:`scenes` finds them all, so adding a scene is adding a
-module.
+"""Scenes and benchmarks. Each scene module (or package, for a scene of several modules)
+exposes ``SCENE`` (name, parameter dataclass, ``run``); :func:`scenes` finds them all, so
+adding a scene is adding a module.
 
     from eyemech.problems import sphere_inflation
     result = sphere_inflation.run(sphere_inflation.Parameters(pressure=0.02))
@@ -22,14 +22,14 @@ import pkgutil
 
 
 def scenes() -> dict:
-    """Name -> Scene for every scene module in this package."""
+    """Name -> Scene for every scene (module or package) in this package."""
     found = {}
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name.startswith("_") or info.ispkg:
+        if info.name.startswith("_"):
             continue
         module = importlib.import_module(f"{__name__}.{info.name}")
         scene = getattr(module, "SCENE", None)
-        if scene is not None:
+        if scene is not None:  # a package without one is a room (what scenes share)
             found[scene.name] = scene
     return found
 

@@ -44,18 +44,25 @@ def _scene_literal(path: Path) -> SceneEntry | None:
     return None
 
 
+def scene_sources(folder: Path) -> list[tuple[str, Path]]:
+    """(module name, source) of every top-level module and package of ``folder``: a
+    package's source is its ``__init__.py``."""
+    found = [(path.stem, path) for path in folder.glob("*.py")]
+    found += [(path.parent.name, path) for path in folder.glob("*/__init__.py")]
+    return sorted((name, path) for name, path in found if not name.startswith("_"))
+
+
 def scene_catalogue() -> list[SceneEntry]:
-    """Every scene of the top level of ``eyemech.problems``, sorted by name. A module whose
-    SCENE is not written with literals is imported to read it."""
+    """Every scene of the top level of ``eyemech.problems`` (a module, or a package whose
+    ``__init__.py`` defines SCENE), sorted by name. A module whose SCENE is not written
+    with literals is imported to read it."""
     entries = []
-    for path in sorted(problems_folder().glob("*.py")):
-        if path.name.startswith("_"):
-            continue
+    for name, path in scene_sources(problems_folder()):
         entry = _scene_literal(path)
-        if entry is None and "SCENE" in path.read_text(encoding="utf-8"):
+        if entry is None and "SCENE = " in path.read_text(encoding="utf-8"):
             import importlib
 
-            scene = getattr(importlib.import_module(f"eyemech.problems.{path.stem}"), "SCENE", None)
+            scene = getattr(importlib.import_module(f"eyemech.problems.{name}"), "SCENE", None)
             entry = SceneEntry(scene.name, scene.kind, scene.summary) if scene is not None else None
         if entry is not None:
             entries.append(entry)

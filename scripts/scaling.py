@@ -25,6 +25,7 @@ import argparse
 import csv
 import datetime
 import json
+import math
 import os
 import platform
 import shlex
@@ -102,14 +103,14 @@ PROBE_COLUMNS = ("date", "machine", "load", "element", "cells_per_edge", "until"
 
 def probe(cells: int, element: str, until: float, petsc: dict[str, str]) -> dict:
     """Serial scleral-buckling with ``cells`` per cube edge, solver=iterative, along
-    the load path up to ``until`` (1: IOP step)."""
+    the load path to the end of the stage ``until`` lies in (1: the IOP stage)."""
     import dataclasses
 
-    from eyemech.problems import buckling_output
     from eyemech.problems import scleral_buckling as sb
     from eyemech.problems.run.context import RunContext, RunOptions
     from eyemech.problems.run.parameters import build
-    from eyemech.problems.solve.driver import NewtonOptions, Stepping, follow_path
+    from eyemech.problems.scleral_buckling.stages import operation as stages_of
+    from eyemech.problems.solve.driver import NewtonOptions
 
     @dataclasses.dataclass(frozen=True)
     class Refined(sb.Parameters):
@@ -122,14 +123,10 @@ def probe(cells: int, element: str, until: float, petsc: dict[str, str]) -> dict
     status = "ok"
     with RunContext(sb.SCENE.name, params, None, None, options) as ctx:
         model = sb.BucklingModel(params, ctx)
-        writer = buckling_output.Writer(model, ctx)
+        writer = sb.Writer(model, ctx)
+        stages = stages_of(params)[:max(1, math.ceil(until))]  # the first stages of the operation
         try:
-            follow_path(model.solver, model.apply,
-                        Stepping(0.0, until, initial_step=min(1 / 12, sb._max_step(params)),
-                                 max_step=sb._max_step(params),
-                                 stops=tuple(s for s in (1.0, 2.0) if s < until)),
-                        on_converged=lambda record: sb._converged(model, ctx, writer, record),
-                        label="probe", quiet=True)
+            sb.Operation(model, ctx, writer, stages).follow(label="probe")
         except sb.SolveFailure as err:
             status = f"failed: {err}"[:80]
         finally:

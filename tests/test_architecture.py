@@ -52,9 +52,6 @@ MAX_FUNCTION_LINES = 80
 MAX_CLASS_LINES = 400
 # "path" (every function and class in it) or "path::Qualified.name": why it may be longer
 LONG_ALLOWED = {
-    "problems/scleral_buckling.py": "moving to a package (terms/stages)",
-    "problems/solve/driver.py::follow_path": "the path follower with its step-cutting policy "
-        "inline; the policy moves to the step controller (problems/solve/stepping.py)",
     "problems/solve/driver.py::NonlinearSolver": "one SNES with the state its callbacks share "
         "(the kept Jacobian and factorisation, the counters, the fallback line search)",
     "problems/contact/node_to_surface.py::NodeToSurfaceContact": "one contact pair: its search, "
@@ -257,7 +254,7 @@ HISTORY = re.compile(
     r"|\bsessions?\b|\bwas\b[^.]*\bnow\b|\bformerly\b",
     re.IGNORECASE)
 # pages a helper is rewriting; the lead removes the entry when it lands
-HISTORY_ALLOWED = {"docs/scleral_buckling.md": "being rewritten as the scene's reference (terms)"}
+HISTORY_ALLOWED: dict[str, str] = {}
 
 
 def history_lines(paths: list[Path]) -> list[str]:

@@ -1,4 +1,4 @@
-"""The radial tire (tire_orientation = radial, issue 21 item 1) on the coarse eye: it
+"""The radial tire (tire_orientation = radial) on the coarse eye: it
 indents the sclera under the tear along its meridian, lengthens the eye less than an
 encircling band, its sutured footprint does not slide, and bad radial buckles are
 refused before any solve (docs/scleral_buckling.md, Radial tire)."""

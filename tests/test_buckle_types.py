@@ -1,4 +1,4 @@
-"""Buckles as surgeons place them (issue 21), on the coarse eye: the sutured buckle
+"""Buckles as surgeons place them, on the coarse eye: the sutured buckle
 does not slide, a segmental tire lengthens the eye less than an encircling band, deep
 buckles and wide bands run to the end, bad buckles are refused."""
 
@@ -118,7 +118,7 @@ def test_realistic_buckles_run_to_the_end(overrides):
 @pytest.mark.parametrize("overrides, key", [
     ({"tire_arc_deg": "0"}, "tire_arc_deg"),
     ({"tire_arc_deg": "400"}, "tire_arc_deg"),
-    ({"buckle": "segmental"}, "suture_azimuths"),     # sutures at 90° and 180°: off the tire
+    ({"buckle": "segmental", "suture_azimuths": "0,90"}, "suture_azimuths"),  # 90°: off the tire
     ({"buckle": "encircling", "suture_width": "2"}, "suture_width"),
     ({"buckle": "rubber-band"}, "buckle"),
     ({"buckle_position": "45"}, "buckle_position"),    # the buckle off the eye
@@ -140,8 +140,35 @@ def test_bad_buckles_are_refused(overrides, key):
     ("indentation=12", "indentation"),           # deeper than the sclera's 11.5 mm radius
 ])
 def test_bad_buckle_exits_2(tmp_path, setting, key):
-    # one clear error naming the parameter, before any solve (drainage without a
-    # detachment: tests/test_tear_closure.py)
+    # one clear error naming the parameter, before any solve (drainage: tests/test_drainage.py)
     code, _, err = run_cli("run", "scleral-buckling", "--set", setting, "--out", str(tmp_path))
     assert code == 2
     assert key in err
+
+
+@pytest.mark.parametrize("overrides, meridians", [
+    ({}, (0.0, 90.0, 180.0)),                                         # band and tire
+    ({"buckle": "encircling"}, (0.0, 90.0, 180.0)),
+    ({"buckle": "segmental"}, (0.0, 36.0)),                           # 90° tire: ±45°
+    ({"buckle": "segmental", "tire_arc_deg": "60"}, (0.0, 24.0)),
+    ({"buckle": "segmental", "tire_orientation": "radial"}, (0.0,)),
+    ({"buckle": "segmental", "suture_azimuths": "0,20"}, (0.0, 20.0)),  # as set
+])
+def test_the_sutures_follow_the_buckle_chosen(overrides, meridians):
+    """Without suture_azimuths the sutures go where the chosen buckle is: every meridian
+    they are given lies on an element of that buckle (the validation refuses one that
+    does not), so `--set buckle=segmental` alone is a valid operation."""
+    params = build(sb.Parameters, overrides)
+    assert params.suture_meridians() == meridians
+    shape = params.buckle_shape()
+    assert all(shape.element_at(a) is not None for a in meridians)
+
+
+def test_a_segmental_tire_alone_runs_with_its_own_sutures():
+    """`eyemech run scleral-buckling --set buckle=segmental` (coarse, to the end of
+    suturing): two sutures across the 90° tire, 0 and 36° from the tear, each pulling
+    0.2 N at the end of step 3."""
+    result = _run(buckle="segmental", settle="false")
+    after = result.quantities["after_suturing"]
+    assert result.status == "ok" and after["suture_force_N"] == pytest.approx(0.2)
+    assert after["buckle_travel_mm"] > 0

@@ -1,5 +1,4 @@
-"""Newton's work counted and PETSc options that reach the objects that read them (issue 22,
-deliverables 1 and 2).
+"""Newton's work counted and PETSc options that reach the objects that read them.
 
 - Every Newton iteration, Jacobian, numeric factorisation and symbolic analysis is counted,
   a cut step's failed attempts included: per step (``attempts``, ``newton_iterations_all``,
@@ -16,6 +15,9 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import dolfinx
 import dolfinx.fem
@@ -89,7 +91,9 @@ def check_counts(saved: dict) -> None:
     totals, steps = saved["solver_counts"], saved["steps"]
     for step in steps:
         assert all(key in step for key in STEP_KEYS), step
-        assert step["attempts"] == step["cuts"] + 1
+        # a failed run's last step: every attempt failed, each one cut the step
+        failed = step.get("status") == "failed"
+        assert step["attempts"] == step["cuts"] + (0 if failed else 1)
         assert step["newton_iterations_all"] >= step["newton_iterations"]
         # SNES Newton with LU: one Jacobian and one factorisation per iteration
         assert step["factorisations"] == step["jacobians"] == step["newton_iterations_all"]
@@ -163,6 +167,156 @@ def test_failed_attempts_are_counted():
     # failed attempts: max_it iterations each, all factorised
     failed = work.newton_iterations_all - work.newton_iterations
     assert failed == 4 * work.failed_newton_solves
+
+
+class PetscLog:
+    """PETSc's own log events counted over a ``with`` block (the driver turns PETSc's
+    logging on at import): SNES solves, linear solves, Jacobian evaluations (kept ones
+    included), numeric and symbolic factorisations (LU, and LDLᵀ as PETSc's Cholesky)."""
+
+    EVENTS = ("SNESSolve", "KSPSolve", "SNESJacobianEval", "MatLUFactorNum", "MatLUFactorSym",
+              "MatCholFctrNum", "MatCholFctrSym")
+
+    def __enter__(self) -> "PetscLog":
+        self._before = self._now()
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        now = self._now()
+        self.counts = {name: now[name] - self._before[name] for name in self.EVENTS}
+
+    def _now(self) -> dict[str, int]:
+        return {name: int(PETSc.Log.Event(name).getPerfInfo()["count"]) for name in self.EVENTS}
+
+
+def assert_counts_are_petscs(counts: dict, log: PetscLog) -> None:
+    """Full Newton with a direct solver: a Newton iteration is one linear solve and one
+    Jacobian, each Jacobian one numeric factorisation (MUMPS LU or LDLᵀ)."""
+    events = log.counts
+    assert counts["newton_solves"] == events["SNESSolve"]
+    assert counts["newton_iterations_all"] == events["KSPSolve"] == events["SNESJacobianEval"]
+    assert counts["jacobians"] == events["SNESJacobianEval"]
+    assert counts["factorisations"] == events["MatLUFactorNum"] + events["MatCholFctrNum"]
+    assert counts["symbolic_factorisations"] == \
+        events["MatLUFactorSym"] + events["MatCholFctrSym"]
+
+
+def _nan_in_the_line_search() -> NonlinearSolver:
+    """ln u = 0 from u = e³ with backtracking allowed no step below 1/2: the full step
+    makes u negative, ln u NaN (DIVERGED_FUNCTION_NANORINF in the first iteration's line
+    search, after its linear solve)."""
+    mesh = dolfinx.mesh.create_unit_interval(MPI.COMM_SELF, 1)
+    V = dolfinx.fem.functionspace(mesh, ("DG", 0))
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    u.x.array[:] = np.exp(3.0)
+    options = NewtonOptions(line_search="bt", petsc={"snes_linesearch_minlambda": "0.5"})
+    return driver.NonlinearSolver(ufl.ln(u) * v * ufl.dx, u, options=options)
+
+
+def _error_in_a_residual_hook() -> NonlinearSolver:
+    """The nonlinear Poisson problem whose residual hook raises at its third call: in the
+    line search of the second Newton iteration, after its linear solve."""
+    problem = _nonlinear_poisson(NewtonOptions())
+    problem["load"].value = 1.0
+    calls = [0]
+
+    def hook(_x, _vec):
+        calls[0] += 1
+        if calls[0] == 3:
+            raise RuntimeError("a hook's error")
+
+    problem["solver"].residual_hooks.append(hook)
+    return problem["solver"]
+
+
+def test_the_iteration_a_solve_fails_in_is_counted_as_petsc_logs_it():
+    """An attempt that ends inside a Newton iteration (here a NaN residual in its line
+    search, after the linear solve) did that iteration's Jacobian, linear solve and
+    factorisation: ``newton_iterations_all`` counts it (SNES's iteration number does not),
+    and every count equals PETSc's log events of the solve."""
+    solver = _nan_in_the_line_search()
+    with PetscLog() as log:
+        converged, _ = solver.solve()
+    assert not converged and solver.reason() == "DIVERGED_FUNCTION_NANORINF"
+    counts = solver.last_counts.as_dict()
+    assert counts["newton_iterations_all"] == 1 > solver.snes.getIterationNumber()
+    assert_counts_are_petscs(counts, log)
+
+
+# run in a process of its own: the error leaves PETSc's events around it (SNESSolve, the
+# line search, the residual's evaluation) begun and never ended, and PETSc counts an event
+# when its outermost begin ends, so the process's log would count none of them again
+ERROR_IN_A_HOOK = """
+import json
+from test_newton_counts import PetscLog, _error_in_a_residual_hook
+solver = _error_in_a_residual_hook()
+with PetscLog() as log:
+    try:
+        solver.solve()
+    except RuntimeError as error:
+        assert str(error) == "a hook's error"
+print(json.dumps({"counts": solver.last_counts.as_dict(), "events": log.counts,
+                  "snes_iterations": solver.snes.getIterationNumber()}))
+"""
+
+
+def test_the_iteration_a_hook_raises_in_is_counted_as_petsc_logs_it():
+    """An exception in a residual hook in the second iteration's line search (after its
+    linear solve and factorisation): both iterations are counted, as PETSc's log counts
+    their linear solves, Jacobians and factorisations (the events the error left closed)."""
+    proc = subprocess.run([sys.executable, "-c", ERROR_IN_A_HOOK], capture_output=True,
+                          text=True, cwd=Path(__file__).parent, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    measured = json.loads(proc.stdout.strip().splitlines()[-1])
+    counts, events = measured["counts"], measured["events"]
+    assert counts["newton_iterations_all"] == 2 > measured["snes_iterations"]
+    assert counts["newton_iterations_all"] == events["KSPSolve"] == events["SNESJacobianEval"]
+    assert counts["jacobians"] == events["SNESJacobianEval"]
+    assert counts["factorisations"] == events["MatLUFactorNum"] == 2
+    assert counts["symbolic_factorisations"] == events["MatLUFactorSym"] == 1
+
+
+def test_a_path_with_nan_attempts_counts_what_petsc_logs():
+    """The NaN-cut path (``_log_path``: full steps, a NaN residual cuts the load step at
+    once): the solver's totals equal PETSc's log events over the path, and the steps' counts
+    sum to the totals (measured: 29 linear solves; the 3 NaN attempts' iterations were
+    the ones SNES's iteration number leaves out)."""
+    with PetscLog() as log:
+        solver, records, _u = _log_path(cut_on_nan=True)
+    counts = solver.counts.as_dict()
+    assert solver.counts.failed_newton_solves >= 2
+    assert_counts_are_petscs(counts, log)
+    assert counts["newton_iterations_all"] == sum(r.iterations_all for r in records)
+    for record in records:  # one iteration, Jacobian and factorisation per NaN attempt
+        assert record.iterations_all == record.jacobians == record.factorisations
+        assert record.iterations_all == record.iterations + record.cuts
+
+
+def test_a_failed_run_records_its_failed_step_and_counts_what_petsc_logs(tmp_path):
+    """The thick sphere past its limit pressure (neo-Hookean inflation has a pressure
+    maximum, ≈ 0.45 of 0.05 MPa here): steps converge until the step is cut below its
+    smallest length. ``results.json`` (status failed) records the last, failed step
+    (status failed, its attempts' work), the totals equal the sum over the steps, and
+    they equal PETSc's log events over the run (measured: 8 steps, 130 factorisations, the
+    failed step's 6 among them)."""
+    from eyemech.scripts.cli import main
+
+    with PetscLog() as log:
+        code = main(["run", "sphere-inflation", "--set", "mesh_size=4.0", "--set",
+                     "pressure=0.05", "--out", str(tmp_path), "--no-fields", "--no-pictures",
+                     "--quiet"])
+    assert code == 3
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert saved["status"] == "failed"
+    steps, totals = saved["steps"], saved["solver_counts"]
+    assert [s.get("status") for s in steps[:-1]] == [None] * (len(steps) - 1)
+    last = steps[-1]
+    assert last["status"] == "failed" and last["newton_iterations"] == 0
+    assert last["factorisations"] > 0 and last["attempts"] == last["cuts"] >= 1
+    assert last["step"] == len(steps) and last["load"] > steps[-2]["load_factor"]
+    check_counts(saved)
+    assert totals["newton_iterations_all"] == sum(s["newton_iterations_all"] for s in steps)
+    assert_counts_are_petscs(totals, log)
 
 
 def test_factorisations_are_counted_where_petsc_performs_them():
@@ -350,10 +504,41 @@ BUDGET_EYE = {"resolution": "coarse", "settle": False}
 
 
 @pytest.fixture(scope="module")
-def budget_eye():
-    """The coarse eye with the scene's defaults (one run shared by the tests below)."""
+def budget_eye_and_log():
+    """The coarse eye with the scene's defaults, and PETSc's log events over its run."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
-    return scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE), options=options)
+    with PetscLog() as log:
+        result = scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE), options=options)
+    return result, log
+
+
+@pytest.fixture(scope="module")
+def budget_eye(budget_eye_and_log):
+    """The coarse eye with the scene's defaults (one run shared by the tests below)."""
+    return budget_eye_and_log[0]
+
+
+def assert_eye_counts_are_petscs(result, log: PetscLog) -> None:
+    """The eye's totals against PETSc's log events over its run, and the sum over its steps
+    against the totals. With modified Newton an iteration on a kept Jacobian is a linear
+    solve and a Jacobian request (``SNESJacobianEval``) but no assembly and no
+    factorisation: Jacobians assembled = numeric factorisations ≤ requests."""
+    data = result.as_json()
+    counts, events, steps = data["solver_counts"], log.counts, data["steps"]
+    assert counts["newton_solves"] == events["SNESSolve"]
+    assert counts["newton_iterations_all"] == events["KSPSolve"] == events["SNESJacobianEval"]
+    assert counts["factorisations"] == events["MatLUFactorNum"] + events["MatCholFctrNum"]
+    assert counts["symbolic_factorisations"] == \
+        events["MatLUFactorSym"] + events["MatCholFctrSym"]
+    assert counts["jacobians"] <= events["SNESJacobianEval"]
+    for key in STEP_KEYS:
+        assert counts["newton_solves" if key == "attempts" else key] == \
+            sum(s[key] for s in steps), key
+
+
+def test_the_coarse_eyes_counts_are_petscs(budget_eye_and_log):
+    """The default coarse eye (no settling): every count as PETSc's log counts it."""
+    assert_eye_counts_are_petscs(*budget_eye_and_log)
 
 
 def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factorisations(
@@ -367,8 +552,10 @@ def test_scleral_buckling_budget_matches_the_reference_method_with_fewer_factori
     factorisations (measured: 50 in 20 load steps against 177 in 24; 0.28, so the bound
     leaves room for the solver's counts to move)."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
-    reference = scleral_buckling.run(scleral_buckling.Parameters(**BUDGET_EYE, **REFERENCE_METHOD),
-                                     options=options)
+    with PetscLog() as log:
+        reference = scleral_buckling.run(
+            scleral_buckling.Parameters(**BUDGET_EYE, **REFERENCE_METHOD), options=options)
+    assert_eye_counts_are_petscs(reference, log)
     budget = budget_eye
     assert_same_eye(reference, budget, rim_gap_tolerance=0.01)
     ref_counts = reference.as_json()["solver_counts"]
@@ -567,7 +754,7 @@ def test_factorisation_choice():
 
 def test_results_state_the_newton_stopping_test():
     """results.json's ``newton_tolerances``: the stopping test the run's Newton solves used
-    (issue 26: a result states the accuracy it was converged to), here SNES's default
+    (a result states the accuracy it was converged to), here SNES's default
     ‖F‖ ≤ max(1e-10, 1e-9 ‖F_0‖), and ``--petsc snes_rtol`` is what it then states."""
     options = RunOptions(fields=False, pictures=False, quiet=True)
     params = sphere_inflation.Parameters(mesh_size=4.0)

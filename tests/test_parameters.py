@@ -140,13 +140,7 @@ NOT_PHYSICS = {"load_steps": SOLVER, "mesh_size": GEOMETRY, "resolution": GEOMET
 def _scene_cases():
     from eyemech.problems import scenes
 
-    cases = []
-    for name, scene in scenes().items():
-        marks = ()
-        if name == "scleral-buckling":  # its 88 keys are tagged with its parameters' split
-            marks = pytest.mark.xfail(strict=True, reason="scleral-buckling's fields untagged")
-        cases.append(pytest.param(scene, id=name, marks=marks))
-    return cases
+    return [pytest.param(scene, id=name) for name, scene in scenes().items()]
 
 
 @pytest.mark.parametrize("scene", _scene_cases())

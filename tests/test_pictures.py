@@ -16,7 +16,7 @@ from eyemech.problems import scenes
 from eyemech.problems.run.output import picture_record, render_png
 
 IMAGES = Path(__file__).resolve().parents[1] / "docs" / "img"
-# scleral-buckling's pictures are made with its own writer (problems/buckling_output.py)
+# scleral-buckling's pictures are made with its own writer (problems/scleral_buckling/output.py)
 DOCS_PICTURES = sorted(p for p in IMAGES.glob("*.png") if not p.name.startswith("buckling-"))
 
 

@@ -79,5 +79,7 @@ def test_the_bar_and_the_lines_name_the_stage():
 
 def test_the_main_job_names_its_stages():
     from eyemech.problems import scleral_buckling as sb
+    from eyemech.problems.scleral_buckling.stages import operation
 
-    assert sb._stepping(sb.Parameters()).stage_names == ("IOP", "buckling", "suturing", "settling")
+    assert tuple(stage.name for stage in operation(sb.Parameters())) == \
+        ("iop", "buckling", "suturing", "settling")

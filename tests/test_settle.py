@@ -18,7 +18,7 @@ from conftest import BIN, run_cli
 
 from eyemech.problems import scleral_buckling
 from eyemech.problems.run.context import RunOptions
-from eyemech.problems.scleral_buckling import settle_pressure
+from eyemech.problems.scleral_buckling.stages import ramp_value as settle_pressure
 
 # the buckle as measured in docs/scleral_buckling.md ("The settling step"), pinned so that a
 # change of the scene's buckle defaults does not change what this test measures

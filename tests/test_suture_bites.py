@@ -40,13 +40,13 @@ def _delivered(params: sb.Parameters) -> tuple[np.ndarray, np.ndarray, np.ndarra
     translation), the resultant asked for (Σ share_s F_s), and the raw ∫ w_s dA."""
     with RunContext(sb.SCENE.name, params, MPI.COMM_SELF, None, QUIET) as ctx:
         model = sb.BucklingModel(params, ctx)
-        sutures = model.sutures
+        sutures = model.sutures.forces
         rng = np.random.default_rng(7)
         directions = rng.normal(size=(len(sutures.points), 3))
         sutures.directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
         sutures.set_magnitude(FORCE)
         V = model.u.function_space
-        ds = model.eye.ds({"quadrature_degree": model.family.quadrature_degree})
+        ds = model.eye.ds({"quadrature_degree": model.body.family.quadrature_degree})
         delivered = np.zeros(3)
         for i in range(3):
             translation = dolfinx.fem.Function(V)

@@ -1,19 +1,17 @@
-"""The force-driven tire and subretinal drainage (issue 21), on the coarse eye: a suture's
-loop over the tire pushes it in until the sclera's contact force balances the pull, and
-its travel grows with the pull; drainage without a detachment (or without the settled
-step it acts in) is refused. Tear closure after suturing at the defaults is checked by
+"""The force-driven tire on the coarse eye: a suture's loop over the tire pushes it in
+until the sclera's contact force balances the pull, and its travel grows with the pull.
+Tear closure after suturing at the defaults is checked by
 ``test_scleral_buckling.test_the_tear_is_closed_after_suturing_on_the_coarse_eye`` and
-``::test_the_tear_closes_after_suturing_on_the_default_mesh``; drainage's effect by
+``::test_the_tear_closes_after_suturing_on_the_default_mesh``; drainage's refusal by
 ``test_drainage``."""
 
 from __future__ import annotations
 
 import pytest
-from conftest import run_cli
 
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
-from eyemech.problems.run.parameters import ParameterError, build
+from eyemech.problems.run.parameters import build
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -59,23 +57,6 @@ def test_sutures_drive_the_tire_until_the_sclera_balances_them(sewn):
     assert 0.0 < after["tire_suture_pull_N"] < 2 * 0.3
 
 
-@pytest.mark.parametrize("overrides", [
-    {"drainage": "external", "detachment_height": "0"},
-    {"drainage": "external", "settle": "false"},
-])
-def test_drainage_needs_a_detachment_and_the_settled_step(overrides):
-    with pytest.raises(ParameterError) as info:
-        build(sb.Parameters, overrides)
-    assert info.value.key == "drainage"
-
-
-def test_drainage_without_a_detachment_exits_2(tmp_path):
-    code, _, err = run_cli("run", "scleral-buckling", "--set", "drainage=external",
-                           "--set", "detachment_height=0", "--out", str(tmp_path))
-    assert code == 2
-    assert "drainage" in err
-
-
 def test_sutures_lift_the_tire_off_a_shallow_band():
     # band and tire pressed only 0.3 mm (0.25 mm past the clearance): the sclera's push on
     # the tire is weaker than the 0.25 N suture's loop, so the band lets the tire go
@@ -87,10 +68,10 @@ def test_sutures_lift_the_tire_off_a_shallow_band():
     # The release is checked after each converged step of step 3 and acts from the next
     # one (lagged, as the suture directions): with the budget's stepping step 3 is two load
     # steps and the tire is freed only at its end, too late to move (docs/scleral_buckling.md,
-    # "Not done"); the reference stepping takes three here, which this test pins. With
+    # "Known limits"); the reference stepping takes three here, which this test pins. With
     # 0.3 N the reference stepping's first step of step 3 goes to 0.225 N at once, and the
     # suture directions updated after it turn the loop's pull outward (-0.14 N): the tire
-    # stays on the band (docs/scleral_buckling.md, "Not done").
+    # stays on the band (docs/scleral_buckling.md, "Known limits").
     result = sb.run(build(sb.Parameters, dict(resolution="coarse", suture_azimuths="0",
                                               indentation="0.3", suture_force="0.25",
                                               buckle_position="12.5", settle="false",

@@ -16,11 +16,19 @@ FACTORISATIONS = ("auto", "lu", "ldlt")
 
 
 class SolveFailure(RuntimeError):
-    """Newton failed and step cutting is exhausted; the last converged state is kept."""
+    """Newton failed and step cutting is exhausted; the last converged state is kept.
+
+    ``failed_step``: the failed step as ``results.json`` records a step (status ``failed``,
+    its attempts' work), which the run contract adds to the run's ``steps``; None where
+    the raiser keeps no such record."""
+
+    failed_step: dict[str, Any] | None = None  # also for a subclass with an __init__ of its own
 
     def __init__(self, step: int, load: float, last_converged: float, residuals: list[float],
-                 reason: str, quantity: str = "load factor", unit: str = ""):
+                 reason: str, quantity: str = "load factor", unit: str = "", *,
+                 failed_step: dict[str, Any] | None = None):
         self.step, self.load, self.last_converged = step, load, last_converged
+        self.failed_step = failed_step
         self.residuals, self.reason = residuals, reason
         self.quantity, self.unit = quantity, unit
         history = ", ".join(f"{r:.3e}" for r in residuals) or "none"
@@ -175,6 +183,9 @@ class NewtonOptions:
 
 # the solvers not closed yet, by serial; held weakly (a dropped solver is freed as usual)
 _OPEN_SOLVERS: weakref.WeakValueDictionary[int, Any] = weakref.WeakValueDictionary()
+# the parallel solvers an open run keeps until it closes them (:func:`hold_solvers`)
+_HELD_SOLVERS: dict[int, Any] = {}
+_runs_holding = 0
 _created = 0
 
 
@@ -186,9 +197,17 @@ def register_solver(solver: Any) -> int:
     return _created
 
 
+def hold_solver(solver: Any) -> None:
+    """Keep the parallel ``solver`` (registered) to the end of the open run, if a run is
+    open (:func:`hold_solvers`), so that the run closes it rather than Python's collector."""
+    if _runs_holding:
+        _HELD_SOLVERS[solver.serial] = solver
+
+
 def forget_solver(serial: int) -> None:
     """The solver ``serial`` is closed: nothing left to close at the run's end."""
     _OPEN_SOLVERS.pop(serial, None)
+    _HELD_SOLVERS.pop(serial, None)
 
 
 def solvers_created() -> int:
@@ -196,11 +215,30 @@ def solvers_created() -> int:
     return _created
 
 
+def hold_solvers() -> int:
+    """From now until the matching :func:`close_solvers`, a solver on more than one rank
+    is kept when its last reference is dropped, so that the run closes it; returns
+    :func:`solvers_created`.
+
+    A parallel PETSc object that Python frees goes to PETSc's garbage on its
+    communicator (petsc4py cannot destroy it at once: destroying is collective, and the
+    collector frees at a different moment on each rank). Nothing cleans that garbage up,
+    so it keeps its communicators for the rest of the process: a 2-rank keratotomy run,
+    whose solvers are locals of a function that returns before the run ends, kept 14
+    (its two solvers' matrices, vectors and MUMPS instances) and a sweep of such runs
+    stopped at MPICH's limit (tests/test_solver_lifetime.py)."""
+    global _runs_holding
+    _runs_holding += 1
+    return solvers_created()
+
+
 def close_solvers(created_after: int) -> None:
-    """Close every open solver created after the ``created_after``-th (collective: the
-    same solvers on every rank of their communicators, see
-    :meth:`eyemech.problems.solve.driver.NonlinearSolver.close`)."""
+    """Close every open solver created after the ``created_after``-th and end a
+    :func:`hold_solvers` (collective: the same solvers on every rank of their
+    communicators, see :meth:`eyemech.problems.solve.driver.NonlinearSolver.close`)."""
+    global _runs_holding
     for serial in sorted(serial for serial in list(_OPEN_SOLVERS) if serial > created_after):
         solver = _OPEN_SOLVERS.get(serial)
         if solver is not None:
             solver.close()
+    _runs_holding = max(0, _runs_holding - 1)

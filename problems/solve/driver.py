@@ -41,7 +41,7 @@ import contextlib
 import dataclasses
 import logging
 import time
-from typing import TYPE_CHECKING, Callable, Literal, Sequence
+from typing import TYPE_CHECKING, Callable, Literal, Protocol, Sequence
 
 import dolfinx
 import dolfinx.fem.petsc
@@ -56,6 +56,7 @@ from eyemech.problems.run.newton import (  # noqa: F401  (scenes import these fr
     SolveFailure,
     close_solvers,
     forget_solver,
+    hold_solver,
     register_solver,
     solvers_created,
 )
@@ -150,11 +151,14 @@ class NonlinearSolver:
         blocked = isinstance(residual, (list, tuple))
         self.serial = register_solver(self)  # the order of creation, alike on every rank
         self.closed = False  # :meth:`close` destroyed the PETSc objects
+        self.stale: StaleFactorisation | None = None
         prefix = f"eyemech{self.serial}_"
         start = time.perf_counter()
         self.problem = _Problem(
             residual, self.unknowns if blocked else self.unknowns[0], bcs=list(bcs), J=jacobian,
             petsc_options_prefix=prefix, kind=(matrix_kind or "mpi") if blocked else matrix_kind)
+        if self.unknowns[0].function_space.mesh.comm.size > 1:
+            hold_solver(self)
         self.timings.add("form_compilation", time.perf_counter() - start)
         self.residual_hooks = list(residual_hooks)
         self.jacobian_hooks = list(jacobian_hooks)
@@ -188,7 +192,6 @@ class NonlinearSolver:
         self._set_options(prefix)
         if iterative is not None:
             iterative.install(self)
-        self.stale: StaleFactorisation | None = None
         if self.options.linear_reuse == "krylov":
             if iterative is not None:
                 raise ParameterError("linear_reuse", "krylov keeps a direct factorisation: "
@@ -206,6 +209,14 @@ class NonlinearSolver:
         self._factorisations = FactorisationCounter()
         self.stagnated = False  # the last solve was stopped by the stagnation test
         self.snes.setMonitor(petsc_callback(self._monitor))
+        # Newton iterations begun: SNES calls its update at the start of every iteration,
+        # the one that fails in its line search (a NaN residual) or in a callback included,
+        # while its iteration number counts the completed ones only
+        self._iterations_begun = 0
+        self.snes.setUpdate(petsc_callback(self._begin_iteration))
+
+    def _begin_iteration(self, _snes: PETSc.SNES, _iteration: int) -> None:
+        self._iterations_begun += 1
 
     def _monitor(self, snes: PETSc.SNES, _iteration: int, norm: float) -> None:
         """Records ‖F_k‖; stops a stagnating backtracking solve (``options.stagnation_window``). SNES
@@ -240,7 +251,10 @@ class NonlinearSolver:
         self.closed = True
         if self.stale is not None:
             self.stale.free()
-        problem = self.problem
+        problem = getattr(self, "problem", None)  # None: its set-up failed before PETSc's objects
+        if problem is None:
+            forget_solver(self.serial)
+            return
         for obj in (problem.solver, problem.A, problem.P_mat, problem.b, problem.x):
             if obj is not None:
                 obj.destroy()
@@ -504,6 +518,7 @@ class NonlinearSolver:
         self.stagnated = False
         self.through_obstacle = False
         self._kept_iterations = 0
+        self._iterations_begun = 0
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
@@ -552,7 +567,7 @@ class NonlinearSolver:
         iterations = self.snes.getIterationNumber()
         work = SolverCounts(newton_solves=1, failed_newton_solves=0 if converged else 1,
                             newton_iterations=iterations if converged else 0,
-                            newton_iterations_all=iterations,
+                            newton_iterations_all=max(iterations, self._iterations_begun),
                             jacobians=self._jacobians - jacobians_before,
                             factorisations=numeric - numeric_before,
                             symbolic_factorisations=symbolic - symbolic_before,
@@ -727,6 +742,17 @@ class StepRecord:
                 "krylov_iterations_all": counts.krylov_iterations,
                 "matrix_mallocs": counts.matrix_mallocs}
 
+    def with_work(self, counts: SolverCounts) -> "StepRecord":
+        """This record with more work of the step added (solves after its converged one:
+        the attempts, iterations, Jacobians, factorisations they took)."""
+        extra = StepRecord.work(counts)
+        return dataclasses.replace(
+            self, attempts=self.attempts + extra["attempts"],
+            iterations_all=self.iterations_all + extra["iterations_all"],
+            **{key: getattr(self, key) + extra[key]
+               for key in ("jacobians", "factorisations", "symbolic_factorisations",
+                           "krylov_iterations_all", "matrix_mallocs")})
+
     def counts(self) -> dict[str, int]:
         """The step's work under the names of ``results.json``'s step records:
         ``ctx.record_step(..., **record.counts())``."""
@@ -745,8 +771,8 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
                 augmentation: "Augmentation | None" = None) -> list[StepRecord]:
     """Solve along the path: ``apply(value, increment)`` sets loads (or time) for the
     target value, Newton solves, and ``on_converged`` records and updates history
-    variables. A failed solve restores the last converged state and halves the
-    increment; easy solves grow it.
+    variables. A failed solve restores the last converged state and cuts the step
+    (:class:`~eyemech.problems.solve.stepping.StepController`); easy solves grow it.
 
     With ``checkpoints`` (``ctx.checkpoints``) a checkpoint is written after a step when
     due, SIGINT/SIGTERM stop the run after the current step (raising ``Interrupted``),
@@ -765,104 +791,274 @@ def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
     a step that converged where ``augmentation.due`` says is solved again with updated
     contact multipliers until they settle; those solves are the step's work (counted in
     its record, ``augmentations``), and a failed one cuts the step."""
-    span = stepping.end - stepping.start
-    if span <= 0:
-        raise ValueError("stepping.end must be greater than stepping.start")
-    stops = sorted(s for s in set(stepping.stops) | {stepping.end}
-                   if stepping.start < s <= stepping.end)
-    value = stepping.start
-    controller = stepping.controller()
-    records: list[StepRecord] = []
-    step = 0
-    resumed = checkpoints.enter_path(label) if checkpoints is not None else None
-    if resumed is not None:
-        if "skip" in resumed:  # finished before the checkpoint: its state comes later
-            records = [StepRecord(**r) for r in resumed["skip"]]
-            apply(stepping.end, records[-1].increment if records else 0.0)
-            checkpoints.leave_path([dataclasses.asdict(r) for r in records])
-            return records
-        value, controller.step, step = resumed["value"], resumed["increment"], resumed["step"]
-        records = [StepRecord(**r) for r in resumed["records"]]
-        apply(value, records[-1].increment if records else 0.0)
-    bar = _progress(solver, label, quiet, stepping, records)
-    if stepping.predictor == "none":
-        predictor = None
-    elif predictor is None:
-        predictor = SecantPredictor(solver)
-    if predictor is not None and resumed is None:
-        predictor.restart(value)
-    while value < stepping.end - 1e-12 * span:
-        step += 1
+    walk = _Walk(solver, stepping, label=label, quiet=quiet, checkpoints=checkpoints,
+                 predictor=predictor, augmentation=augmentation)
+    return walk.run(apply, on_converged)
+
+
+@dataclasses.dataclass(frozen=True)
+class NewtonSettings:
+    """What a stage changes of its solver's Newton options for its own solves; None keeps
+    the solver's as it was built (a stage's settings do not carry over to the next).
+    A line search given with ``--petsc snes_linesearch_type=...`` wins over every stage's."""
+
+    line_search: str | None = None           # basic | bt | cp | l2 | nleqerr
+    fallback_line_search: str | None = None  # NewtonOptions.fallback_line_search
+    stagnation_window: int | None = None     # NewtonOptions.stagnation_window
+    reuse_step_relative: bool | None = None  # NewtonOptions.reuse_step_relative
+
+    @staticmethod
+    def of(solver: NonlinearSolver) -> "NewtonSettings":
+        """The solver's current settings."""
+        options = solver.options
+        return NewtonSettings(solver.snes.getLineSearch().getType(), options.fallback_line_search,
+                              options.stagnation_window, options.reuse_step_relative)
+
+    def apply(self, solver: NonlinearSolver, built: "NewtonSettings") -> None:
+        """Set these on ``solver``, ``built``'s where these say None."""
+        def pick(name: str):
+            mine = getattr(self, name)
+            return getattr(built, name) if mine is None else mine
+
+        if "snes_linesearch_type" not in solver.options.petsc:
+            solver.snes.getLineSearch().setType(pick("line_search"))
+        solver.options.fallback_line_search = pick("fallback_line_search")
+        solver.options.stagnation_window = pick("stagnation_window")
+        solver.options.reuse_step_relative = pick("reuse_step_relative")
+
+
+class PathStage(Protocol):
+    """One stage of an operation as :func:`follow_stages` walks it: one unit of the path,
+    its own controls, step sizes and Newton settings."""
+
+    name: str
+    largest_step: float       # the largest load step, as a fraction of the stage
+    predicts: bool            # whether its load steps start from the predictor
+    newton: NewtonSettings    # set when the stage starts, and when a run resumes in it
+
+    def begin(self) -> None:
+        """Switches as the stage starts (once: a run resumed inside the stage has their
+        effect from its checkpoint)."""
+
+    def apply(self, fraction: float) -> None:
+        """The controls at ``fraction`` ∈ [0, 1] of the stage, before an attempt."""
+
+    def finish(self) -> None:
+        """After the stage's last step converged, before it is recorded (its solves, if
+        any, are counted with that step)."""
+
+
+def follow_stages(solver: NonlinearSolver, stages: Sequence[PathStage], stepping: Stepping, *,
+                  on_converged: Callable[[StepRecord, PathStage, bool], None] | None = None,
+                  label: str = "", quiet: bool = False,
+                  checkpoints: "Checkpoints | None" = None,
+                  predictor: SecantPredictor | None = None,
+                  augmentation: "Augmentation | None" = None) -> list[StepRecord]:
+    """Follow an operation made of ``stages``, one after another: stage k (from 0) covers
+    the path values [k, k + 1], its load steps as long as its ``largest_step`` allows,
+    started from the predictor where it ``predicts``, solved with its ``newton``
+    settings; :meth:`PathStage.begin` as it starts, :meth:`PathStage.finish` after its
+    last step. ``stepping``'s ``initial_step`` (each stage's first step at most) and
+    ``min_step`` are fractions of one stage; its growth and effort rules apply to every
+    stage. ``on_converged(record, stage, ends)``: after each converged step, ``ends`` when
+    it ends its stage. Checkpoints, predictor and augmentation as in :func:`follow_path`."""
+    count = len(stages)
+    span = float(count)
+    path = dataclasses.replace(
+        stepping, start=0.0, end=span, stops=tuple(float(k) for k in range(1, count + 1)),
+        initial_step=stepping.initial_step / span, min_step=stepping.min_step / span,
+        max_step=max(s.largest_step for s in stages) / span,
+        stage_max_steps=tuple(s.largest_step / span for s in stages),
+        stage_predicts=tuple(s.predicts for s in stages), stage_names=tuple(s.name for s in stages))
+    walk = _Walk(solver, path, label=label, quiet=quiet, checkpoints=checkpoints,
+                 predictor=predictor, augmentation=augmentation, stages=stages)
+
+    def apply(value: float, _increment: float) -> None:
+        index = walk.stage_index
+        stages[index].apply(min(max(value - index, 0.0), 1.0))
+
+    def converged(record: StepRecord) -> None:
+        if on_converged is not None:
+            on_converged(record, stages[walk.stage_index], walk.at_stop(record.load))
+
+    return walk.run(apply, converged)
+
+
+class _Walk:
+    """One walk along a path: :func:`follow_path`'s and :func:`follow_stages`' loop."""
+
+    def __init__(self, solver: NonlinearSolver, stepping: Stepping, *, label: str, quiet: bool,
+                 checkpoints: "Checkpoints | None", predictor: SecantPredictor | None,
+                 augmentation: "Augmentation | None",
+                 stages: Sequence[PathStage] | None = None):
+        span = stepping.end - stepping.start
+        if span <= 0:
+            raise ValueError("stepping.end must be greater than stepping.start")
+        self.solver, self.stepping, self.span = solver, stepping, span
+        self.label, self.quiet, self.checkpoints = label, quiet, checkpoints
+        self.augmentation, self.stages = augmentation, stages
+        self.stops = sorted(s for s in set(stepping.stops) | {stepping.end}
+                            if stepping.start < s <= stepping.end)
+        self.controller = stepping.controller()
+        if stepping.predictor == "none":
+            predictor = None
+        elif predictor is None:
+            predictor = SecantPredictor(solver)
+        self.predictor = predictor
+        self.built = NewtonSettings.of(solver) if stages is not None else None
+        self.value, self.step = stepping.start, 0
+        self.records: list[StepRecord] = []
+        self.stage_index = 0
+
+    def at_stop(self, value: float) -> bool:
+        return any(abs(value - s) <= 1e-12 * self.span for s in self.stops)
+
+    def run(self, apply: Callable[[float, float], None],
+            on_converged: Callable[[StepRecord], None] | None) -> list[StepRecord]:
+        stepping, checkpoints = self.stepping, self.checkpoints
+        resumed = checkpoints.enter_path(self.label) if checkpoints is not None else None
+        if resumed is not None and "skip" in resumed:  # finished before the checkpoint
+            self.records = [StepRecord(**r) for r in resumed["skip"]]
+            self._enter_stage(stepping.end, fresh=False)
+            apply(stepping.end, self.records[-1].increment if self.records else 0.0)
+            checkpoints.leave_path([dataclasses.asdict(r) for r in self.records])
+            return self.records
+        if resumed is not None:
+            self.value, self.controller.step = resumed["value"], resumed["increment"]
+            self.step = resumed["step"]
+            self.records = [StepRecord(**r) for r in resumed["records"]]
+            self._enter_stage(self.value, fresh=False)
+            apply(self.value, self.records[-1].increment if self.records else 0.0)
+        else:
+            self._enter_stage(self.value, fresh=True)
+            if self.predictor is not None:
+                self.predictor.restart(self.value)
+        self.bar = _progress(self.solver, self.label, self.quiet, self.stepping, self.records)
+        try:
+            while self.value < stepping.end - 1e-12 * self.span:
+                self._next_step(apply, on_converged)
+        finally:
+            self.bar.close()
+        if checkpoints is not None:
+            checkpoints.leave_path([dataclasses.asdict(r) for r in self.records])
+        return self.records
+
+    def _enter_stage(self, value: float, fresh: bool) -> None:
+        """The stage the steps from ``value`` are in: its Newton settings, and on a fresh
+        entry its switches."""
+        if self.stages is None:
+            return
+        self.stage_index = min(self.stepping._stage(value), len(self.stages) - 1)
+        stage = self.stages[self.stage_index]
+        stage.newton.apply(self.solver, self.built)
+        if fresh:
+            stage.begin()
+
+    def _next_step(self, apply, on_converged) -> None:
+        """One load step: attempts until one converges (cuts between them), then the
+        bookkeeping of a converged step."""
+        solver, stepping = self.solver, self.stepping
+        self.step += 1
         state, memory = solver.save_state(), solver.save_memory()
         counts_before = solver.counts.copy()
-        if checkpoints is not None:
-            checkpoints.watch_step(solver)
-        augmented = 0
+        if self.checkpoints is not None:
+            self.checkpoints.watch_step(solver)
         while True:
-            next_stop = next(s for s in stops if s > value + 1e-12 * span)
-            target = controller.target(value, next_stop)
-            apply(target, target - value)
-            reference = None
-            if predictor is not None and predictor.ready and stepping.predicts(value):
-                # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
-                reference = solver.residual_norm()
-                reference = _predict(solver, predictor, target, state, stepping.depth_limit,
-                                     reference)
-            converged, iterations = solver.solve(reference) if reference is not None \
-                else solver.solve()
-            if converged and augmentation is not None and augmentation.due(target):
-                converged, iterations, updates = augmentation.run(solver, iterations)
-                augmented += updates
-            if converged and solver.depth_hooks:
-                depth = solver.depth_through_obstacles()
-                if depth > stepping.depth_limit:
-                    log.info("step %d: converged at %.6g with a point %.2f of an obstacle's "
-                             "thickness through it, cutting", step, target, depth)
-                    solver.reject_last_solve()
-                    converged = False
+            next_stop = next(s for s in self.stops if s > self.value + 1e-12 * self.span)
+            target = self.controller.target(self.value, next_stop)
+            apply(target, target - self.value)
+            converged, iterations, augmented = self._attempt(target, state)
             if converged:
                 break
             history = list(solver.residual_history)
-            log.info("step %d: no convergence at %.6g (%s), cutting", step, target, solver.reason())
+            log.info("step %d: no convergence at %.6g (%s), cutting", self.step, target,
+                     solver.reason())
             solver.restore_state(state)
             solver.restore_memory(memory)
-            if not controller.cut():
-                apply(value, 0.0)
-                bar.close()
-                raise SolveFailure(step, target, value, history, solver.reason(),
-                                   *stepping.describe())
-        record = StepRecord(step, target, target - value, iterations, controller.cuts,
-                            list(solver.residual_history), solver.linear_iterations,
+            if not self.controller.cut():
+                apply(self.value, 0.0)
+                raise SolveFailure(self.step, target, self.value, history, solver.reason(),
+                                   *stepping.describe(),
+                                   failed_step=self._failed_step(target, counts_before, history))
+        record = StepRecord(self.step, target, target - self.value, iterations,
+                            self.controller.cuts, list(solver.residual_history),
+                            solver.linear_iterations,
                             **StepRecord.work(solver.counts - counts_before),
                             augmentations=augmented)
-        value = target
-        records.append(record)
+        sized = record  # the next step is sized by the step's own work
+        if self.stages is not None and self.at_stop(target):
+            # the stage's closing work (e.g. solves to an equilibrium) is counted with its
+            # last step, whose converged solve the record still describes
+            finishing = solver.counts.copy()
+            self.stages[self.stage_index].finish()
+            record = record.with_work(solver.counts - finishing)
+        self._converged(record, sized, state, on_converged)
+
+    def _failed_step(self, target: float, counts_before: SolverCounts,
+                     history: list[float]) -> dict:
+        """The step whose cuts are exhausted, as ``results.json`` records a step: every
+        attempt failed (``newton_iterations`` 0, ``cuts`` the failed attempts), its work
+        counted as a converged step's, the residuals of its last attempt."""
+        solver = self.solver
+        record = StepRecord(self.step, target, target - self.value, 0, self.controller.cuts,
+                            history, solver.linear_iterations,
+                            **StepRecord.work(solver.counts - counts_before))
+        stage = {} if self.stages is None else {"stage": self.stage_index + 1}
+        return {"step": record.step, "load": record.load, **stage, "status": "failed",
+                "newton_iterations": 0, "cuts": record.cuts, **record.counts(),
+                "krylov_iterations": record.linear_iterations, "residuals": record.residuals}
+
+    def _attempt(self, target: float, state: list[np.ndarray]) -> tuple[bool, int, int]:
+        """One attempt at ``target`` from ``state``: the predictor's start, Newton, the
+        multipliers' updates, the obstacle's depth check. (converged, iterations,
+        augmentations)."""
+        solver, stepping, predictor = self.solver, self.stepping, self.predictor
+        reference = None
+        if predictor is not None and predictor.ready and stepping.predicts(self.value):
+            # the tolerance of a start without prediction: ‖F‖ ≤ rtol ‖F(u_n, target)‖
+            reference = solver.residual_norm()
+            reference = _predict(solver, predictor, target, state, stepping.depth_limit, reference)
+        converged, iterations = solver.solve(reference) if reference is not None \
+            else solver.solve()
+        augmented = 0
+        if converged and self.augmentation is not None and self.augmentation.due(target):
+            converged, iterations, augmented = self.augmentation.run(solver, iterations)
+        if converged and solver.depth_hooks:
+            depth = solver.depth_through_obstacles()
+            if depth > stepping.depth_limit:
+                log.info("step %d: converged at %.6g with a point %.2f of an obstacle's "
+                         "thickness through it, cutting", self.step, target, depth)
+                solver.reject_last_solve()
+                converged = False
+        return converged, iterations, augmented
+
+    def _converged(self, record: StepRecord, sized: StepRecord, state: list[np.ndarray],
+                   on_converged: Callable[[StepRecord], None] | None) -> None:
+        """A converged step: recorded, the next step sized, a stop's new stage entered,
+        a checkpoint written when due."""
+        stepping, solver, predictor = self.stepping, self.solver, self.predictor
+        self.value = record.load
+        self.records.append(record)
         if on_converged is not None:
             on_converged(record)
-        bar.update((target - stepping.start) / span - bar.n)
-        stepping.accept(controller, record, value)
+        self.bar.update((record.load - stepping.start) / self.span - self.bar.n)
+        stepping.accept(self.controller, sized, self.value)
         if predictor is not None:
-            predictor.converged(value, state)
-        if any(abs(target - s) <= 1e-12 * span for s in stops):
+            predictor.converged(self.value, state)
+        if self.at_stop(record.load):
             # a new stage (or output interval) starts: its difficulty is not the last one's,
             # its path not the last one's continuation, its system perhaps not the last one's
             # (on_converged may switch terms on): no secant across it, no kept Jacobian
-            controller.at_least(stepping.first_step(value) * span)
+            self.controller.at_least(stepping.first_step(self.value) * self.span)
             solver.invalidate_jacobian()
             if predictor is not None:
-                predictor.restart(value)
-        if checkpoints is not None:
-            try:
-                checkpoints.step_done({"label": label, "step": step, "value": value,
-                                       "increment": controller.step,
-                                       "records": [dataclasses.asdict(r) for r in records]})
-            except BaseException:
-                bar.close()
-                raise
-    bar.close()
-    if checkpoints is not None:
-        checkpoints.leave_path([dataclasses.asdict(r) for r in records])
-    return records
+                predictor.restart(self.value)
+            if self.value < stepping.end - 1e-12 * self.span:
+                self._enter_stage(self.value, fresh=True)
+        if self.checkpoints is not None:
+            self.checkpoints.step_done({"label": self.label, "step": self.step, "value": self.value,
+                                        "increment": self.controller.step,
+                                        "records": [dataclasses.asdict(r) for r in self.records]})
 
 
 def _predict(solver: NonlinearSolver, predictor: "SecantPredictor", target: float,

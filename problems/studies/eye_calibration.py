@@ -57,12 +57,13 @@ def inflation_curve(params: scleral_buckling.Parameters, pressures=PRESSURES,
     volumes: dict[float, float] = {}
     with RunContext(scleral_buckling.SCENE.name, params, comm, None, QUIET) as ctx:
         model = scleral_buckling.BucklingModel(params, ctx)
-        volumes[0.0] = 2.0 * model.volume()
+        volumes[0.0] = 2.0 * model.liquid.volume()
 
         def record(step) -> None:
-            volumes[round(step.load * top, 9)] = 2.0 * model.volume()
+            volumes[round(step.load * top, 9)] = 2.0 * model.liquid.volume()
 
-        records = follow_path(model.solver, model.apply,
+        # the first stage's controls (the IOP's ramp) along a path of its own
+        records = follow_path(model.solver, scleral_buckling.Operation(model, ctx).apply,
                               Stepping(0.0, 1.0, initial_step=0.125, max_step=0.125,
                                        stops=tuple(p / top for p in pressures)),
                               on_converged=record, label="inflation", quiet=True)

@@ -1,0 +1,198 @@
+"""The sutures and the row of the tire's travel: a suture's loop pulls its bites towards
+the buckle and, over a tire, pushes the tire in, whose travel then balances the sclera's
+contact force (docs/scleral_buckling.md, "The sutures and the tire's travel"). The
+buckle's geometry is :mod:`eyemech.forms.buckle`'s."""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Callable
+
+import dolfinx
+import dolfinx.fem
+import numpy as np
+import ufl
+
+from eyemech.forms.buckle import pinned_travel_residual, tire_travel_residual
+from eyemech.problems.scleral_buckling.body import Body
+from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, RigidBuckle
+from eyemech.problems.scleral_buckling.parameters import Parameters
+from eyemech.problems.solid.sutures import SutureForces, SuturePoint
+from eyemech.problems.solve.scalars import assemble_scalar
+from eyemech.problems.solve.terms import Control, Term
+
+
+class Sutures(Term):
+    """Suture forces at the bites (both bites of each suture, ``suture_width`` apart
+    across the element its meridian crosses), spread over each bite (radius
+    ``suture_bite_radius``; a point load's response does not converge under refinement),
+    tangent to the buckle's outline: from the bite to where the suture leaves the buckle,
+    lagged (the last converged step's; seed 002, §2.2). Control ``suture_force``: the
+    pull on each suture. With the loop model the sutures' pull also pushes the tire in
+    (:meth:`pull_on_tire`)."""
+
+    def __init__(self, body: Body, params: Parameters, buckle: RigidBuckle, loop: bool):
+        self.body, self.buckle, self.loop = body, buckle, loop
+        geo = body.geometry
+        self.bites = buckle.buckle.suture_bites(params.suture_meridians(), params.suture_width,
+                                                geo.sclera_radius, math.radians(buckle.angle))
+        points = [SuturePoint(azimuth, side, centre) for azimuth, side, centre in self.bites]
+        self.forces = SutureForces(body.mesh, body.u.function_space, points, body.sclera_nodes,
+                                   params.suture_bite_radius)
+        # each bite normalised on this mesh: the half model carries exactly its share
+        self.forces.normalise(body.ds(body.eye.tag("sclera_outer")), body.comm)
+        self.on_tire = [buckle.buckle.part_at(b[0]).is_tire for b in self.bites]
+
+    def residual(self, tests):
+        return self.forces.residual(tests[0], self.body.ds(self.body.eye.tag("sclera_outer")))
+
+    def anchors(self) -> np.ndarray:
+        """Where each suture leaves the buckle (directions for the next step)."""
+        travel = self.buckle.tire_travel() if self.loop else None
+        return self.buckle.buckle.suture_anchors(self.bites, travel)
+
+    def pull_on_tire(self) -> float:
+        """The sutures' inward radial resultant on the tire (half model, N): each tire
+        suture's loop turns over the tire, which takes the opposite of its bite loads,
+        −F_s ∫s_s w_s dA, whose inward component is |F| ∫s_s w_s dA d_s·e_in at its
+        meridian (d_s from the bite to the tire's corner: lagged, as the bite loads).
+        0 unless the loop drives the tire."""
+        forces, pull = self.forces, 0.0
+        for bite, direction, share, on_tire in zip(self.bites, forces.directions, forces.shares,
+                                                   self.on_tire):
+            if on_tire:  # the loop's reaction on the tire: −F_s, along the inward direction
+                pull -= forces.magnitude * share * float(direction @ self.buckle.buckle.inward(bite))
+        return pull if self.loop else 0.0
+
+    def converged(self) -> None:
+        self.forces.update_directions(self.body.u, self.anchors())
+
+    def controls(self) -> dict[str, Control]:
+        return {"suture_force": Control(lambda: self.forces.magnitude, self.forces.set_magnitude)}
+
+    def register(self, checkpoints) -> None:
+        checkpoints.value("sutures", lambda: {"directions": self.forces.directions,
+                                              "magnitude": self.forces.magnitude}, self._restore)
+
+    def _restore(self, saved: dict) -> None:
+        self.forces.directions = np.asarray(saved["directions"], dtype=float)
+        self.forces.set_magnitude(saved["magnitude"])
+
+    def measure(self) -> dict:
+        return {"suture_force_N": float(self.forces.magnitude)}
+
+
+class TireRow(Term):
+    """The tire's radial travel δ (a Real unknown) and its row: pinned to the band's
+    travel, k (δ − δ_band) = 0, or free (``tire_free``): the sclera's contact force on the
+    tire, ∂Π_c/∂δ, balanced against the sutures' inward pull (``suture_pull``, from
+    ``pull``), the instrument's hold (``tire_hold``, released over suturing) and the
+    band's push on the tire it runs over (a unilateral stop). The loop model frees the
+    tire: without a band when buckling ends (:meth:`free`), with one once the pull exceeds
+    the contact force (:meth:`release_from_band`)."""
+
+    def __init__(self, body: Body, buckle: RigidBuckle, contact: BuckleContact, loop: bool,
+                 pull: Callable[[], float]):
+        self.body, self.buckle, self.contact, self.loop, self.pull = body, buckle, contact, loop, pull
+        mesh = body.mesh
+        self.tire_free = dolfinx.fem.Constant(mesh, 0.0)
+        self.tire_hold = dolfinx.fem.Constant(mesh, 0.0)    # the instrument's hold
+        self.suture_pull = dolfinx.fem.Constant(mesh, 0.0)  # the sutures' inward resultant
+        self.held_force = 0.0  # the sclera's force on the tire when it was freed
+        # Constants of the row from the reference configuration, not literals (the mesh and
+        # the penalty set them, and a literal would compile the residual anew for each):
+        # the sclera's outer area (the row's constant terms are spread over it) and the
+        # stiffness of the band's push and of the pinned row (the buckle's penalty over
+        # the tire's footprint: as stiff as the sclera's contact with it)
+        X = ufl.SpatialCoordinate(mesh)
+        one = dolfinx.fem.Constant(mesh, 1.0)
+        measure = body.ds(body.eye.tag("sclera_outer"))
+        self.sclera_area = dolfinx.fem.Constant(mesh, assemble_scalar(one * measure, body.comm))
+        footprint = assemble_scalar(buckle.buckle.footprint_weight(X) * measure, body.comm)
+        self.tire_stiffness = dolfinx.fem.Constant(mesh, contact.penalty * max(footprint, 1.0))
+        self.band_backed = buckle.buckle.backs_tire
+
+    def residual(self, tests):
+        delta, q, surface = self.body.tire_travel, tests[-1], self.buckle.surface
+        band_travel = self.buckle.indentation
+        inward = self.suture_pull + self.tire_hold + self.buckle.buckle.band_push(delta, self.tire_stiffness)
+        free = tire_travel_residual(self.contact.energy, delta, q, inward, surface, self.sclera_area)
+        pinned = pinned_travel_residual(delta, band_travel, q, self.tire_stiffness, surface,
+                                        self.sclera_area)
+        return self.tire_free * free + (1 - self.tire_free) * pinned
+
+    @functools.cached_property
+    def _force_form(self) -> dolfinx.fem.Form:
+        direction = dolfinx.fem.Function(self.body.tire_travel.function_space)
+        direction.x.array[:] = 1.0
+        return dolfinx.fem.form(ufl.derivative(self.contact.energy, self.body.tire_travel, direction))
+
+    def contact_force(self) -> float:
+        """∂Π_c/∂δ: the sclera's contact force on the tire along its inward travel (half
+        model, N)."""
+        return assemble_scalar(self._force_form, self.body.comm)
+
+    @property
+    def free_(self) -> bool:
+        return float(self.tire_free.value) == 1.0
+
+    def free(self) -> None:
+        """Buckling ends (loop, no band): the tire's travel becomes an unknown; the force
+        that holds it there is measured, to be released over suturing. A tire that does
+        not touch the sclera (travel within the clearance) has no contact force to balance
+        its row (∂Π_c/∂δ ≡ 0 would make the Jacobian singular): it keeps its travel."""
+        if not self.loop or self.band_backed:
+            return  # a band holds it: see release_from_band
+        force = self.contact_force()
+        if force <= 0.0:
+            return
+        self.held_force = force
+        self.tire_free.value = 1.0
+        self.tire_hold.value = self.held_force
+
+    def release_from_band(self) -> None:
+        """With a band (loop): the band holds the tire at its travel while the sclera
+        pushes the tire out harder than the sutures pull it in. Once the pull exceeds the
+        sclera's contact force (checked after every converged step while the sutures pull,
+        lagged by one step as the suture directions are), the tire's travel is free and
+        the band's push becomes the unilateral stop of its row, which takes the tire back if
+        the pull drops. Freed on the stop's kink with the pull winning, Newton starts on
+        the side where the stop is inactive; freed with the contact winning, Newton
+        stalled there on the default mesh (residual constant at 2.3e-4), and a
+        frictionless 1 mm buckle stalled in the suturing stage on the coarse eye."""
+        if not (self.loop and self.band_backed) or self.free_:
+            return
+        pull = float(self.suture_pull.value)
+        if pull > 0.0 and pull > self.contact_force():
+            self.tire_free.value = 1.0
+
+    def prepare(self) -> None:
+        self.suture_pull.value = self.pull()
+        if not self.free_:  # prescribed: start Newton at the target
+            self.body.tire_travel.x.array[:] = float(self.buckle.indentation.value)
+
+    def converged(self) -> None:
+        self.suture_pull.value = self.pull()
+        self.release_from_band()
+
+    def controls(self) -> dict[str, Control]:
+        return {"tire_hold": Control(lambda: float(self.tire_hold.value),
+                                     lambda value: setattr(self.tire_hold, "value", value)),
+                "held_force": Control(lambda: self.held_force,
+                                      lambda value: setattr(self, "held_force", value))}
+
+    def register(self, checkpoints) -> None:
+        checkpoints.function("tire_travel", self.body.tire_travel)
+        for name in ("tire_free", "tire_hold", "suture_pull"):
+            checkpoints.constant(name, getattr(self, name))
+        checkpoints.value("held_force", lambda: self.held_force,
+                          lambda saved: setattr(self, "held_force", float(saved)))
+
+    def measure(self) -> dict:
+        # the tire's radial travel (= the band's unless the sutures' loop drives it), the
+        # sclera's contact force on it and the sutures' inward pull (whole eye)
+        return {"tire_travel_mm": self.buckle.tire_travel(),
+                "tire_contact_force_N": 2.0 * self.contact_force(),
+                "tire_suture_pull_N": 2.0 * float(self.suture_pull.value),
+                "tire_free": self.free_}
