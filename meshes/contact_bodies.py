@@ -4,7 +4,8 @@
 origin, one quarter (x ≥ 0, y ≥ 0). Tags: cell ``ball``; facets ``contact`` (the
 spherical surface), ``top`` (the equatorial plane z = 0), ``symmetry_x``,
 ``symmetry_y``. Elements are graded from ``contact_size`` within ``zone`` of the
-south pole (0, 0, −R) — where the ball touches a plane — to ``far_size``.
+south pole (0, 0, −R) — where the ball touches a plane — to ``far_size``, linearly over
+the distance ``ramp`` beyond the zone (default 2 ``far_size``).
 ``quarter_hemisphere_cells`` estimates its number of cells before meshing.
 
 ``layered_caps``: two concentric spherical caps about the z axis (one quarter), a
@@ -24,7 +25,8 @@ from eyemech.meshes.tagged import TaggedMesh, from_gmsh
 
 
 def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone: float,
-                       order: int = 2, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
+                       order: int = 2, comm: MPI.Comm = MPI.COMM_WORLD,
+                       ramp: float | None = None) -> TaggedMesh:
     if not 0 < contact_size <= far_size:
         raise ValueError("need 0 < contact_size <= far_size")
 
@@ -51,7 +53,7 @@ def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone
             model.addPhysicalGroup(2, surfaces, tag=tag, name=name)
         pole = occ.addPoint(0, 0, -radius)
         occ.synchronize()
-        _graded_field(model, [pole], contact_size, far_size, zone)
+        _graded_field(model, [pole], contact_size, far_size, zone, ramp)
         model.mesh.generate(3)
         if order > 1:
             model.mesh.setOrder(order)
@@ -65,14 +67,17 @@ def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone
 CELLS_PER_UNIT_DENSITY = 6.0
 
 
-def graded_size(distance: np.ndarray, fine: float, coarse: float, zone: float) -> np.ndarray:
+def graded_size(distance: np.ndarray, fine: float, coarse: float, zone: float,
+                ramp: float | None = None) -> np.ndarray:
     """The element size the graded field asks for at ``distance`` from the refined point:
-    ``fine`` within ``zone``, rising linearly to ``coarse`` over 2·``coarse``."""
-    ramp = np.clip((distance - zone) / (2 * coarse), 0.0, 1.0)
-    return fine + (coarse - fine) * ramp
+    ``fine`` within ``zone``, rising linearly to ``coarse`` over ``ramp`` (2·``coarse``)."""
+    length = 2 * coarse if ramp is None else ramp
+    share = np.clip((distance - zone) / length, 0.0, 1.0)
+    return fine + (coarse - fine) * share
 
 
-def quarter_hemisphere_cells(radius: float, contact_size: float, far_size: float, zone: float) -> float:
+def quarter_hemisphere_cells(radius: float, contact_size: float, far_size: float, zone: float,
+                             ramp: float | None = None) -> float:
     """Expected number of tetrahedra of ``quarter_hemisphere``: CELLS_PER_UNIT_DENSITY ·
     ∫ h⁻³ dV with h the graded field's size. The volume of the ball at distance ρ from its
     south pole per unit ρ is 2πρ² (1 − ρ/2R) for ρ ≤ R and 2πρ² (R/ρ − ρ/2R) up to √2 R
@@ -81,12 +86,13 @@ def quarter_hemisphere_cells(radius: float, contact_size: float, far_size: float
     # a geometric grid in ρ resolves the fine zone however small it is against R
     rho = np.geomspace(1e-3 * min(contact_size, zone), np.sqrt(2) * R, 4000)
     shell = 2 * np.pi * rho**2 * (np.minimum(1.0, R / rho) - rho / (2 * R))
-    h = np.minimum(graded_size(rho, contact_size, far_size, zone), far_size)
+    h = np.minimum(graded_size(rho, contact_size, far_size, zone, ramp), far_size)
     integrand = np.maximum(shell, 0.0) / h**3 / 4
     return float(CELLS_PER_UNIT_DENSITY * np.sum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(rho)))
 
 
-def _graded_field(model, points: list[int], fine: float, coarse: float, zone: float) -> None:
+def _graded_field(model, points: list[int], fine: float, coarse: float, zone: float,
+                  ramp: float | None = None) -> None:
     import gmsh
 
     distance = model.mesh.field.add("Distance")
@@ -96,7 +102,7 @@ def _graded_field(model, points: list[int], fine: float, coarse: float, zone: fl
     model.mesh.field.setNumber(threshold, "SizeMin", fine)
     model.mesh.field.setNumber(threshold, "SizeMax", coarse)
     model.mesh.field.setNumber(threshold, "DistMin", zone)
-    model.mesh.field.setNumber(threshold, "DistMax", zone + 2 * coarse)
+    model.mesh.field.setNumber(threshold, "DistMax", zone + (2 * coarse if ramp is None else ramp))
     model.mesh.field.setAsBackgroundMesh(threshold)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)

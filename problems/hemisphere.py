@@ -34,7 +34,7 @@ class Parameters(HemisphereParameters):
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
         options: RunOptions | None = None):
-    return run_hemisphere(SCENE.name, params, comm, out, options)
+    return run_hemisphere(SCENE.name, params, comm, out, options, rerun=run)
 
 
 SCENE = Scene(name="hemisphere", kind="benchmark", parameters=Parameters, run=run,

@@ -312,14 +312,26 @@ def fold_cache_path(params: Parameters) -> Path:
 
 
 def _store_fold(path: Path, shell: LensShell, ctx: RunContext) -> None:
-    """Save the fold in the cache; a cache that cannot be written only costs the next run a fold."""
-    try:
-        if ctx.rank0:
+    """Save the fold in the cache; a cache that cannot be written only costs the next run a
+    fold. Collective: rank 0 writes, and every rank learns whether it could (the gather in
+    ``save_state`` is made by all ranks or by none)."""
+    error = None
+    if ctx.rank0:
+        try:
             path.parent.mkdir(parents=True, exist_ok=True)
-        save_state(path, shell, ctx.comm)
+        except OSError as err:
+            error = str(err)
+    error = ctx.comm.bcast(error, root=0)
+    if error is None:
+        try:
+            save_state(path, shell, ctx.comm)  # the write on rank 0 may fail there alone
+        except OSError as err:
+            error = str(err)
+        error = ctx.comm.bcast(error, root=0)
+    if error is None:
         ctx.result.quantities["fold_cache"] = str(path)
-    except OSError as err:
-        print(f"iol-injection: fold not cached ({err})")
+    elif ctx.rank0:
+        print(f"iol-injection: fold not cached ({error})")
 
 
 def _refuse_intersecting(params: Parameters, shell: LensShell) -> None:

@@ -18,7 +18,7 @@ Parameters = PlateParameters
 
 def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None = None,
         options: RunOptions | None = None):
-    return run_plate(SCENE.name, "clamped", params, comm, out, options)
+    return run_plate(SCENE.name, "clamped", params, comm, out, options, rerun=run)
 
 
 SCENE = Scene(name="plate-clamped", kind="benchmark", parameters=Parameters, run=run,

@@ -41,6 +41,11 @@ from eyemech.problems.solid.spaces import global_dofs
 from eyemech.problems.solve.driver import NonlinearSolver, Stepping, follow_path
 
 QUADRATURE = {"quadrature_degree": 4}
+# the caps' facet regions (meshes/contact_bodies.py::layered_caps) and the body each bounds;
+# the contact pairs the two faces that face each other across the gap
+FACETS = {"slave": "soft", "pressure": "soft", "soft_rim": "soft", "master": "stiff",
+          "fixed": "stiff", "stiff_rim": "stiff", "symmetry_x": "both", "symmetry_y": "both"}
+FACING = ("slave", "master")  # the soft layer's outer face, the stiff layer's inner face
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,6 +93,33 @@ class Parameters(SceneParameters):
             raise ParameterError("half_angle", "must be below 80 degrees")
         if self.degree not in (1, 2):
             raise ParameterError("degree", f"must be 1 or 2, got {self.degree}")
+        self._validate_contact_pair()
+
+    def _validate_contact_pair(self) -> None:
+        """Slave and master: two facet regions of the caps, of different bodies, facing
+        each other across the gap (the soft layer's outer face and the stiff layer's inner
+        one, in either role). The key named is the one set off its default."""
+        defaults = {"slave": FACING[0], "master": FACING[1]}
+        changed = [k for k in ("slave", "master") if getattr(self, k) != defaults[k]] \
+            or ["slave"]
+        for key in ("slave", "master"):
+            if getattr(self, key) not in FACETS:
+                raise ParameterError(key, f"'{getattr(self, key)}' is not a facet region of the "
+                                     f"caps; they are {', '.join(FACETS)}")
+        key = changed[0]
+        if self.slave == self.master:
+            raise ParameterError(key, f"slave and master are both '{self.slave}': a surface "
+                                 "cannot be in contact with itself")
+        bodies = {FACETS[self.slave], FACETS[self.master]}
+        if "both" in bodies or len(bodies) == 1:
+            raise ParameterError(key, f"slave '{self.slave}' and master '{self.master}' do not "
+                                 "bound the two different layers (soft: slave, pressure, "
+                                 "soft_rim; stiff: master, fixed, stiff_rim)")
+        if {self.slave, self.master} != set(FACING):
+            raise ParameterError(key, f"slave '{self.slave}' and master '{self.master}' do not "
+                                 "face each other across the gap: the contact is between "
+                                 "the soft layer's outer face 'slave' and the stiff layer's "
+                                 "inner face 'master' (either may be the slave)")
 
     @property
     def penalty_stiffness(self) -> float:

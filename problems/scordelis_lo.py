@@ -13,6 +13,7 @@ triangles; the shell form subtracts the reference kinks.
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import ClassVar
 
@@ -23,6 +24,7 @@ from mpi4py import MPI
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.error_estimate import Refinement, error_estimate_field, estimate_errors
 from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SceneParameters, field
 from eyemech.problems.run.scene import Scene
 from eyemech.problems.shell.model import (
@@ -47,17 +49,36 @@ class Parameters(SceneParameters, ShellDiscretisation):
     poisson_ratio: float = field(0.0, "Poisson's ratio", group=PHYSICS)
     gravity_load: float = field(90.0, "self weight per unit (reference) area, acting along -z", "MPa",
                                 group=PHYSICS)
-    divisions: int = field(16, "squares along the length and around the arc", group=GEOMETRY)
+    divisions: int = field(0, "squares along the length and around the arc; 0 = from "
+                              "cells_per_bending_length", group=GEOMETRY)
+    cells_per_bending_length: float = field(
+        1.2, "elements per bending length √(R h) around the arc (divisions = 0; as many along "
+             "the length): the faceted P2 shell's membrane locking is a function of it "
+             "(docs/shell.md, Resolution)", group=GEOMETRY)
     kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear", group=PHYSICS)
+    error_estimate: bool = error_estimate_field()
 
-    RESOLUTION_KEY: ClassVar[str] = "divisions"
+    RESOLUTION_KEY: ClassVar[str] = "cells_per_bending_length"
+
+    def resolution_key(self) -> str:
+        return "divisions" if self.divisions > 0 else self.RESOLUTION_KEY
+
+    @property
+    def grid_divisions(self) -> int:
+        """``divisions``, or ⌈cells_per_bending_length · arc / √(R h)⌉."""
+        if self.divisions > 0:
+            return self.divisions
+        arc = self.radius * 2.0 * math.radians(self.half_angle)
+        bending = math.sqrt(self.radius * self.thickness)
+        return max(2, math.ceil(self.cells_per_bending_length * arc / bending - 1e-9))
 
     @property
     def estimated_cells(self) -> int:
-        return self.grid_triangles(self.divisions, self.divisions)
+        return self.grid_triangles(self.grid_divisions, self.grid_divisions)
 
     def validate(self) -> None:
-        self.require_positive("radius", "length", "half_angle", "divisions")
+        self.require_positive("radius", "length", "half_angle", "cells_per_bending_length")
+        self.require_nonnegative("divisions")
         check_shell_parameters(self, min(self.length, self.radius * np.radians(self.half_angle)))
 
 
@@ -71,7 +92,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             return np.column_stack([L * s, R * np.sin(angle), R * np.cos(angle)])
 
         with ctx.timings("mesh"):
-            mesh = mapped_surface(roof, params.divisions, params.divisions, params.diagonal, ctx.comm)
+            mesh = mapped_surface(roof, params.grid_divisions, params.grid_divisions, params.diagonal,
+                                  ctx.comm)
             ends = lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], L)  # noqa: E731
             tagged = tag_boundary(mesh, {"diaphragm": ends})
         away_from_axis = lambda x: np.column_stack([0.0 * x[:, 0], x[:, 1], x[:, 2]])  # noqa: E731
@@ -88,11 +110,20 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
         deflection = -float(shell.value_at(edge_mid)[2])
         ctx.result.quantities.update(edge_deflection=deflection, edge_deflection_reference=REFERENCE,
                                      edge_deflection_error=deflection / REFERENCE - 1.0,
-                                     dofs=shell.dofs())
+                                     dofs=shell.dofs(), divisions=params.grid_divisions)
+        if params.error_estimate:
+            estimate_errors(ctx, run, params, ESTIMATE)
         if ctx.pictures:
             with ctx.timings("output"):
                 picture(shell.u, ctx, "scordelis-lo", "-u_z (mm)", lambda d: -d[:, 2], scale=10.0)
     return ctx.result
+
+
+# both directions twice as coarse; the edge deflection converges at about h² (measured in
+# docs/atlas/shell-resolution.md)
+ESTIMATE = Refinement(keys=("cells_per_bending_length",), order=2.0, quantities=("edge_deflection",),
+                      overrides=(("cells_per_bending_length", "divisions"),),
+                      size=lambda params: 1.0 / params.grid_divisions)
 
 
 SCENE = Scene(name="scordelis-lo", kind="benchmark", parameters=Parameters, run=run,

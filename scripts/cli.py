@@ -21,12 +21,16 @@ on one rank: its traceback, then MPI_Abort ends the job).
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
+import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
+EXIT_ERROR = 1
 EXIT_BAD_INPUT = 2
 EXIT_SOLVE_FAILED = 3
 EXIT_CASES_FAILED = 4  # a sweep ran to its end, but some cases failed or raised
@@ -115,15 +119,29 @@ def main(argv: list[str] | None = None) -> int:
 
     _only_rank_0_reports(MPI.COMM_WORLD.rank, args.verbose)
 
+    from petsc4py import PETSc  # noqa: F401  (PETSc's own signal handlers, replaced below)
+
+    from eyemech.problems.run.signals import stop_signals
+
+    comm = MPI.COMM_WORLD
+    # SIGINT/SIGTERM end a command with 130/143 on every rank, also one stuck in C
+    # (problems/run/signals.py)
+    with stop_signals(rank=comm.rank):
+        return _command(args, comm)
+
+
+def _command(args, comm) -> int:
     from eyemech import problems
     from eyemech.meshes import MeshError
     from eyemech.problems.run.checkpoint import CheckpointError, Interrupted
+    from eyemech.problems.run.faults import describe_output_error, output_error
+    from eyemech.problems.run.lockstep import RanksDiverged
     from eyemech.problems.run.parameters import ParameterError
     from eyemech.problems.solve.driver import SolveFailure
 
-    comm = MPI.COMM_WORLD
     say = (lambda *a, **k: print(*a, **k)) if comm.rank == 0 else (lambda *a, **k: None)
     try:
+        _check_paths(args)
         if args.command == "list":
             if args.markdown:
                 say(parameter_tables(problems.scenes()), end="")
@@ -157,13 +175,56 @@ def main(argv: list[str] | None = None) -> int:
     except SolveFailure as err:
         say(f"eyemech: solve failed: {err}", file=sys.stderr)
         return EXIT_SOLVE_FAILED
-    except Exception:
+    except RanksDiverged as err:  # raised on every rank alike (problems/run/lockstep.py)
+        say(f"eyemech: error: {err}", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as err:
+        if comm.size == 1 and isinstance(err, OSError) and (
+                output_error(err) or err.errno == errno.ENAMETOOLONG):
+            say(f"eyemech: error: {describe_output_error(err)}", file=sys.stderr)
+            return EXIT_BAD_INPUT
         if comm.size == 1:
             raise
         # an error on one rank would leave the others waiting in a collective call
         from eyemech.problems.run.faults import abort
 
         abort(comm)
+
+
+# what the run adds below its output folder at most (case_NNNN/checkpoints/.tmp_ckpt_NNNNNN/
+# rank_NNNN.npz and the like): a folder whose path leaves less room is refused
+PATH_ROOM = 100
+
+
+def _path_problem(path: str) -> str | None:
+    """Why ``path`` cannot be used on this system (a name or the whole path too long)."""
+    absolute = os.path.abspath(path)
+    try:
+        name_max = os.pathconf("/", "PC_NAME_MAX")
+        path_max = os.pathconf("/", "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    for part in absolute.split(os.sep):
+        if len(os.fsencode(part)) > name_max:
+            return (f"{path[:40]}...: a name of {len(os.fsencode(part))} bytes "
+                    f"({part[:24]}...); the file system allows {name_max}")
+    if len(os.fsencode(absolute)) + PATH_ROOM > path_max:
+        return (f"{absolute[:40]}...: a path of {len(os.fsencode(absolute))} bytes; the system "
+                f"allows {path_max}, and the run's own files need {PATH_ROOM} more")
+    return None
+
+
+def _check_paths(args) -> None:
+    """--out, --resume and --config usable as paths at all, before anything is read or
+    written (exit 2 naming the option)."""
+    from eyemech.problems.run.parameters import ParameterError
+
+    for key in ("out", "resume", "config"):
+        value = getattr(args, key, None)
+        if isinstance(value, str) and value:
+            why = _path_problem(value)
+            if why:
+                raise ParameterError(f"--{key}", why)
 
 
 def _scene_help_request(argv: list[str]) -> tuple[str, str] | None:
@@ -301,9 +362,13 @@ def parameter_tables(scenes: dict) -> str:
 
 
 def _overrides(args) -> dict:
-    from eyemech.problems.run.parameters import load_toml, parse_assignments
+    from eyemech.problems.run.parameters import ParameterError, load_toml, parse_assignments
 
-    overrides = load_toml(args.config) if args.config else {}
+    try:
+        overrides = load_toml(args.config) if args.config else {}
+    except RecursionError:
+        raise ParameterError("--config", f"{args.config} nests arrays or tables too deeply "
+                             "to read") from None
     overrides.update(parse_assignments(args.sets))
     return overrides
 
@@ -316,11 +381,15 @@ def _options(args):
         check_petsc_options,
         parse_assignments,
     )
+    from eyemech.problems.run.petsc_output import for_trial
     from eyemech.problems.solve.driver import NewtonOptions
 
     newton = NewtonOptions(petsc={k.lstrip("-"): v for k, v in parse_assignments(args.petsc).items()},
                            factorisation=args.factorisation)
-    check_petsc_options(newton.petsc)  # unknown names and unreadable values: exit 2 now
+    # unknown names and unreadable values: exit 2 now; files of viewers go to the run's
+    # folder (problems/run/petsc_output.py), so the trial writes them to a scratch folder
+    with tempfile.TemporaryDirectory(prefix="eyemech-petsc-check-") as scratch:
+        check_petsc_options(for_trial(newton.petsc, scratch))
     try:
         steps, minutes = CheckpointOptions.parse_every(args.checkpoint_every)
     except ValueError as err:
@@ -342,7 +411,13 @@ def _run(scene, overrides, args, options, comm, say) -> int:
     from eyemech.problems.solve.driver import SolveFailure
 
     if args.resume:
-        overrides = _resumed_parameters(scene, Path(args.resume), overrides, comm)
+        overrides, finished = _resumed_parameters(scene, Path(args.resume), overrides, comm)
+        if finished is not None:  # a finished run: its record, unchanged
+            if args.json:
+                say(json.dumps(finished))
+            else:
+                _summary(_Record(finished), Path(args.resume), say)
+            return 0
     params = build(scene.parameters, overrides)  # raises before anything is created
     out = Path(args.out) if args.out else Path(args.resume) if args.resume \
         else Path("results") / scene.name
@@ -361,29 +436,47 @@ def _run(scene, overrides, args, options, comm, say) -> int:
     return 0
 
 
-def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> dict:
-    """The checkpoint's parameters; --set/--config may repeat them but not change them
-    (the checkpoint then refuses). No checkpoint in ``folder``: a fresh start."""
-    from eyemech.problems.run.checkpoint import CheckpointError, newest_readable
+def _resumed_parameters(scene, folder: Path, overrides: dict, comm) -> tuple[dict, dict | None]:
+    """The parameters of the run in ``folder`` (problems/run/identity.py: its run.json and
+    its own checkpoints) and, when that run has finished, its results.json. --set/--config
+    may repeat the run's values but not change them; no run in ``folder`` (no such folder,
+    or nothing of eyemech's in it): exit 2."""
+    from eyemech.problems.run.checkpoint import CheckpointError
+    from eyemech.problems.run.identity import resume_plan
+    from eyemech.problems.run.parameters import build
 
-    if folder.exists() and not folder.is_dir():
-        raise CheckpointError(f"--resume {folder}: not a folder (give the run's output folder)")
-    meta, error = None, None
-    if comm.rank == 0:  # rank 0 reads; an unreadable checkpoint must not leave the others waiting
+    plan, error = None, None
+    if comm.rank == 0:  # rank 0 reads; its answer must not leave the others waiting
         try:
-            meta = newest_readable(folder, warn=False)[1]  # the newest that reads whole
+            plan = resume_plan(folder)
         except (OSError, ValueError) as err:
-            error = f"cannot read the checkpoint in {folder}: {err}"
-    meta, error = comm.bcast((meta, error), root=0)
+            error = str(err)
+    plan, error = comm.bcast((plan, error), root=0)
     if error:
-        raise CheckpointError(error)
-    if meta is None:
-        logging.getLogger("eyemech").warning("no checkpoint in %s: starting from the beginning",
-                                             folder)
-        return overrides
-    if meta["scene"] != scene.name:
-        raise CheckpointError(f"the checkpoint in {folder} is of scene '{meta['scene']}'")
-    return {**meta["parameters"], **overrides}
+        raise CheckpointError(f"--resume {error}")
+    if plan.scene != scene.name:
+        raise CheckpointError(f"--resume {folder}: its run is of scene '{plan.scene}'")
+    theirs = build(scene.parameters, plan.parameters).as_dict()
+    mine = build(scene.parameters, {**plan.parameters, **overrides}).as_dict()
+    changed = sorted(k for k in theirs if theirs[k] != mine[k])
+    if changed:
+        given = ", ".join(f"{k}={mine[k]!r} (the run has {theirs[k]!r})" for k in changed)
+        raise CheckpointError(f"--resume {folder}: {given}; a resumed run keeps its "
+                              "parameters (start a new run with --out for others)")
+    if plan.finished is None and not plan.from_checkpoint:
+        logging.getLogger("eyemech").warning(
+            "no checkpoint of the run in %s: it starts again from the beginning, with its "
+            "own parameters", folder)
+    return dict(plan.parameters), plan.finished
+
+
+class _Record:
+    """A results.json as :func:`_summary` reads a Result."""
+
+    def __init__(self, data: dict):
+        self.scene, self.status = data.get("scene", "?"), data.get("status", "?")
+        self.timings, self.mpi_size = data.get("timings") or {}, data.get("mpi_size", 1)
+        self.quantities = data.get("quantities") or {}
 
 
 def _summary(result, out: Path, say) -> None:

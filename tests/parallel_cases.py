@@ -109,6 +109,12 @@ CASES: dict[str, Case] = {
 
 # scenes whose VTX field output is written and checked (the others run --no-fields)
 WITH_FIELDS = ("sphere-inflation",)
+# scenes that draw their pictures on N ranks (the others run --no-pictures): each kind of
+# picture code -- a gathered grid rendered on rank 0 (sphere, retina, cornea, shells, Cook's
+# panel), a gathered plot (hertz), rank 0's own chart (sls-creep) -- must keep the ranks'
+# collective calls in step (tests/test_parallel.py)
+WITH_PICTURES = ("sphere-inflation", "hertz", "retina-reattachment", "keratotomy",
+                 "plate-clamped", "cook-membrane", "sls-creep")
 
 
 def cli_arguments(name: str, out: Path) -> list[str]:
@@ -116,5 +122,6 @@ def cli_arguments(name: str, out: Path) -> list[str]:
     sets = [a for k, v in CASES[name].overrides.items() for a in ("--set", f"{k}={v}")]
     sets += [a for k, v in CASES[name].petsc.items() for a in ("--petsc", f"{k}={v}")]
     fields = [] if name in WITH_FIELDS else ["--no-fields"]
-    return ["-v", "run", name, *sets, "--out", str(out), "--json", "--quiet", "--no-pictures",
+    pictures = [] if name in WITH_PICTURES else ["--no-pictures"]
+    return ["-v", "run", name, *sets, "--out", str(out), "--json", "--quiet", *pictures,
             "--checkpoint-every", "0", *fields]

@@ -87,7 +87,8 @@ def test_radial_tires_sutured_footprint_does_not_slide(radial):
 @pytest.mark.parametrize("overrides, key", [
     ({"tire_orientation": "radial"}, "tire_orientation"),  # with the band (the default buckle)
     ({"tire_orientation": "radial", "buckle": "encircling"}, "tire_orientation"),
-    ({"tire_orientation": "radial", "buckle": "segmental"}, "suture_azimuths"),
+    ({"tire_orientation": "radial", "buckle": "segmental", "suture_azimuths": "0,30"},
+     "suture_azimuths"),                                    # sutures off its meridian
     ({**RADIAL, "tire_length": "28"}, "tire_length"),      # the meridian is 27.0 mm
     ({**RADIAL, "tire_length": "0"}, "tire_length"),
     ({**RADIAL, "buckle_position": "5"}, "buckle_position"),    # its front end past the limbus

@@ -16,8 +16,9 @@ from eyemech.problems import scenes
 from eyemech.problems.run.output import picture_record, render_png
 
 IMAGES = Path(__file__).resolve().parents[1] / "docs" / "img"
-# scleral-buckling's pictures are made with its own writer (problems/scleral_buckling/output.py)
-DOCS_PICTURES = sorted(p for p in IMAGES.glob("*.png") if not p.name.startswith("buckling-"))
+# the lens and zonules' section is a view drawn outside the scene's writer: it carries no record
+UNRECORDED = {"buckling-lens-section.png"}
+DOCS_PICTURES = sorted(p for p in IMAGES.glob("*.png") if p.name not in UNRECORDED)
 
 
 @pytest.mark.parametrize("path", DOCS_PICTURES, ids=[p.stem for p in DOCS_PICTURES])

@@ -92,7 +92,10 @@ def assert_close(expected, actual, rtol: float, path: str = "") -> None:
     elif isinstance(expected, (bool, str)) or expected is None:
         assert actual == expected, path
     else:
-        assert actual == pytest.approx(expected, rel=rtol, abs=1e-12), path
+        # a volume change (µL) is a difference of the eye's volumes (~6,000 µL): one that is
+        # zero comes out as round-off of those, measured up to 5e-12 µL between 1 and 2 ranks
+        zero = 1e-9 if path.rstrip(".").endswith("_uL") else 1e-12
+        assert actual == pytest.approx(expected, rel=rtol, abs=zero), path
 
 
 @pytest.fixture(scope="module")

@@ -39,6 +39,13 @@ def test_the_coarse_eye_draws_every_stage_and_writes_its_fields(coarse, coarse_f
     assert len(coarse.pictures) == 2 * len(stages)
     assert all((coarse_folder / name).stat().st_size > 10_000 for name in coarse.pictures)
     assert "state.pvd" in coarse.fields
+    # the section's title states the stage's rim gap and IOP, as results.json has them
+    from eyemech.problems.run.output import picture_record
+
+    sutured = coarse.quantities["after_suturing"]
+    caption = picture_record(coarse_folder / "step3_suturing_section.png")["caption"]
+    assert f"rim gap {sutured['tear_rim_gap_max_mm']:.3f} mm" in caption
+    assert f"IOP {sutured['iop_mmHg']:.0f} mmHg" in caption
     frames = list(coarse_folder.glob("state_*.vtu"))
     assert len(frames) >= len(coarse.steps)
 

@@ -161,3 +161,58 @@ def test_slit_annular_plate_follows_sze_at_a_tenth_of_the_load():
         assert -0.12 < q[key] < 0.0
     assert q["deflection_b"] > 1.3 * q["deflection_a"]  # the outer edge lifts more (twist)
     assert slit_annular_plate.sze_reference(0.8) == (13.891, 17.528)
+
+
+# -- off the defaults: the slit plate's default mesh at every load level; a second thickness and load
+THICK_CSV = STUDY_CSV.with_name("shell_hemisphere_thick.csv")
+SLIT_CSV = STUDY_CSV.with_name("shell_slit_plate.csv")
+SLIT_THICK_CSV = STUDY_CSV.with_name("shell_slit_plate_thick.csv")
+NONLINEAR_TOLERANCE = 0.02
+
+
+def test_nonlinear_hemisphere_second_thickness_and_load():
+    """h = 0.2 (R/h = 50) at P = 12,500 (Sze's P = 100 × (0.2/0.04)³), default resolution
+    (15 divisions), against the same model's mesh-converged answer: Richardson's value of
+    three resolutions × 1.5 (study shell-hemisphere, shell_hemisphere_thick.csv; no
+    published curve exists for this thickness). Measured −0.38 % / −0.30 %."""
+    reference = read_csv(THICK_CSV)[0]
+    params = hemisphere_nonlinear.Parameters(thickness=0.2, force=12_500.0, load_steps=4)
+    q = _run(hemisphere_nonlinear, thickness=0.2, force=12_500.0, load_steps=4).quantities
+    assert q["divisions"] == params.meridian_divisions == 15
+    assert "radial_displacement_x_sze" not in q  # Sze's table is for h = 0.04 alone
+    assert q["radial_displacement_x"] == pytest.approx(float(reference["outward_reference"]),
+                                                       rel=NONLINEAR_TOLERANCE)
+    assert q["radial_displacement_y"] == pytest.approx(float(reference["inward_reference"]),
+                                                       rel=NONLINEAR_TOLERANCE)
+
+
+def test_slit_plate_default_mesh_follows_sze_within_two_percent():
+    """The study's rows on the default 48 × 6 mesh at Sze's 11 load levels q = 0.02 … 0.8
+    (measured −0.52 … −1.60 % at W_A). Between the levels the table's linear interpolation
+    of a curved path is no reference (+3.8 % at q = 0.06)."""
+    from eyemech.problems import slit_annular_plate
+
+    levels = [f * slit_annular_plate.SZE_MAX_LINE_LOAD for f in slit_annular_plate.SZE_LOAD_FRACTION]
+    rows = [r for r in read_csv(SLIT_CSV) if r["divisions"] == "48"
+            and np.isclose(float(r["line_load"]), levels, rtol=1e-6).any()]
+    assert len(rows) == 11
+    for row in rows:
+        assert float(row["deflection_a"]) == pytest.approx(float(row["deflection_a_sze"]),
+                                                           rel=NONLINEAR_TOLERANCE)
+        assert float(row["deflection_b"]) == pytest.approx(float(row["deflection_b_sze"]),
+                                                           rel=NONLINEAR_TOLERANCE)
+
+
+def test_slit_plate_second_thickness_and_load():
+    """h = 0.06 at q = 3.2 (Sze's 0.4 × (0.06/0.03)³: half the path, bending-scaled) on the
+    default 48 × 6 mesh against the same model's mesh-converged answer (Richardson of 32 × 4,
+    48 × 6, 72 × 9: study shell-slit-plate; no published curve for this thickness)."""
+    from eyemech.problems import slit_annular_plate
+
+    reference = read_csv(SLIT_THICK_CSV)[0]
+    q = _run(slit_annular_plate, thickness=0.06, line_load=3.2, load_steps=8).quantities
+    assert "deflection_a_sze" not in q
+    assert q["deflection_a"] == pytest.approx(float(reference["deflection_a_reference"]),
+                                              rel=NONLINEAR_TOLERANCE)
+    assert q["deflection_b"] == pytest.approx(float(reference["deflection_b_reference"]),
+                                              rel=NONLINEAR_TOLERANCE)

@@ -47,8 +47,9 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
     params = build(scene.parameters, overrides)
     options = options or RunOptions(fields=False, pictures=False)
     # a row with settings of its own keeps its own results.json beside the benchmark's
-    folder = f"{scene.name}-{comm.size}ranks" + "".join(f"-{key}={value}"
-                                                          for key, value in extra.items())
+    # one folder (a value that is a path, e.g. folded_state, must not nest folders)
+    folder = f"{scene.name}-{comm.size}ranks" + "".join(
+        f"-{key}={str(value).replace('/', '_')}" for key, value in extra.items())
     result = scene.run(params, comm=comm, out=Path(out) / folder, options=options)
     if comm.rank != 0:
         return None

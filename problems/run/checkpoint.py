@@ -1,4 +1,4 @@
-"""Checkpoint and restart of stepped runs (issue 11); see docs/restart.md.
+"""Checkpoint and restart of stepped runs; see docs/restart.md.
 
 A scene registers the state that the path follower cannot see -- DOLFINx Functions
 (unknowns, quadrature-space internal variables such as ``Cv_n``), Constants (the cavity's
@@ -32,7 +32,9 @@ original cell index need nothing new and keep N-to-M restart.
 Atomicity: everything is written into ``.tmp_ckpt_SSSSSS``; after a barrier rank 0
 renames it to ``ckpt_SSSSSS`` (one ``rename``, atomic on POSIX file systems). A kill
 before the rename leaves only a ``.tmp_`` folder that readers ignore; the last good
-checkpoint is untouched. Older checkpoints beyond ``keep`` are deleted after the rename.
+checkpoint is untouched. After the rename the run's older checkpoints beyond ``keep``
+and any other run's are deleted (``meta.json`` names the run: its scene and the hash of
+its parameters, problems/run/identity.py).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ import os
 import re
 import shutil
 import signal
+import sys
 import time
 import zipfile
 from pathlib import Path
@@ -53,7 +56,9 @@ from typing import Any, Callable
 import numpy as np
 from mpi4py import MPI
 
-from eyemech.problems.run.faults import KILL_ENV, parse_kill  # noqa: F401  (test hook)
+from eyemech.problems.run import signals
+from eyemech.problems.run.faults import KILL_ENV, parse_divergence, parse_kill  # noqa: F401
+from eyemech.problems.run.lockstep import Lockstep, label_code
 
 log = logging.getLogger("eyemech")
 
@@ -116,12 +121,13 @@ def latest(folder: str | Path) -> Path | None:
     return max(found)[1] if found else None
 
 
-def newest_readable(folder: str | Path, warn: bool = True) \
+def newest_readable(folder: str | Path, warn: bool = True, run: str | None = None) \
         -> tuple[Path | None, dict[str, Any] | None]:
     """The newest checkpoint under ``folder`` whose ``meta.json`` and rank files all read
     whole, with its meta; older ones are tried when the newest is damaged (truncated by
-    a full disk, emptied by a crash of the file system), each skipped one logged. (None,
-    None) when there is no checkpoint; :class:`CheckpointError` when none is readable."""
+    a full disk, emptied by a crash of the file system), each skipped one logged. With
+    ``run`` (a run id) only that run's checkpoints count. (None, None) when there is no
+    checkpoint; :class:`CheckpointError` when none is readable."""
     folder = Path(folder)
     if (folder / "checkpoints").is_dir():
         folder = folder / "checkpoints"
@@ -129,6 +135,12 @@ def newest_readable(folder: str | Path, warn: bool = True) \
         return None, None
     found = sorted(((int(m.group(1)), p) for p in folder.iterdir()
                     if (m := NAME.match(p.name)) and (p / "meta.json").is_file()), reverse=True)
+    if run is not None:
+        from eyemech.problems.run.identity import checkpoints_in
+
+        others = {c.path.name for c in checkpoints_in(folder.parent)
+                  if c.run_id is not None and c.run_id != run}
+        found = [(step, p) for step, p in found if p.name not in others]
     problems = []
     for _, candidate in found:
         try:
@@ -172,8 +184,12 @@ class Checkpoints:
     """The registry of a run's state, the writer and the reader (collective on ``comm``)."""
 
     def __init__(self, scene: str, parameters: dict[str, Any], result, comm: MPI.Comm,
-                 out: Path | None, options: CheckpointOptions | None = None):
+                 out: Path | None, options: CheckpointOptions | None = None,
+                 run_id: str | None = None):
+        from eyemech.problems.run.identity import run_id as identity
+
         self.scene, self.parameters, self.result = scene, parameters, result
+        self.run_id = run_id or identity(scene, parameters)
         self.comm, self.options = comm, options or CheckpointOptions()
         self.folder = out / "checkpoints" if out is not None else None
         self.entries: dict[str, _Entry] = {}
@@ -184,15 +200,19 @@ class Checkpoints:
         self.last: Path | None = None
         self.write_seconds: list[float] = []
         self._last_write = time.monotonic()
-        self._stop_signal = 0
-        self._handlers: dict[int, Any] = {}
+        self._listening = False
         self._kill = parse_kill()
+        self._diverge = parse_divergence()
         self._watching: tuple[Any, Callable] | None = None  # (solver, hook) of the test hook
         self.resume_meta: dict[str, Any] | None = None
         self.resumed_from: Path | None = None
         self.restore_seconds = 0.0
         if self.options.resume is not None:
             self._load_meta(Path(self.options.resume))
+        # made last: close() frees them (collective, like their creation)
+        self._hang_comm = comm.Dup() if self._diverge[0] == "hang" else None  # test hook
+        # every rank at every step's end with the same decision, or an error (lockstep.py)
+        self.lockstep = Lockstep(comm)
 
     # -- registration ---------------------------------------------------------------
     def function(self, name: str, f) -> None:
@@ -231,7 +251,7 @@ class Checkpoints:
         """Called when ``follow_path`` starts. Returns None for a fresh path, or, when
         resuming, ``{"skip": records}`` for a path finished before the checkpoint or
         the saved path state for the path the checkpoint is in (state then restored)."""
-        self._install_signal_handlers()
+        self._listen()
         self.path_index += 1
         meta = self.resume_meta
         if meta is None:
@@ -252,9 +272,12 @@ class Checkpoints:
         self.completed_paths.append(records)
 
     def watch_step(self, solver) -> None:
-        """Test hook: a kill (or SIGTERM) inside Newton of the step about to be solved."""
+        """Test hook: a kill (or SIGTERM, or a hang) inside Newton of the step about to be
+        solved."""
         kind, step, rank = self._kill
-        if kind not in ("step", "sigterm") or self.steps_done + 1 != step:
+        if self._diverge[0] == "hang":
+            kind, step, rank = self._diverge
+        if kind not in ("step", "sigterm", "hang") or self.steps_done + 1 != step:
             return
         calls = []
 
@@ -263,24 +286,49 @@ class Checkpoints:
             if len(calls) == 2:  # after Newton's first update: the unknowns are mid-step
                 if kind == "step":
                     os.kill(os.getpid(), signal.SIGKILL)
-                elif rank is None or rank == self.comm.rank:
+                elif kind == "hang" and rank == self.comm.rank:
+                    print(f"EYEMECH_TEST_DIVERGE: rank {rank} hangs in step {step}",
+                          file=sys.stderr, flush=True)
+                    self._hang_comm.Barrier()  # no other rank calls it: stuck in C
+                elif kind == "sigterm" and (rank is None or rank == self.comm.rank):
                     os.kill(os.getpid(), signal.SIGTERM)
         solver.residual_hooks.append(hook)
         self._watching = (solver, hook)
 
     def step_done(self, path_state: dict[str, Any]) -> None:
-        """After a converged step: write a checkpoint when due, stop when asked to."""
+        """After a converged step: check that every rank is in step (the same step and
+        decision, problems/run/lockstep.py), write a checkpoint when due, stop when
+        asked to."""
         self.steps_done += 1
         if self._watching is not None:
             solver, hook = self._watching
             solver.residual_hooks.remove(hook)
             self._watching = None
-        stop = self.comm.allreduce(self._stop_signal, op=MPI.MAX)
+        records = path_state.get("records") or [{}]
+        decision = [float(self.path_index), label_code(str(path_state.get("label", ""))),
+                    float(self.steps_done), float(path_state.get("step", 0)),
+                    float(path_state.get("value", 0.0)), float(path_state.get("increment", 0.0)),
+                    float(records[-1].get("iterations", 0)), float(records[-1].get("cuts", 0))]
+        self._planted_divergence(decision)
+        self.lockstep.check(f"the end of step {self.steps_done} (path "
+                            f"'{path_state.get('label', '')}')", tuple(decision))
+        stop = self.comm.allreduce(signals.requested(), op=MPI.MAX)
         due = self.comm.bcast(self._due() if self.comm.rank == 0 else None, root=0)
         if self.enabled and (due or stop):
             self.write(path_state)
         if stop:
             raise Interrupted(stop, self.steps_done, self.last if self.enabled else None)
+
+    def _planted_divergence(self, decision: list[float]) -> None:
+        """Test hook (``EYEMECH_TEST_DIVERGE``, problems/run/faults.py): one rank leaves the
+        others' control flow at the end of a step."""
+        kind, step, rank = self._diverge
+        if step != self.steps_done or rank != self.comm.rank:
+            return
+        if kind == "collective":  # one collective call more than the others make
+            self.comm.allreduce(0, op=MPI.SUM)
+        elif kind == "decision":  # another path value than the others reached
+            decision[4] += 1.0
 
     def _due(self) -> bool:
         opts = self.options
@@ -319,7 +367,7 @@ class Checkpoints:
                 shutil.rmtree(final)
             os.rename(tmp, final)
             _fsync_dir(self.folder)
-            self._prune()
+            self._prune(self.steps_done)
         self.comm.Barrier()
         self.last = final
         self._last_write = time.monotonic()
@@ -330,7 +378,8 @@ class Checkpoints:
         for key, entry in self.entries.items():
             if entry.kind == "function":
                 functions[key]["mesh"] = _fingerprint(entry.obj.function_space.mesh)
-        meta = {"format": FORMAT, "scene": self.scene, "parameters": self.parameters,
+        meta = {"format": FORMAT, "scene": self.scene, "run_id": self.run_id,
+                "parameters": self.parameters,
                 "mpi_size": self.comm.size, "steps_done": self.steps_done,
                 "path": {"index": self.path_index, **path_state},
                 "completed_paths": self.completed_paths, "functions": functions,
@@ -342,18 +391,26 @@ class Checkpoints:
                 "written": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         return meta
 
-    def _prune(self) -> None:
-        found = sorted((int(m.group(1)), p) for p in self.folder.iterdir()
-                       if (m := NAME.match(p.name)))
-        for _, old in found[:-max(self.options.keep, 1)]:
-            shutil.rmtree(old, ignore_errors=True)
+    def _prune(self, newest: int) -> None:
+        """Keep the newest ``keep`` checkpoints of this run, up to the one just written
+        (``newest``); remove the rest: this run's older ones, its later ones from before
+        a resume (they describe steps this run is computing again) and other runs' (a
+        new run starts only where those ended, identity.check_fresh_start)."""
+        from eyemech.problems.run.identity import checkpoints_in
+
+        found = checkpoints_in(self.folder.parent)
+        own = [c for c in found if c.run_id == self.run_id and c.step <= newest]
+        kept = {c.path for c in own[-max(self.options.keep, 1):]}
+        for checkpoint in found:
+            if checkpoint.path not in kept:
+                shutil.rmtree(checkpoint.path, ignore_errors=True)
 
     # -- reading ------------------------------------------------------------------------
     def _load_meta(self, folder: Path) -> None:
         meta, error = None, None
         if self.comm.rank == 0:
             try:
-                found, meta = newest_readable(folder)
+                found, meta = newest_readable(folder, run=self.run_id)
                 if meta is not None:
                     meta["_folder"] = str(found)
             except (OSError, ValueError) as err:
@@ -403,25 +460,29 @@ class Checkpoints:
         self.completed_paths = [list(p) for p in meta["completed_paths"]]
         self.restore_seconds = time.perf_counter() - start
 
-    # -- signals ------------------------------------------------------------------------
-    def _install_signal_handlers(self) -> None:
-        """SIGINT/SIGTERM: finish the step, checkpoint, stop (a second one: at once)."""
-        if self._handlers or not _main_thread():
-            return
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            self._handlers[signum] = signal.signal(signum, self._on_signal)
-
-    def _on_signal(self, signum, _frame) -> None:
-        if self._stop_signal:  # asked twice: the default action
-            self.restore_signal_handlers()
-            os.kill(os.getpid(), signum)
-            return
-        self._stop_signal = signum
+    # -- signals and the end of the run ---------------------------------------------------
+    def _listen(self) -> None:
+        """SIGINT/SIGTERM: finish the step, checkpoint, stop (a second one: at once;
+        problems/run/signals.py)."""
+        if not self._listening:
+            signals.listen()
+            self._listening = True
 
     def restore_signal_handlers(self) -> None:
-        for signum, handler in self._handlers.items():
-            signal.signal(signum, handler)
-        self._handlers = {}
+        if self._listening:
+            signals.unlisten()
+            self._listening = False
+
+    def close(self) -> None:
+        """The run ends (collective: every rank, as ``RunContext.__exit__``)."""
+        self.restore_signal_handlers()
+        if self.lockstep.comm is not None:  # the longest wait of any rank, for results.json
+            self.lockstep.longest_wait = self.lockstep.comm.allreduce(
+                self.lockstep.longest_wait, op=MPI.MAX)
+        self.lockstep.free()
+        if self._hang_comm is not None:
+            self._hang_comm.Free()
+            self._hang_comm = None
 
     def summary(self) -> dict[str, Any]:
         """What results.json says about checkpoints."""
@@ -434,6 +495,9 @@ class Checkpoints:
         if self.resumed_from is not None:
             out["resumed_from"] = str(self.resumed_from)
             out["restore_seconds"] = round(self.restore_seconds, 4)
+        if self.lockstep.checks:  # the longest wait of any rank for the others at a step's end
+            out["lockstep_checks"] = self.lockstep.checks
+            out["lockstep_wait_max_s"] = round(self.lockstep.longest_wait, 4)
         return out
 
 
@@ -504,15 +568,26 @@ def _fingerprint(mesh) -> list[float]:
 
 
 # -- files ---------------------------------------------------------------------------------
+@contextlib.contextmanager
+def _naming(path: Path):
+    """An OSError of the write (a full disk) names the file it was writing."""
+    try:
+        yield
+    except OSError as err:
+        if err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
+
+
 def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    with open(path, "wb") as handle:
+    with _naming(path), open(path, "wb") as handle:
         np.savez(handle, **arrays)
         handle.flush()
         os.fsync(handle.fileno())
 
 
 def _write_text(path: Path, text: str) -> None:
-    with open(path, "w") as handle:
+    with _naming(path), open(path, "w") as handle:
         handle.write(text)
         handle.flush()
         os.fsync(handle.fileno())
@@ -551,8 +626,3 @@ def _canonical(value: Any) -> Any:
     """Parameters compared as JSON sees them (tuples and lists alike)."""
     return json.loads(json.dumps(value, default=_encode))
 
-
-def _main_thread() -> bool:
-    import threading
-
-    return threading.current_thread() is threading.main_thread()

@@ -13,13 +13,15 @@ from mpi4py import MPI
 
 from eyemech.forms import ordering  # noqa: F401  (UFL's operand order: forms/ordering.py)
 from eyemech.meshes import MeshError
-from eyemech.problems.run import jit_cache
+from eyemech.problems.run import identity, jit_cache
 from eyemech.problems.run.checkpoint import CheckpointOptions, Checkpoints, Interrupted
-from eyemech.problems.run.faults import abort_if_stranding
+from eyemech.problems.run.faults import abort_if_stranding, output_error
+from eyemech.problems.run.identity import run_id
 from eyemech.problems.run.newton import NewtonOptions, SolveFailure, close_solvers, hold_solvers
 from eyemech.problems.run.output import FieldWriter, PyvistaSeries
 from eyemech.problems.run.parameters import ParameterError, SceneParameters, check
 from eyemech.problems.run.petsc_lifetime import release_run_objects, start_run
+from eyemech.problems.run.petsc_output import confined
 from eyemech.problems.run.results import (
     OutputFolder,
     Result,
@@ -61,18 +63,100 @@ class RunContext:
         jit_cache.install()  # a cached form found by its file name (problems/run/jit_cache.py)
         self.comm = comm if comm is not None else MPI.COMM_WORLD
         self.out = Path(out) if out is not None else None
-        self.options = options or RunOptions()
+        options = options or RunOptions()
+        # files of --petsc viewers go to this run's folder (problems/run/petsc_output.py)
+        newton = dataclasses.replace(options.newton,
+                                     petsc=confined(options.newton.petsc, self.out))
+        self.options = dataclasses.replace(options, newton=newton)
         self.timings = Timings()
-        self.result = Result(scene=scene, parameters=params.as_dict(), mpi_size=self.comm.size)
-        self.checkpoints = Checkpoints(scene, self.result.parameters, self.result, self.comm,
-                                       self.out, self.options.checkpoint)
+        parameters = params.as_dict()
+        self.result = Result(scene=scene, parameters=parameters, mpi_size=self.comm.size,
+                             run_id=run_id(scene, parameters))
         # the folder is made, checked and locked (all ranks raise alike when it cannot be)
         self.folder = OutputFolder(self.out, self.comm).acquire() if self.out is not None \
             else None
+        self._fresh = False  # this run replaces the folder's previous one (not a resume)
+        self._resuming_here = False  # --resume names this run's own --out folder
+        self._previous_outputs: set[str] = set()
+        self._previous_run_file: bytes | None = None
+        try:
+            self.checkpoints = Checkpoints(scene, self.result.parameters, self.result, self.comm,
+                                           self.out, self.options.checkpoint,
+                                           run_id=self.result.run_id)
+        except BaseException:
+            self._release()
+            raise
+        try:
+            self._take_folder()
+        except BaseException:
+            self.checkpoints.close()
+            self._release()
+            raise
+        self._field_writers: list[FieldWriter] = []
         # the run's parallel solvers are kept until it closes them, and its other parallel
         # PETSc objects destroyed as it ends (problems/run/petsc_lifetime.py)
         self._solvers_before = hold_solvers()
         self._first_petsc_object = start_run(self.comm)  # last: it freezes the collector
+
+    def _close_field_writers(self, error: BaseException | None) -> None:
+        """The writers a scene left open (an error before its ``finally``), closed on every
+        rank in the order they were made: an ADIOS2 writer left to the garbage collector
+        flushes in its destructor, and on a full disk that aborts the process. A close that
+        fails retires its writer (output.py); the run's own error is the one reported."""
+        for writer in self._field_writers:
+            try:
+                writer.close()
+            except OSError:
+                if error is None:
+                    raise
+        self._field_writers = []
+
+    def _release(self, remove_if_empty: bool = False) -> None:
+        if self.folder is not None:
+            self.folder.release(remove_if_empty=remove_if_empty)
+
+    def _take_folder(self) -> None:
+        """The folder becomes this run's (collective): refused while it holds an unfinished
+        run's checkpoints (a resume continues its own), ``run.json`` names this run, and
+        the previous run's outputs are listed to be cleared when this run ends
+        (problems/run/identity.py)."""
+        if self.out is None:
+            return
+        # a resume continues its own folder; any other folder is this run's to take
+        resume = self.options.checkpoint.resume
+        self._resuming_here = resume is not None and Path(resume).resolve() == self.out.resolve()
+        self._fresh = self.checkpoints.resume_meta is None or not self._resuming_here
+        error, previous = None, (set(), None)
+        if self.rank0:
+            try:
+                previous = self._take_folder_here()
+            except ValueError as err:
+                error = str(err)
+            except OSError as err:
+                error = f"cannot write in {self.out}: {err.strerror or err}"
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise ParameterError("--resume" if self._resuming_here else "--out", error)
+        self._previous_outputs, self._previous_run_file = previous
+
+    def _take_folder_here(self) -> tuple[set[str], bytes | None]:
+        record = identity.read_folder(self.out)
+        resume = self.options.checkpoint.resume
+        if resume is not None and record.finished() and record.run_id == self.result.run_id \
+                and Path(resume).resolve() == self.out.resolve():
+            raise ValueError(f"the run in {self.out} has finished (its results.json says ok): "
+                             "nothing to resume")
+        if not self._fresh:
+            before = identity.write_run_file(self.out, self.result.scene, self.result.parameters,
+                                             self.result.run_id, self.comm.size)
+            return set(), before
+        if self._resuming_here:  # and no checkpoint of this run found
+            identity.refuse_other_runs_checkpoints(self.out, self.result.parameters)
+        identity.check_fresh_start(self.out, self.result.scene)
+        previous = identity.outputs(self.out, record.results)
+        before = identity.write_run_file(self.out, self.result.scene, self.result.parameters,
+                                         self.result.run_id, self.comm.size)
+        return previous, before
 
     def __enter__(self) -> "RunContext":
         return self
@@ -81,9 +165,12 @@ class RunContext:
         # an exception on this rank alone: the other ranks wait in a collective call
         abort_if_stranding(self.comm, error)
         # every rank is here (or the error was this rank's alone and the job is ended)
-        release_run_objects(self.comm, self._first_petsc_object,
-                            lambda: close_solvers(created_after=self._solvers_before))
-        self.checkpoints.restore_signal_handlers()
+        try:
+            self._close_field_writers(error)
+        finally:
+            release_run_objects(self.comm, self._first_petsc_object,
+                                lambda: close_solvers(created_after=self._solvers_before))
+            self.checkpoints.close()
         if isinstance(error, Interrupted):
             self.result.status = "interrupted"
             self.result.message = str(error)
@@ -115,15 +202,26 @@ class RunContext:
         # the scene cannot use) is bad input all the same: no results.json, and the
         # folder goes again if this run made it and nothing else is in it (exit 2)
         late_bad_input = isinstance(error, (ParameterError, MeshError))
+        # a resume refused before it reached its checkpoint (another layout of the scene's
+        # state, a checkpoint that does not fit) leaves the folder as it found it
+        refused_resume = error is not None and self.checkpoints.resume_meta is not None
         try:
-            if not late_bad_input and not (error is not None
-                                           and self.checkpoints.resume_meta is not None):
-                self.write()
+            if late_bad_input or refused_resume:
+                self._give_folder_back()
+            elif not (error is not None and self.checkpoints.resume_meta is not None):
+                try:
+                    self.write()
+                except OSError as failed:
+                    # a full disk that stopped the run cannot take results.json either:
+                    # the first failure is the one to report
+                    if not (output_error(failed) and output_error(error)):
+                        raise
+                else:
+                    self._clear_previous()
             # a resume that failed before it reached the checkpoint keeps the folder's
             # results.json (say "interrupted"): it still describes the run
         finally:
-            if self.folder is not None:
-                self.folder.release(remove_if_empty=late_bad_input)
+            self._release(remove_if_empty=late_bad_input)
         if self.result.status == "error" and error is None:
             from eyemech.problems.run.checkpoint import CheckpointError
 
@@ -151,8 +249,10 @@ class RunContext:
     def field_writer(self, functions: list, stem: str = "fields", pvd: bool = True) -> FieldWriter:
         """``functions`` as a ``.pvd`` series (``pvd=False``: a scene with a series of its
         own), and as ADIOS2 VTX under ``--vtx``; a no-op writer under ``--no-fields``."""
-        return FieldWriter(self.field_dir, self.comm, functions, stem=stem, vtx=self.options.vtx,
-                           pvd=pvd)
+        writer = FieldWriter(self.field_dir, self.comm, functions, stem=stem,
+                             vtx=self.options.vtx, pvd=pvd)
+        self._field_writers.append(writer)
+        return writer
 
     def pyvista_series(self, stem: str = "state") -> PyvistaSeries:
         """``<stem>.pvd`` + one gathered ``.vtu`` per frame for pyvista (no-op under ``--no-fields``)."""
@@ -164,3 +264,20 @@ class RunContext:
     def write(self) -> None:
         if self.out is not None and self.rank0:
             write_json_atomic(self.out / "results.json", self.result.as_json())
+
+    def _clear_previous(self) -> None:
+        """A new run in a used folder: the previous run's outputs it did not write again
+        and the checkpoints of other runs go (rank 0, after results.json is written)."""
+        if self.out is None or not self._fresh or not self.rank0:
+            return
+        kept = identity.written_outputs(self.out, self.result.fields, self.result.pictures)
+        removed = identity.clear_previous(self.out, self._previous_outputs, kept,
+                                          self.result.run_id)
+        if removed:
+            log.info("removed the previous run's %s from %s", ", ".join(removed), self.out)
+
+    def _give_folder_back(self) -> None:
+        """Bad input found after meshing, or a resume refused before its checkpoint:
+        run.json as it was before this run."""
+        if self.out is not None and self.rank0:
+            identity.restore_run_file(self.out, self._previous_run_file)

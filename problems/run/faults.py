@@ -21,10 +21,18 @@ The test hooks (environment variables, read where the fault is injected):
   ``checkpoint:N`` (SIGKILL inside the N-th checkpoint write, before its commit),
   ``sigterm:N[:RANK]`` (SIGTERM to this process -- or only to rank RANK -- inside Newton
   of step N).
+- ``EYEMECH_TEST_DIVERGE``: ``collective:N:RANK`` (rank RANK makes one collective call
+  more than the others at the end of step N, as a picture drawn on rank 0 that reads a
+  distributed unknown would), ``decision:N:RANK`` (rank RANK records another path value at
+  the end of step N, as a branch on local data would), ``hang:N:RANK`` (rank RANK waits
+  in a collective call no other rank makes, inside Newton of step N: a job stuck in C for
+  the signal tests). The lock-step check (problems/run/lockstep.py) must turn each into
+  an error.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 import time
@@ -32,10 +40,27 @@ import traceback
 
 RAISE_ENV = "EYEMECH_TEST_RAISE_ON_RANK"
 KILL_ENV = "EYEMECH_TEST_KILL"
+DIVERGE_ENV = "EYEMECH_TEST_DIVERGE"
 
 # exit code of a job ended by MPI_Abort after an exception on one rank
 EXIT_RANK_FAILED = 1
+# ... after the output folder could not take a file (disk full, quota, read-only): the
+# run contract's code of an unusable --out folder
+EXIT_OUTPUT = 2
 ABORT_GRACE_SECONDS = 0.5
+# the errors of a folder that cannot take the run's files (docs/cli.md, exit code 2)
+OUTPUT_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO)
+
+
+def output_error(error: BaseException | None) -> bool:
+    """Whether ``error`` says that the output folder cannot take a file."""
+    return isinstance(error, OSError) and error.errno in OUTPUT_ERRNOS
+
+
+def describe_output_error(error: OSError) -> str:
+    where = f"cannot write {error.filename}" if error.filename else "cannot write the output"
+    return (f"{where}: {error.strerror or error} (the files written before are kept; "
+            "free space or choose another --out)")
 
 
 def test_raise_rank(comm) -> bool:
@@ -57,17 +82,29 @@ def parse_kill(spec: str | None = None) -> tuple[str, int, int | None]:
     return parts[0], int(parts[1]), (int(parts[2]) if len(parts) > 2 else None)
 
 
+def parse_divergence(spec: str | None = None) -> tuple[str, int, int]:
+    """``EYEMECH_TEST_DIVERGE`` as (kind, step, rank); ("", 0, -1) when unset."""
+    spec = os.environ.get(DIVERGE_ENV, "") if spec is None else spec
+    if not spec:
+        return "", 0, -1
+    kind, step, rank = spec.split(":")
+    if kind not in ("collective", "decision", "hang"):
+        raise ValueError(f"{DIVERGE_ENV}={spec}: the kind is collective, decision or hang")
+    return kind, int(step), int(rank)
+
+
 def collective_error(error: BaseException | None) -> bool:
     """Whether ``error`` is raised on every rank alike (or is no error at all)."""
     if error is None:
         return True
     from eyemech.meshes import MeshError
     from eyemech.problems.run.checkpoint import CheckpointError, Interrupted
+    from eyemech.problems.run.lockstep import RanksDiverged
     from eyemech.problems.run.newton import SolveFailure
     from eyemech.problems.run.parameters import ParameterError
 
     return isinstance(error, (SolveFailure, Interrupted, ParameterError, MeshError,
-                              CheckpointError, KeyboardInterrupt, SystemExit))
+                              CheckpointError, RanksDiverged, KeyboardInterrupt, SystemExit))
 
 
 def propagating() -> BaseException | None:
@@ -85,15 +122,31 @@ def abort(comm, error: BaseException | None = None) -> None:
     from mpi4py import MPI
 
     world = MPI.COMM_WORLD
-    text = "".join(traceback.format_exception(error)) if error is not None \
-        else traceback.format_exc()
+    error = error if error is not None else sys.exc_info()[1]
     sys.stdout.flush()
-    print(f"eyemech: rank {world.rank} of {world.size} failed:\n{text}", file=sys.stderr,
-          flush=True)
+    if output_error(error):
+        print(f"eyemech: rank {world.rank} of {world.size}: {describe_output_error(error)}",
+              file=sys.stderr, flush=True)
+    else:
+        text = "".join(traceback.format_exception(error)) if error is not None \
+            else traceback.format_exc()
+        print(f"eyemech: rank {world.rank} of {world.size} failed:\n{text}", file=sys.stderr,
+              flush=True)
     # mpiexec forwards each rank's output through its proxies; MPI_Abort tears them down,
     # and output still in transit is lost (seen: an empty stderr). Give it a moment.
     time.sleep(ABORT_GRACE_SECONDS)
-    (comm or world).Abort(EXIT_RANK_FAILED)
+    (comm or world).Abort(EXIT_OUTPUT if output_error(error) else EXIT_RANK_FAILED)
+
+
+def abort_with_message(text: str) -> None:
+    """Print ``text`` as this rank's reason and end the whole job with ``MPI_Abort``."""
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    sys.stdout.flush()
+    print(f"eyemech: rank {world.rank} of {world.size}: {text}", file=sys.stderr, flush=True)
+    time.sleep(ABORT_GRACE_SECONDS)  # see abort()
+    world.Abort(EXIT_RANK_FAILED)
 
 
 def abort_if_stranding(comm, error: BaseException | None = None) -> None:

@@ -48,7 +48,8 @@ class FieldWriter:
 
     def write(self, time: float) -> None:
         for writer in self._writers:
-            writer.write(time)
+            with self._failing(writer):
+                writer.write(time)
         for group, series in self._series:  # collective: every rank gathers
             series.write(time, gather_grid(group[0], {f.name: f for f in group[1:]}))
 
@@ -59,18 +60,67 @@ class FieldWriter:
         from eyemech.problems.run.faults import abort_if_stranding
 
         abort_if_stranding(self.comm, error)
-        for writer in self._writers:
-            writer.close()
-        self._writers = []
         for _, series in self._series:
             self.files += [f for f in series.files if f not in self.files]
         self._series = []
+        writers, self._writers = self._writers, []
+        for writer in writers:
+            with self._failing(writer):
+                writer.close()
+
+    @contextlib.contextmanager
+    def _failing(self, writer):
+        """ADIOS2 reports a write it cannot do (a full disk) as a RuntimeError, and its
+        writer's destructor tries the same write again and throws, which ends the process
+        with SIGABRT: such a writer is retired (kept alive to the end of the process, see
+        :func:`_retire`) and the error raised as the OSError it is."""
+        try:
+            yield
+        except RuntimeError as err:
+            if writer in self._writers:
+                self._writers.remove(writer)
+            _retire(writer)
+            raise _as_os_error(err) from None
 
     def __enter__(self):
         return self
 
     def __exit__(self, kind, error, tb):
         self.close(error)
+
+
+# writers whose files could not be written: never destroyed (see FieldWriter._failing)
+_RETIRED: list = []
+
+
+def _retire(writer) -> None:
+    """Keep ``writer``'s C++ object alive for good: one reference more than Python will
+    ever release, so its destructor (which would repeat the failed write and abort) never
+    runs, not even when the interpreter exits (tests/test_faults.py, full disk)."""
+    import ctypes
+
+    cpp = getattr(writer, "_cpp_object", writer)
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(cpp))
+    _RETIRED.append(cpp)
+
+
+def _as_os_error(error: RuntimeError) -> Exception:
+    """ADIOS2's "couldn't write to file F : errno = N: ..." as OSError(N, ..., F); one
+    without a number ("couldn't close file F, in call to fstream close", also a full
+    disk) as EIO. Other errors as they are."""
+    import errno as errnos
+    import re
+
+    text = re.sub(r"\x1b\[[0-9;]*m", "", str(error))
+    name = re.search(r"couldn't \w+(?: to)? file ([^\s,]+)", text)
+    found = re.search(r"errno = (\d+)", text)
+    if found:
+        number = int(found.group(1))
+        return OSError(number, os.strerror(number) if number in errnos.errorcode else text,
+                       name.group(1) if name else None)
+    if name:
+        return OSError(errnos.EIO, "ADIOS2 could not write it (a full disk?)", name.group(1))
+    return error
 
 
 def region_data(cell_tags, cells: int) -> np.ndarray:
@@ -206,12 +256,47 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
         getattr(plotter, f"view_{camera}")()
     else:  # a direction to look from
         plotter.view_vector(camera)
-    tmp = Path(path).with_suffix(".tmp.png")
-    plotter.screenshot(str(tmp))
-    plotter.close()
-    if scene:
-        tag_picture(tmp, scene, parameters or {}, title)
-    os.replace(tmp, path)
+    tag = (lambda tmp: tag_picture(tmp, scene, parameters or {}, title)) if scene else None
+    try:
+        save_screenshot(plotter, Path(path), tag)
+    finally:
+        plotter.close()
+
+
+def save_screenshot(plotter, path: Path, before_rename=None) -> None:
+    """``plotter``'s picture in ``path``, whole or not at all: written beside it (and
+    ``before_rename(tmp)`` applied to it) and renamed; a failed write (a full disk) leaves
+    no partial file and names ``path``."""
+    tmp = path.with_suffix(".tmp.png")
+    try:
+        plotter.screenshot(str(tmp))
+        if before_rename is not None:
+            before_rename(tmp)
+        os.replace(tmp, path)
+    except BaseException as err:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if isinstance(err, OSError) and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
+
+
+def vtu_bytes(grid) -> bytes:
+    """``grid`` as a ``.vtu`` file's bytes, as pyvista's ``save`` writes it (binary data,
+    zlib-compressed), made in memory: VTK's XML writer that fails to write a file (a full
+    disk) corrupts the heap (seen: "double free or corruption", SIGSEGV), so the bytes
+    are written by Python, which raises an OSError naming the file instead."""
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+    writer = vtkXMLUnstructuredGridWriter()
+    writer.SetInputData(grid)
+    writer.SetDataModeToBinary()
+    writer.SetCompressorTypeToZLib()
+    writer.WriteToOutputStringOn()
+    if not writer.Write():
+        raise RuntimeError("VTK could not serialise the grid")
+    return writer.GetOutputStdString().encode("latin-1") \
+        if hasattr(writer, "GetOutputStdString") else writer.GetOutputString().encode("latin-1")
 
 
 PICTURE_KEY = "eyemech"
@@ -271,9 +356,9 @@ class PyvistaSeries:
         if self.out is None or self.comm.rank != 0 or grid is None:
             return
         name = f"{self.stem}_{len(self.entries):04d}.vtu"
-        tmp = self.out / f".{name}.tmp.vtu"
-        grid.save(str(tmp))
-        os.replace(tmp, self.out / name)
+        from eyemech.problems.run.results import write_bytes_atomic
+
+        write_bytes_atomic(self.out / name, vtu_bytes(grid))
         self.entries.append((time, name))
         datasets = "\n".join(f'    <DataSet timestep="{t:.9g}" part="0" file="{n}"/>'
                              for t, n in self.entries)

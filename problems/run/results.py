@@ -150,6 +150,9 @@ class Result:
 
     scene: str
     parameters: dict[str, Any]
+    # the run's identity: a hash of the scene and its parameters (problems/run/identity.py),
+    # also in run.json and in every checkpoint
+    run_id: str = ""
     quantities: dict[str, Any] = dataclasses.field(default_factory=dict)
     steps: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -167,6 +170,10 @@ class Result:
     solver_counts: dict[str, int] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if not self.run_id:
+            from eyemech.problems.run.identity import run_id
+
+            self.run_id = run_id(self.scene, self.parameters)
         self._counts_at_start = SOLVER_COUNTS.copy()
         self._criteria_at_start = len(STOPPING_CRITERIA)
 
@@ -252,33 +259,45 @@ def _temporary(path: Path) -> tuple[int, str]:
     return fd, tmp
 
 
-def write_json_atomic(path: str | Path, data: Any) -> None:
-    """Write JSON so that readers see the old file or the whole new one, never a part."""
+def write_bytes_atomic(path: str | Path, data: bytes) -> None:
+    """``data`` in ``path``, whole or not at all (a temporary file beside it, renamed); an
+    error (a full disk) names ``path`` and leaves no temporary file."""
     path = Path(path)
     fd, tmp = _temporary(path)
     try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(data, handle, indent=2)
-            handle.write("\n")
-            handle.flush()
-            os.fsync(handle.fileno())
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
         raise
 
 
-def write_text_atomic(path: str | Path, text: str) -> None:
+def write_json_atomic(path: str | Path, data: Any) -> None:
+    """Write JSON so that readers see the old file or the whole new one, never a part."""
+    write_text_atomic(path, json.dumps(data, indent=2) + "\n", sync=True)
+
+
+def write_text_atomic(path: str | Path, text: str, sync: bool = False) -> None:
+    """Write ``text`` so that readers see the old file or the whole new one; an error
+    (a full disk) names ``path`` and leaves no temporary file."""
     path = Path(path)
     fd, tmp = _temporary(path)
     try:
         with os.fdopen(fd, "w") as handle:
             handle.write(text)
+            if sync:
+                handle.flush()
+                os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.filename is None:
+            raise OSError(err.errno, err.strerror, str(path)) from err
         raise
 
 
@@ -301,6 +320,7 @@ class OutputFolder:
         self.lock = self.folder / LOCK_NAME
         self.held = False
         self.created = False
+        self.made: list[Path] = []
 
     def acquire(self) -> "OutputFolder":
         from eyemech.problems.run.parameters import ParameterError
@@ -318,11 +338,17 @@ class OutputFolder:
 
     def _acquire(self) -> None:
         folder = self.folder
-        for parent in (folder, *folder.parents):
-            if parent.exists() and not parent.is_dir():
-                where = "is a file" if parent == folder else f"is under the file {parent}"
-                raise ValueError(f"{folder} {where}; the output goes to a folder")
-        self.created = not folder.exists()
+        try:
+            for parent in (folder, *folder.parents):
+                if parent.exists() and not parent.is_dir():
+                    where = "is a file" if parent == folder else f"is under the file {parent}"
+                    raise ValueError(f"{folder} {where}; the output goes to a folder")
+            # the folders this run makes (the folder and missing parents, innermost first):
+            # bad input found later removes them again
+            self.made = [p for p in (folder, *folder.parents) if not p.exists()]
+        except OSError as err:  # e.g. a name too long for the file system
+            raise ValueError(f"cannot use {folder}: {err.strerror or err}") from None
+        self.created = bool(self.made)
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -363,7 +389,8 @@ class OutputFolder:
                     os.unlink(self.lock)
             if remove_if_empty and self.created:
                 with contextlib.suppress(OSError):
-                    self.folder.rmdir()  # fails, as it should, when anything is in it
+                    for made in self.made:
+                        made.rmdir()  # fails, as it should, when anything is in it
         self.held = False
 
 

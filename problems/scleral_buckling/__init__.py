@@ -98,10 +98,14 @@ def _refuse_other_layouts(ctx: RunContext) -> None:
         return
     saved = meta.get("values", {}).get("state_layout")
     if saved != STATE_LAYOUT:
+        # the folder stays the interrupted run's (problems/run/identity.py): a new run goes
+        # elsewhere or after its checkpoints are removed
+        folder = Path(meta.get("_folder", ctx.out / "checkpoints" / "ckpt")).parent
         raise CheckpointError(
             f"checkpoint {meta.get('_folder')} was written with another layout of "
             f"scleral-buckling's state ({saved or 'unnamed'}; this version reads "
-            f"{STATE_LAYOUT}) and cannot be resumed: start the run again")
+            f"{STATE_LAYOUT}) and cannot be resumed: start the run again in another "
+            f"folder, or remove {folder}")
 
 
 def slide_note(measured: dict, params: Parameters) -> str:

@@ -5,13 +5,18 @@ the buckle's outline (:meth:`eyemech.forms.buckle.Buckle.outline`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from pathlib import Path
+
+import numpy as np
 
 from eyemech.problems.run.output import (
     add_legend,
     gather_grid,
     region_data,
     render_png,
+    save_screenshot,
 )
 
 
@@ -33,9 +38,11 @@ class Writer:
                               lambda saved: self.series.entries.__setitem__(
                                   slice(None), [tuple(e) for e in saved]))
 
-    def state(self, load: float, stage: int, name: str = "reference", picture: bool = False) -> None:
+    def state(self, load: float, stage: int, name: str = "reference", picture: bool = False,
+              measured: dict | None = None) -> None:
         """The state at path value ``load``, stage number ``stage`` (0: before any), named
-        ``name`` in its pictures (drawn when ``picture``)."""
+        ``name`` in its pictures (drawn when ``picture``; ``measured``: the stage's
+        measurements, whose rim gap and IOP the section's title states)."""
         if self.ctx.field_dir is None and not self.pictures:  # --no-fields --no-pictures
             return
         with self.ctx.timings("output"):
@@ -55,47 +62,142 @@ class Writer:
                 # the outline reads distributed unknowns (collective): every rank computes
                 # it, only rank 0 (which holds the gathered grid) draws
                 outline = self.model.buckle.outline()
+                marks = self._marks()
+                whole, section = self._picture_paths(stage, name)
                 if grid is not None:
-                    self._pictures(grid, stage, name, outline)
+                    self._pictures(grid, stage, name, outline, marks, measured or {})
+                # the names on every rank: the ranks' results agree (docs/parallel.md)
+                self.ctx.result.pictures += [whole.name, section.name]
 
-    def _pictures(self, grid, stage: int, name: str, outline) -> None:
+    def _picture_paths(self, stage: int, name: str):
         out = self.ctx.out
-        whole = out / f"step{stage}_{name}_von_mises.png"
-        render_png(grid, whole, scalars="von_mises (MPa)", warp="displacement", camera=(0.6, 1.0, 0.35),
-                   title=f"step {stage} ({name}): von Mises stress (MPa)", show_undeformed=False,
-                   cmap="inferno")
-        section = out / f"step{stage}_{name}_section.png"
-        self._section(grid, section, f"step {stage} ({name}): section through the tear", outline)
-        self.ctx.result.pictures += [whole.name, section.name]
+        return out / f"step{stage}_{name}_von_mises.png", out / f"step{stage}_{name}_section.png"
 
-    def _section(self, grid, path, title: str, outline) -> None:
-        """The symmetry plane x = 0 seen from −x, zoomed on the buckle, with the
-        buckle's outline drawn at its current position."""
+    def _marks(self) -> dict:
+        """What the section marks, from values every rank holds (collective): the tear
+        rim's nodes (global numbers) and, on the section's meridian, the sutures' bites
+        and where each leaves the buckle."""
+        sutures = self.model.sutures
+        anchors = sutures.anchors()
+        in_plane = [k for k, bite in enumerate(sutures.bites) if abs(bite[0]) < 1e-9]
+        gaps = self.model.gaps
+        rim = gaps.rim_nodes() if gaps.pairing is not None else np.zeros(0, dtype=np.int64)
+        return {"rim": rim, "bites": np.array([sutures.bites[k][2] for k in in_plane]).reshape(-1, 3),
+                "anchors": np.asarray(anchors)[in_plane].reshape(-1, 3)}
+
+    def _pictures(self, grid, stage: int, name: str, outline, marks: dict, measured: dict) -> None:
+        whole, section = self._picture_paths(stage, name)
+        parameters = dataclasses.asdict(self.model.params)
+        title = f"step {stage} ({name}): von Mises stress (MPa)"
+        render_png(grid, whole, scalars="von_mises (MPa)", warp="displacement", camera=(0.6, 1.0, 0.35),
+                   title=title, show_undeformed=False, cmap="inferno", scene=SCENE_NAME,
+                   parameters=parameters)
+        self._section(grid, section, _section_title(stage, name, measured), outline, marks, parameters)
+
+    def _section(self, grid, path, title: str, outline, marks: dict, parameters: dict) -> None:
+        """The symmetry plane x = 0 (the tear's meridian) seen from −x, zoomed on the
+        buckle: the tissues by name, the buckle's outline, the tear's rim, the sutures
+        that lie in the plane, a 2 mm scale and which way is anterior and outside."""
         import pyvista
 
-        from eyemech.problems.run.output import quiet_vtk
+        from eyemech.problems.run.output import quiet_vtk, tag_picture
 
         quiet_vtk()
         buckle = self.model.buckle
         # a slice just inside the symmetry plane: the layers, the subretinal gap, the tear
         section = grid.slice(normal=(1.0, 0.0, 0.0), origin=(0.02, 0.0, 0.0))
         warped = section.warp_by_vector("displacement")
+        names = dict(zip(grid.field_data["tissue_tags"].tolist(), grid.field_data["tissue_names"].tolist()))
+        shown = sorted(set(np.asarray(warped.cell_data["tissue"]).tolist()) & set(names))
+        # tissues as categories: each tag its colour and its name in the legend
+        warped.cell_data["tissue_index"] = np.searchsorted(shown, warped.cell_data["tissue"])
         plotter = pyvista.Plotter(off_screen=True, window_size=(1000, 800))
-        plotter.add_mesh(warped, scalars="c", show_edges=True, cmap="tab10", log_scale=True,
-                         scalar_bar_args={"title": "tissue c (MPa)"})
+        plotter.add_mesh(warped, scalars="tissue_index", show_edges=True, cmap="tab10",
+                         n_colors=max(len(shown), 1), show_scalar_bar=False)
+        plotter.add_legend([(names[tag].replace("_", " "), color) for tag, color in
+                            zip(shown, _category_colors(len(shown)))], bcolor="white",
+                           size=(0.2, 0.035 * len(shown) + 0.02), loc="lower left")
         if outline is not None:
-            plotter.add_lines(outline, color="red", width=4)
+            plotter.add_lines(outline, color="red", width=4, label="buckle")
+        moved = grid.points + grid.point_data["displacement"]
+        in_front = -1.0  # overlays between the camera (at x = −30) and the section
+        rim = moved[marks["rim"]]
+        rim = rim[np.abs(grid.points[marks["rim"], 0]) < 0.3]  # the rim's nodes on the section
+        if len(rim):
+            plotter.add_points(_onto(rim, in_front), color="yellow", point_size=14,
+                               render_points_as_spheres=True)
+            plotter.add_point_labels(_onto(rim[:1], in_front), ["tear's rim"], font_size=14,
+                                     shape_opacity=0.6, always_visible=True)
+        if len(marks["bites"]):
+            nearest = np.argmin(np.linalg.norm(grid.points[None] - marks["bites"][:, None], axis=2), axis=1)
+            bites = _onto(moved[nearest], in_front)
+            plotter.add_points(bites, color="limegreen", point_size=12, render_points_as_spheres=True)
+            for bite, anchor in zip(bites, _onto(marks["anchors"], in_front)):
+                plotter.add_lines(np.array([bite, anchor]), color="limegreen", width=3)
+            plotter.add_point_labels(bites[:1], ["suture"], font_size=14, shape_opacity=0.6,
+                                     always_visible=True)
         centre_y = self.model.geometry.sclera_radius * math.sin(math.radians(buckle.angle))
+        _scale_and_directions(plotter, (in_front, centre_y - 3.5, buckle.axial_position - 5.3))
         plotter.camera.focal_point = (0.0, centre_y, buckle.axial_position)
         plotter.camera.position = (-30.0, centre_y, buckle.axial_position)
         plotter.camera.up = (0.0, 0.0, 1.0)
         plotter.camera.parallel_projection = True
         plotter.camera.parallel_scale = 6.0
         plotter.add_text(title, font_size=11)
-        plotter.screenshot(str(path))
-        plotter.close()
+        try:
+            save_screenshot(plotter, Path(path),
+                            lambda tmp: tag_picture(tmp, SCENE_NAME, parameters, title))
+        finally:
+            plotter.close()
 
     def close(self) -> None:
         self.vtx.close()
         self.ctx.result.fields = self.earlier + self.vtx.files + self.series.files
 
+
+
+SCENE_NAME = "scleral-buckling"
+
+
+def _section_title(stage: int, name: str, measured: dict) -> str:
+    """The stage, and what a surgeon reads off the section: the tear's rim gap (closed or
+    open) and the IOP."""
+    title = f"step {stage} ({name}): section through the tear"
+    if "tear_rim_gap_max_mm" in measured and np.isfinite(measured["tear_rim_gap_max_mm"]):
+        state = "closed" if measured.get("tear_closed") else "open"
+        title += f"\nrim gap {measured['tear_rim_gap_max_mm']:.3f} mm ({state})"
+        if "iop_mmHg" in measured:
+            title += f", IOP {measured['iop_mmHg']:.0f} mmHg"
+    return title
+
+
+def _onto(points: np.ndarray, x: float) -> np.ndarray:
+    """``points`` moved onto the plane x = ``x`` (in front of the section, towards the camera)."""
+    points = np.array(points, dtype=float).reshape(-1, 3)
+    points[:, 0] = x
+    return points
+
+
+def _category_colors(count: int) -> list:
+    """The colours pyvista gives ``count`` categories of the tab10 map (for the legend)."""
+    import matplotlib
+
+    cmap = matplotlib.colormaps["tab10"].resampled(max(count, 1))
+    return [cmap(k)[:3] for k in range(count)]
+
+
+def _scale_and_directions(plotter, corner) -> None:
+    """A 2 mm scale bar from ``corner`` and arrows to anterior (+z) and outside (+y: the
+    section's meridian leaves the axis that way; seen from −x it points left)."""
+    import pyvista
+
+    corner = np.asarray(corner, dtype=float)
+    bar = np.array([corner, corner + (0.0, -2.0, 0.0)])
+    plotter.add_lines(bar, color="black", width=5)
+    plotter.add_point_labels(bar.mean(axis=0, keepdims=True), ["2 mm"], font_size=14,
+                             shape_opacity=0.0, always_visible=True)
+    origin = corner + (0.0, -3.0, 0.8)
+    for direction, label in (((0.0, 0.0, 1.5), "anterior"), ((0.0, 1.5, 0.0), "outside")):
+        plotter.add_mesh(pyvista.Arrow(start=origin, direction=direction, scale=1.5), color="black")
+        plotter.add_point_labels((origin + np.array(direction) * 1.2)[None], [label], font_size=13,
+                                 shape_opacity=0.0, always_visible=True)

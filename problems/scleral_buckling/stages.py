@@ -270,7 +270,8 @@ class Operation:
         if ends:
             self.results[stage.name] = values
         if self.writer is not None:
-            self.writer.state(record.load, stage.number, stage.stage.title, picture=ends)
+            self.writer.state(record.load, stage.number, stage.stage.title, picture=ends,
+                              measured=values)
 
     def register(self, checkpoints) -> None:
         checkpoints.value("stage_results", lambda: self.results,

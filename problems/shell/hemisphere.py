@@ -10,6 +10,7 @@ u_z = 0 at one node of the equator.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Callable, ClassVar
 
 import numpy as np
@@ -19,6 +20,7 @@ from mpi4py import MPI
 from eyemech.forms.shell import Kinematics
 from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems.run.context import RunContext, RunOptions
+from eyemech.problems.run.error_estimate import Refinement, error_estimate_field, estimate_errors
 from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, SOLVER, SceneParameters, field
 from eyemech.problems.shell.model import (
     Shell,
@@ -41,33 +43,66 @@ class HemisphereParameters(SceneParameters, ShellDiscretisation):
     youngs_modulus: float = field(6.825e7, "Young's modulus", "MPa", group=PHYSICS)
     poisson_ratio: float = field(0.3, "Poisson's ratio", group=PHYSICS)
     force: float = field(2.0, "each point load (whole shell)", "N", group=PHYSICS)
-    divisions: int = field(24, "divisions from the equator to the hole (5× as many around)", group=GEOMETRY)
+    divisions: int = field(0, "divisions from the equator to the hole (5× as many around); "
+                              "0 = from cells_per_bending_length", group=GEOMETRY)
+    cells_per_bending_length: float = field(
+        1.2, "elements per bending length √(R h) along the meridian (divisions = 0): the "
+             "faceted P2 shell's membrane locking is a function of it (docs/shell.md, Resolution)",
+        group=GEOMETRY)
     kinematics: Kinematics = field("linear", "linear (the benchmark) or nonlinear", group=PHYSICS)
     load_steps: int = field(10, "initial number of load steps (nonlinear; cut and grown as needed)",
                             group=SOLVER)
+    error_estimate: bool = error_estimate_field()
 
-    RESOLUTION_KEY: ClassVar[str] = "divisions"
+    RESOLUTION_KEY: ClassVar[str] = "cells_per_bending_length"
+
+    def resolution_key(self) -> str:
+        return "divisions" if self.divisions > 0 else self.RESOLUTION_KEY
+
+    @property
+    def meridian_divisions(self) -> int:
+        """``divisions``, or ⌈cells_per_bending_length · meridian / √(R h)⌉ (the meridian from
+        the equator to the hole)."""
+        if self.divisions > 0:
+            return self.divisions
+        meridian = self.radius * math.radians(90.0 - self.hole_angle)
+        return max(2, math.ceil(self.cells_per_bending_length * meridian / bending_length(self) - 1e-9))
 
     @property
     def around(self) -> int:
-        """Divisions around: about 5 × ``divisions``, a multiple of 4."""
-        return 4 * max(1, round(5 * self.divisions / 4))
+        """Divisions around: about 5 × the meridian's, a multiple of 4."""
+        return 4 * max(1, round(5 * self.meridian_divisions / 4))
 
     @property
     def estimated_cells(self) -> int:
-        return self.grid_triangles(self.around, self.divisions)
+        return self.grid_triangles(self.around, self.meridian_divisions)
 
     def validate(self) -> None:
-        self.require_positive("radius", "hole_angle", "divisions", "load_steps")
+        self.require_positive("radius", "hole_angle", "cells_per_bending_length", "load_steps")
+        self.require_nonnegative("divisions")
         check_shell_parameters(self, self.radius)
+
+
+def bending_length(params) -> float:
+    """√(R h): the length over which a shell of radius R and thickness h bends."""
+    return math.sqrt(params.radius * params.thickness)
+
+
+# the meridian twice as coarse; the radial displacements converge at about h² (P2 on flat
+# facets; measured in docs/atlas/shell-resolution.md)
+ESTIMATE = Refinement(keys=("cells_per_bending_length",), order=2.0,
+                      quantities=("radial_displacement_x", "radial_displacement_y"),
+                      overrides=(("cells_per_bending_length", "divisions"),),
+                      size=lambda params: 1.0 / params.meridian_divisions)
 
 
 def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm | None, out,
                    options: RunOptions | None, stops: tuple[float, ...] = (),
-                   on_step: Callable[[dict], None] | None = None):
+                   on_step: Callable[[dict], None] | None = None, rerun: Callable | None = None):
     """The pinched hemisphere (linear in one step, nonlinear along the load path with
     the path landing on ``stops``). ``on_step(values)`` may add entries to each
-    recorded step (e.g. a reference curve). Returns the Result."""
+    recorded step (e.g. a reference curve); ``rerun(params, comm, out, options)`` is the
+    scene's run, for the error estimate's coarse solve. Returns the Result."""
     with RunContext(scene_name, params, comm, out, options) as ctx:
         R, top = params.radius, np.radians(90.0 - params.hole_angle)
         around = params.around
@@ -78,7 +113,8 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
                                         np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
 
         with ctx.timings("mesh"):
-            mesh = mapped_surface(sphere, around, params.divisions, params.diagonal, ctx.comm, weld=True)
+            mesh = mapped_surface(sphere, around, params.meridian_divisions, params.diagonal, ctx.comm,
+                                  weld=True)
             tagged = tag_boundary(mesh, {})
         shell = Shell(tagged, params, lambda x: x)  # outward
         residual = ufl.derivative(shell.energy(params.kinematics), shell.u, shell.v)
@@ -116,11 +152,13 @@ def run_hemisphere(scene_name: str, params: HemisphereParameters, comm: MPI.Comm
         outward_x, inward_y = radial()
         quantities = ctx.result.quantities
         quantities.update(radial_displacement_x=outward_x, radial_displacement_y=inward_y,
-                          dofs=shell.dofs())
+                          dofs=shell.dofs(), divisions=params.meridian_divisions)
         if params.kinematics == "linear":
             linear_reference = REFERENCE * params.force / 2.0  # 0.093 is for the load 2
             quantities.update(radial_displacement_reference=linear_reference,
                               radial_displacement_error=outward_x / linear_reference - 1.0)
+        if params.error_estimate and rerun is not None:
+            estimate_errors(ctx, rerun, params, ESTIMATE)
         if ctx.pictures:
             with ctx.timings("output"):
                 scale = 1.0 if params.kinematics == "nonlinear" else 10.0

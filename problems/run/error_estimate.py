@@ -1,0 +1,139 @@
+"""Richardson's estimate of a run's discretisation error (``--set error_estimate=true``).
+
+A scene that offers it solves its problem a second time on a mesh ``ratio`` times coarser
+(the same parameters with its resolution parameter divided by ``ratio``: ``Refinement``)
+and reports, for each main quantity q, with q_h the run's value, q_H the coarse one,
+r = H/h the ratio of their element sizes and p the order at which q converges (measured
+in the scene's convergence study; where that order varies over the parameter range, the
+lowest measured):
+
+    q_extrapolated   = q_h + (q_h − q_H) / (r^p − 1)     (Richardson)
+    q_error_estimate = |q_h − q_H| / (r^p − 1)            (≈ |q_converged − q_h|)
+
+as flat quantities beside q in results.json (so that ``eyemech sweep`` puts them in
+sweep.csv), with ``error_estimate_ratio`` (r) and ``error_estimate_order`` (p). The
+coarse solve is counted in the run's solver counts and timed as ``error_estimate``; it
+writes no fields or pictures. Should it fail (Newton), the estimates are null and
+``error_estimate_note`` says why; the run's own quantities stand. docs/cli.md, "Error
+estimates", lists the scenes and their quantities.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Callable
+
+from eyemech.problems.run.parameters import SOLVER, field
+
+
+def error_estimate_field() -> Any:
+    """The ``error_estimate`` parameter of the scenes that offer the estimate."""
+    return field(False, "also solve on a coarser mesh and report Richardson's estimate of the "
+                 "discretisation error of the main quantities as <quantity>_error_estimate and "
+                 "<quantity>_extrapolated (docs/cli.md, Error estimates)", group=SOLVER)
+
+
+@dataclasses.dataclass(frozen=True)
+class Refinement:
+    """How a scene's estimate is made: ``keys`` are the parameters that set the mesh, each
+    coarsened by ``ratio`` for the second solve: an element size (a name ending in
+    ``size``) multiplied, a resolution (cells per a length, divisions) divided (an integer
+    rounded, at least 1). ``overrides`` are pairs (key, other): where ``other`` is set
+    (> 0) it sets the mesh instead of ``key`` and is coarsened in its place. ``order`` is
+    the convergence order of ``quantities`` in the element size; ``size(params)``, when
+    given, is the element size the parameters give, and the actual ratio is that of the
+    two sizes (a rounded number of divisions). ``extrapolate`` False leaves out
+    ``<quantity>_extrapolated`` where the two solves are not in the asymptotic range (the
+    estimate then only bounds the error)."""
+
+    keys: tuple[str, ...]
+    order: float
+    quantities: tuple[str, ...]
+    ratio: float = 2.0
+    overrides: tuple[tuple[str, str], ...] = ()
+    size: Callable[[Any], float] | None = None
+    extrapolate: bool = True
+
+    def coarse(self, params):
+        """``params`` on the coarser mesh, without the estimate."""
+        overrides = dict(self.overrides)
+        changes = {}
+        for key in self.keys:
+            other = overrides.get(key)
+            name = other if other is not None and getattr(params, other) > 0 else key
+            changes[name] = _coarsen(name, getattr(params, name), self.ratio)
+        return dataclasses.replace(params, **changes, error_estimate=False)
+
+    def actual_ratio(self, params, coarse) -> float:
+        if self.size is not None:
+            return self.size(coarse) / self.size(params)
+        return self.ratio
+
+
+def _coarsen(name: str, value, ratio: float):
+    if name.endswith("size"):
+        return value * ratio
+    return max(1, round(value / ratio)) if isinstance(value, int) else value / ratio
+
+
+def richardson(fine: float, coarse: float, ratio: float, order: float) -> tuple[float, float]:
+    """(extrapolated value, error estimate |q_converged − fine|) from two solutions whose
+    element sizes differ by ``ratio``, for a quantity converging at ``order``."""
+    correction = (fine - coarse) / (ratio ** order - 1.0)
+    return fine + correction, abs(correction)
+
+
+def estimate_errors(ctx, run: Callable, params, refinement: Refinement) -> dict[str, Any]:
+    """Solve ``run`` again at the coarse resolution (same communicator, quietly) and add
+    the estimates of ``refinement.quantities`` to ``ctx.result.quantities``. Returns what
+    was added."""
+    from eyemech.problems.run.context import RunOptions  # the context imports this module's users
+    from eyemech.problems.run.newton import SolveFailure
+
+    coarse = refinement.coarse(params)
+    ratio = refinement.actual_ratio(params, coarse)
+    options = RunOptions(quiet=True, fields=False, pictures=False, newton=ctx.options.newton)
+    added: dict[str, Any] = {"error_estimate_ratio": ratio, "error_estimate_order": refinement.order}
+    quantities = ctx.result.quantities
+    with ctx.timings("error_estimate"):
+        try:
+            coarse_quantities = run(coarse, comm=ctx.comm, out=None, options=options).quantities
+            note = ""
+        except SolveFailure as failure:
+            coarse_quantities, note = {}, f"the coarse solve failed: {failure}"
+    for name in refinement.quantities:
+        fine, rough = quantities.get(name), coarse_quantities.get(name)
+        if _number(fine) and _number(rough) and ratio > 1.0:
+            extrapolated, estimate = richardson(fine, rough, ratio, refinement.order)
+        else:
+            extrapolated = estimate = None
+        added[f"{name}_error_estimate"] = estimate
+        if refinement.extrapolate:
+            added[f"{name}_extrapolated"] = extrapolated
+    if note:
+        added["error_estimate_note"] = note
+    quantities.update(added)
+    return added
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def extrapolate(values, sizes, order: float = 2.0, bounds: tuple[float, float] = (1.0, 4.0)
+                ) -> tuple[float, float]:
+    """(extrapolated value, order) from solutions on meshes of element ``sizes`` (any
+    order of listing): with three or more, the finest three give the observed order
+    (clipped to ``bounds``) where they converge monotonically, else ``order`` is used;
+    with two, ``order``. The reference of a convergence study."""
+    pairs = sorted(zip(sizes, values), reverse=True)[-3:]
+    h = [p[0] for p in pairs]
+    q = [p[1] for p in pairs]
+    if len(q) < 2:
+        raise ValueError("Richardson's extrapolation needs two solutions at least")
+    if len(q) == 3 and (q[0] - q[1]) * (q[1] - q[2]) > 0:
+        observed = math.log((q[0] - q[1]) / (q[1] - q[2])) / math.log(math.sqrt(h[0] / h[2]))
+        order = min(bounds[1], max(bounds[0], observed))
+    value, _ = richardson(q[-1], q[-2], h[-2] / h[-1], order)
+    return value, order

@@ -1,0 +1,163 @@
+"""Every scene at its defaults on 1, 2 and 3 ranks: wall time and the largest relative
+difference of its quantities from the serial run (``make bench-mpi``).
+
+    python scripts/bench_mpi.py [--ranks 1,2,3] [--scenes a,b] [--out docs/bench]
+
+Each run is ``mpiexec -n N eyemech run NAME --json --quiet`` with the scene's defaults
+(fields and pictures on), timed from outside (interpreter start-up included). Writes
+``OUT/mpi-scenes.csv`` (one row per scene and rank count) and ``OUT/mpi-scenes.md``
+(the table docs/parallel.md shows). Left out: ``iol-injection`` (its default folds the
+lens first, 10–20 min serially; ``--scenes iol-injection`` runs it); ``iol-speed``
+measures one core and refuses more ranks (its row records the refusal).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+BIN = Path(sys.executable).parent
+LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
+COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "max_rel_diff", "worst_quantity",
+           "lockstep_wait_max_s", "note")
+
+
+def flat(quantities: dict, prefix: str = "") -> dict[str, object]:
+    out: dict[str, object] = {}
+    for key, value in quantities.items():
+        if isinstance(value, dict):
+            out.update(flat(value, f"{prefix}{key}."))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+def numbers(value) -> list[float]:
+    if isinstance(value, bool) or value is None:
+        return []
+    if isinstance(value, (int, float)):
+        return [float(value)]
+    if isinstance(value, list):
+        return [x for v in value for x in numbers(v)]
+    return []
+
+
+def largest_difference(serial: dict, parallel: dict) -> tuple[float, str]:
+    """The largest relative difference over the numeric quantities (wall-clock ones
+    left out; |a − b| / |a|, 0 where both are below 1e-14), and its key."""
+    worst, where = 0.0, ""
+    ours, theirs = flat(serial), flat(parallel)
+    for key, value in ours.items():
+        if "seconds" in key or "per_second" in key or key not in theirs:
+            continue
+        a, b = numbers(value), numbers(theirs[key])
+        if len(a) != len(b):
+            return math.inf, f"{key} (length {len(a)} vs {len(b)})"
+        for x, y in zip(a, b):
+            if math.isnan(x) and math.isnan(y):
+                continue
+            scale = max(abs(x), abs(y))
+            difference = 0.0 if scale < 1e-14 else abs(x - y) / scale
+            if difference > worst:
+                worst, where = difference, key
+    return worst, where
+
+
+def run(name: str, ranks: int, folder: Path) -> tuple[int, float, dict | None, str]:
+    command = [str(BIN / "eyemech"), "run", name, "--out", str(folder), "--json", "--quiet"]
+    if ranks > 1:
+        command = [str(BIN / "mpiexec"), "-n", str(ranks), *command]
+    start = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True,
+                          env=dict(os.environ, OMP_NUM_THREADS="1"))
+    seconds = time.perf_counter() - start
+    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+    result = json.loads(lines[-1]) if done.returncode == 0 and lines else None
+    said = done.stderr.strip().splitlines()
+    return done.returncode, seconds, result, said[-1] if said and done.returncode else ""
+
+
+def scene_names() -> list[str]:
+    from eyemech.scripts.catalogue import scene_catalogue
+
+    return [entry.name for entry in scene_catalogue()]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--ranks", default="1,2,3")
+    parser.add_argument("--scenes", default="", help="comma-separated (default: all but "
+                        + ", ".join(LEFT_OUT) + ")")
+    parser.add_argument("--out", default="docs/bench")
+    args = parser.parse_args()
+    counts = [int(r) for r in args.ranks.split(",")]
+    names = args.scenes.split(",") if args.scenes else \
+        [n for n in scene_names() if n not in LEFT_OUT]
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="eyemech-bench-mpi-") as scratch:
+        for name in names:
+            serial = None
+            for ranks in counts:
+                code, seconds, result, said = run(name, ranks, Path(scratch) / f"{name}-{ranks}")
+                # the longest any rank waited for the others at a step's end (scenes with
+                # checkpoints; docs/parallel.md, "Ranks in step")
+                waited = (result or {}).get("checkpoints", {}).get("lockstep_wait_max_s", "")
+                row = {"scene": name, "ranks": ranks, "exit_code": code,
+                       "wall_s": round(seconds, 1), "max_rel_diff": "", "worst_quantity": "",
+                       "lockstep_wait_max_s": waited, "note": said[:160]}
+                if ranks == 1:
+                    serial = result
+                elif result is not None and serial is not None:
+                    worst, where = largest_difference(serial["quantities"], result["quantities"])
+                    row.update(max_rel_diff=f"{worst:.1e}", worst_quantity=where)
+                rows.append(row)
+                print(" ".join(f"{k}={row[k]}" for k in COLUMNS), flush=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=COLUMNS)
+    writer.writeheader()
+    writer.writerows(rows)
+    (out / "mpi-scenes.csv").write_text(buffer.getvalue())
+    (out / "mpi-scenes.md").write_text(markdown(rows, counts))
+    return 0 if all(r["exit_code"] == 0 or "measures one core" in r["note"] for r in rows) else 1
+
+
+def markdown(rows: list[dict], counts: list[int]) -> str:
+    by_scene: dict[str, dict[int, dict]] = {}
+    for row in rows:
+        by_scene.setdefault(row["scene"], {})[row["ranks"]] = row
+    head = ["scene", *[f"{r} rank{'s' * (r > 1)} (s)" for r in counts],
+            *[f"max rel. diff. {r} ranks" for r in counts if r > 1]]
+    lines = [f"Every scene at its defaults (`make bench-mpi`, {time.strftime('%Y-%m-%d')}, "
+             f"{platform.node()}, {os.cpu_count()} cpus): wall time of `mpiexec -n N eyemech "
+             "run NAME` (start-up included) and the largest relative difference of any "
+             "quantity from the serial run.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, runs in by_scene.items():
+        cells = [f"`{name}`"]
+        for r in counts:
+            row = runs.get(r)
+            cells.append("" if row is None else f"{row['wall_s']}" if row["exit_code"] == 0
+                         else f"exit {row['exit_code']}")
+        for r in counts:
+            if r > 1:
+                row = runs.get(r, {})
+                diff = row.get("max_rel_diff", "")
+                cells.append(f"{diff} ({row['worst_quantity']})" if diff else "")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
