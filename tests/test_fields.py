@@ -43,7 +43,7 @@ def test_vtx_on_request(tmp_path):
 def test_a_sweep_writes_fields_and_pictures_only_when_asked(tmp_path):
     _run("sweep", *PLATE, "--grid", "q=1,2", "--out", str(tmp_path / "bare"))
     written = {p.name for p in (tmp_path / "bare").rglob("*") if p.is_file()}
-    assert written == {"sweep.csv", "results.json"}
+    assert written == {"sweep.csv", "results.json", "run.json"}  # run.json: each case's identity
     _run("sweep", *PLATE, "--grid", "q=1", "--fields", "--pictures", "--out", str(tmp_path / "all"))
     case = tmp_path / "all" / "case_0000"
     assert (case / "fields.pvd").exists() and list(case.glob("*.png"))
