@@ -53,7 +53,7 @@ class Writer:
             cells = mesh.topology.index_map(3).size_local
             dofmap = tissues.von_mises.field.function_space.dofmap.list[:cells, 0]
             grid = gather_grid(self.model.u, cell_data={
-                "von_mises (MPa)": tissues.von_mises.field.x.array[dofmap],
+                "von_mises": tissues.von_mises.field.x.array[dofmap],
                 "c": tissues.stiffness.x.array[dofmap],
                 "tissue": region_data(self.model.eye.cell_tags, cells)})
             add_legend(grid, self.model.eye.names, mesh.topology.dim)
@@ -88,6 +88,8 @@ class Writer:
     def _pictures(self, grid, stage: int, name: str, outline, marks: dict, measured: dict) -> None:
         whole, section = self._picture_paths(stage, name)
         parameters = dataclasses.asdict(self.model.params)
+        # the picture's bar names the unit; the fields keep the name notebooks read
+        grid.cell_data["von_mises (MPa)"] = grid.cell_data["von_mises"]
         title = f"step {stage} ({name}): von Mises stress (MPa)"
         render_png(grid, whole, scalars="von_mises (MPa)", warp="displacement", camera=(0.6, 1.0, 0.35),
                    title=title, show_undeformed=False, cmap="inferno", scene=SCENE_NAME,
