@@ -93,7 +93,7 @@ def test_eye_with_a_new_buckle_and_sutures_compiles_nothing_after_its_first_case
             buckle_position=12.0 + random.random(), band_width=2.0 + random.random(),
             tire_width=6.5 + random.random(), tire_height=0.8 + 0.4 * random.random(),
             buckle_corner_radius=0.2 + 0.2 * random.random(), tire_arc_deg=80.0 + 20.0 * random.random(),
-            suture_width=9.0 + random.random(), suture_bite_radius=0.8 + 0.4 * random.random(),
+            suture_width=9.0 + random.random(), suture_bite_radius=1.0 + 0.4 * random.random(),
             contact_smoothing=0.002 + 0.002 * random.random())
 
     scleral_buckling.run(case(), comm=MPI.COMM_SELF, options=QUIET)

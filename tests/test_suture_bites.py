@@ -72,3 +72,19 @@ def test_the_bites_deliver_the_asked_pull_on_every_mesh(overrides):
     assert np.linalg.norm(delivered - asked) <= 1e-6 * np.linalg.norm(asked)
     # the mesh does not resolve the bite: the normalisation is not idle
     assert np.max(np.abs(raw - 1.0)) > 1e-3
+
+
+def test_a_bite_narrower_than_the_cells_is_bad_input(tmp_path):
+    """A 0.5 mm bite on the coarse eye's sclera (cells of ~2 mm) has no quadrature point
+    inside it: its pull would vanish (or divide by zero when normalised). The run stops with
+    exit 2 naming suture_bite_radius, where the bites are and what to change, and leaves no
+    folder behind (the run made it; nothing was solved)."""
+    from conftest import run_cli
+
+    out = tmp_path / "run"
+    code, _out, err = run_cli("run", "scleral-buckling", "--set", "resolution=coarse",
+                              "--set", "suture_bite_radius=0.5", "--out", str(out), "--quiet")
+    assert code == 2, err
+    last = err.strip().splitlines()[-1]
+    assert "suture_bite_radius" in last and "finer resolution" in last
+    assert "Traceback" not in err and not out.exists()

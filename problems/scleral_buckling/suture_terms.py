@@ -15,10 +15,11 @@ import numpy as np
 import ufl
 
 from eyemech.forms.buckle import pinned_travel_residual, tire_travel_residual
+from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.scleral_buckling.body import Body
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, RigidBuckle
 from eyemech.problems.scleral_buckling.parameters import Parameters
-from eyemech.problems.solid.sutures import SutureForces, SuturePoint
+from eyemech.problems.solid.sutures import BitesMissed, SutureForces, SuturePoint
 from eyemech.problems.solve.scalars import assemble_scalar
 from eyemech.problems.solve.terms import Control, Term
 
@@ -41,7 +42,14 @@ class Sutures(Term):
         self.forces = SutureForces(body.mesh, body.u.function_space, points, body.sclera_nodes,
                                    params.suture_bite_radius)
         # each bite normalised on this mesh: the half model carries exactly its share
-        self.forces.normalise(body.ds(body.eye.tag("sclera_outer")), body.comm)
+        try:
+            self.forces.normalise(body.ds(body.eye.tag("sclera_outer")), body.comm)
+        except BitesMissed as missed:
+            raise ParameterError("suture_bite_radius", f"{params.suture_bite_radius} mm: "
+                                 f"{len(missed.centres)} bite(s) hold nothing on this mesh (no "
+                                 "quadrature point of the sclera's surface within the bite, at "
+                                 f"{', '.join(_point(c) for c in missed.centres)}); use a wider "
+                                 "bite or a finer resolution") from None
         self.on_tire = [buckle.buckle.part_at(b[0]).is_tire for b in self.bites]
 
     def residual(self, tests):
@@ -196,3 +204,7 @@ class TireRow(Term):
                 "tire_contact_force_N": 2.0 * self.contact_force(),
                 "tire_suture_pull_N": 2.0 * float(self.suture_pull.value),
                 "tire_free": self.free_}
+
+
+def _point(centre) -> str:
+    return "(" + ", ".join(f"{float(x):.2f}" for x in centre) + ") mm"

@@ -31,6 +31,16 @@ class SuturePoint:
     centre: tuple[float, float, float]
 
 
+class BitesMissed(RuntimeError):
+    """Bites whose weight integrates to nothing on the mesh: off the loaded surface, or
+    narrower than its cells (no quadrature point inside the bite)."""
+
+    def __init__(self, centres: list):
+        self.centres = centres
+        super().__init__(f"suture bites off the loaded surface or between its quadrature points: "
+                         f"{centres}")
+
+
 class SutureForces:
     """Force Constants of the sutures, their directions, and their residual term."""
 
@@ -67,7 +77,7 @@ class SutureForces:
         self.mesh_integrals = np.array(values)
         if np.any(self.mesh_integrals <= 0.0):
             missing = [p.centre for p, a in zip(self.points, values) if a <= 0.0]
-            raise RuntimeError(f"suture bites off the loaded surface: {missing}")
+            raise BitesMissed(missing)
         for scale, share, integral in zip(self.scales, self.shares, self.mesh_integrals):
             scale.value = share / integral
 
