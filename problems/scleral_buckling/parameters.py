@@ -197,13 +197,14 @@ class Parameters(NumericalSettings, EyeParameters):
         "hoop tension against the eye, the tire riding under it (docs/scleral_buckling.md, "
         "\"The elastic band\")", group=PHYSICS)
     band_shortening_percent: float = field(
-        BAND_SHORTENING_PERCENT, "shortening=: the length taken out of the band's loop, in % "
-        "of its length as laid on the eye (used unless band_shortening_mm is set)", "%", group=PHYSICS)
+        BAND_SHORTENING_PERCENT, "with buckle_control=shortening, the length taken out of "
+        "the band's loop, in % of its length as laid on the eye (used unless "
+        "band_shortening_mm is set)", "%", group=PHYSICS)
     band_shortening_mm: float = field(
-        0.0, "shortening=: the length taken out of the band's loop through its sleeve; 0: "
+        0.0, "with buckle_control=shortening, the length taken out of the band's loop through its sleeve; 0: "
         "band_shortening_percent sets it", "mm", group=PHYSICS)
     band_modulus_MPa: float = field(
-        BAND_MODULUS, "Young's modulus of the silicone band (shortening=): 3.0, Gent's "
+        BAND_MODULUS, "Young's modulus of the silicone band (buckle_control=shortening): 3.0, Gent's "
         "relation for silicone rubber of Shore A 55 (2.5-3.6 MPa over Shore A 50-60; an "
         "assumption: no measured modulus of a #240 band was found)", "MPa", group=PHYSICS)
 
