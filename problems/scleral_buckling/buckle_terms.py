@@ -53,8 +53,9 @@ class RigidBuckle(Term):
     position as Constants (a sweep over them reuses the compiled residual), its base
     radius (far away until :meth:`place` puts it ``buckle_clearance`` outside the inflated
     sclera), the band's travel (control ``band_travel``) and the tire's (the Real unknown
-    δ_tire). Node-wise it refuses a load step that carries the sclera through it
-    (``Stepping.depth_limit``)."""
+    δ_tire); an elastic band (``buckle_control = shortening``) and the tire under it both
+    travel by that unknown (:class:`.suture_terms.BandRow` its row). Node-wise it refuses
+    a load step that carries the sclera through it (``Stepping.depth_limit``)."""
 
     def __init__(self, body: Body, params: Parameters):
         self.body, self.params = body, params
@@ -105,20 +106,20 @@ class RigidBuckle(Term):
         """The band's radial travel (collective with an elastic band)."""
         return self.tire_travel() if self.elastic_band else float(self.indentation.value)
 
-    def numbers(self) -> Buckle:
+    def numbers(self, travel: float | None = None) -> Buckle:
         """The buckle with its band's travel a number, for the questions asked of it on
         points (depth, outline, suture anchors): an elastic band's travel is a Real
-        unknown in the forms. Collective."""
+        unknown in the forms (``travel``: its value, read when None). Collective."""
         if not self.elastic_band:
             return self.buckle
-        return dataclasses.replace(self.buckle, indentation=self.tire_travel())
+        travel = self.tire_travel() if travel is None else travel
+        return dataclasses.replace(self.buckle, indentation=travel)
 
     def depth_through(self) -> float:
         """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
         fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
         travel = self.tire_travel()
-        buckle = dataclasses.replace(self.buckle, indentation=travel) if self.elastic_band else self.buckle
-        depth = buckle.depth_through(self.body.sclera_outer_positions(), travel)
+        depth = self.numbers(travel).depth_through(self.body.sclera_outer_positions(), travel)
         return self.body.comm.allreduce(float(depth.max()) if len(depth) else -np.inf, op=MPI.MAX)
 
     def outline(self) -> np.ndarray | None:
@@ -126,7 +127,7 @@ class RigidBuckle(Term):
         segments; None before it is placed. Collective (the tire's travel is a
         distributed unknown): every rank must call it."""
         travel = self.tire_travel()
-        return self.numbers().outline(travel) if self.placed else None
+        return self.numbers(travel).outline(travel) if self.placed else None
 
     def install(self, solver) -> None:
         solver.depth_hooks.append(self.depth_through)

@@ -221,7 +221,7 @@ class BandRow(TireRow):
     centreline length at δ over the tire (band_length) and L_set its length as laid
     less the shortening, which control ``band_tightening`` (0 → 1 over buckling) takes
     out. Free from the start: before the band touches the eye its row is the slack
-    band's, δ = the share of the shortening its own length gives up."""
+    band's, T = 0 at δ = ΔL/2π."""
 
     def __init__(self, body: Body, buckle: RigidBuckle, contact: BuckleContact, loop: bool,
                  pull: Callable[[], float], params: Parameters):
