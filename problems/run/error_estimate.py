@@ -15,7 +15,10 @@ sweep.csv), with ``error_estimate_ratio`` (r) and ``error_estimate_order`` (p). 
 coarse solve is counted in the run's solver counts and timed as ``error_estimate``; it
 writes no fields or pictures. Should it fail (Newton), the estimates are null and
 ``error_estimate_note`` says why; the run's own quantities stand. docs/cli.md, "Error
-estimates", lists the scenes and their quantities.
+estimates", lists the scenes and their quantities. A scene whose meshes form a fixed
+ladder, or whose quantities are not in their asymptotic range, reports Roache's grid
+convergence index instead (:func:`grid_convergence_index`: scleral-buckling), from a second
+solve made by :func:`solve_again`.
 """
 
 from __future__ import annotations
@@ -25,7 +28,6 @@ import math
 from typing import Any, Callable
 
 from eyemech.problems.run.parameters import SOLVER, field
-
 
 RICHARDSON_HELP = ("also solve on a coarser mesh and report Richardson's estimate of the "
                    "discretisation error of the main quantities as <quantity>_error_estimate and "
