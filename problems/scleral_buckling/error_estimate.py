@@ -26,8 +26,8 @@ the coarse / default / paper meshes (tests/test_wall_bending_locking.py), so ΔA
 buckling falls 2.484, 2.330, 2.245, 2.240, 2.199 mm at n = 8, 12, 20, 26, 36 with fitted
 orders from 0.6 to 5.2, and the fine end extrapolates at order 1 (docs/scleral_buckling.md,
 "Q2P1 and Q1P0 at equal accuracy"). With p = 2 the default mesh's settled ΔAL band
-(0.100 mm) would end at the paper mesh's value (0.407 − 0.31 mm); with p = 1 it holds it
-(docs/scleral_buckling.md, "Discretisation error").
+(0.100 mm) would hold the paper mesh's value by 0.002 mm (0.407 against 0.309 mm); with
+p = 1 (0.250 mm) it holds it with room (docs/scleral_buckling.md, "Discretisation error").
 
 The rim gap is a contact quantity: a node lands on the choroid or does not, the widest
 node moves between meshes, and its sequence has no order. Its band says how far the two
