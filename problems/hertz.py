@@ -17,8 +17,10 @@ elastic body that is a half-space truncated to a half ball of radius L = ``exten
 about the contact (one quarter, x, y ≥ 0), clamped on its far surface. The body's
 surface is exactly flat, so its only departure from Hertz's half-space is the clamp at
 distance L: it removes the half-space's displacement there, ≈ 0.5 F/(E L) (Boussinesq),
-which stiffens the contact by ≈ 1.2 a/L in F (measured: 1.1 a/L, docs/contact.md §2).
-The default ``extent`` 200 puts that at ≈ 0.6 % at every d/R. Every length of the body and
+which stiffens the contact by ≈ 1.1 a/L in F (estimated and measured: docs/contact.md §2).
+The default ``extent`` 200 puts that at ≈ 0.55 % at every d/R. A far-field spring support
+in place of the clamp cannot be exact: for ν = 0.3 Boussinesq's radial displacement changes
+sign near the free face where the traction does not. Every length of the body and
 the mesh is a multiple of a, so the mesh, the cost and the accuracy are the same for every
 R, E and d (up to what grows with the strain a/R). Compressible neo-Hooke (linear elastic
 with E, ν at these strains), P2 on curved P2 geometry.

@@ -27,7 +27,7 @@ from eyemech.problems.run.context import RunOptions
 QUIET = RunOptions(fields=False, pictures=False)
 
 # F_converged / F_Hertz − 1 at R = 1 mm, E = 1 MPa, ν = 0.3 (any R and E: self-similar),
-# measured once (2026-11-29, the 2-core VM); the clamp at 200 a is ≈ +0.6 % of it (the force
+# measured once (2026-11-29, the 2-core VM); the clamp at 200 a is ≈ +0.55 % of it (the force
 # falls by 0.32 % from extent 200 to 400, docs/contact.md §2), the strain a/R the rest
 CONVERGED = {0.002: 0.00889, 0.005: 0.01025, 0.01: 0.01291, 0.02: 0.01459}
 
