@@ -124,7 +124,7 @@ class Parameters(SceneParameters):
                                               f"exceed the far size {self.far_element_size:.3g} mm")
         if self.extent < 10.0:
             raise ParameterError("extent", f"a body of {self.extent:g} contact radii is no half-space "
-                                           "(the clamp adds ≈ 1.2 a/L to the force): use at least 10")
+                                           "(the clamp adds ≈ 1.1 a/L to the force): use at least 10")
         if self.far_element_size > self.body_radius:
             raise ParameterError("far_size", "is larger than the body")
         cells = self.estimated_cells
