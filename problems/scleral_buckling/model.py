@@ -176,7 +176,7 @@ class BucklingModel:
                      self.tissues, self.sutures, self.nerve_spring):
             if part is not None:
                 out |= part.measure()
-        return out
+        return out | self.gaps.margin(out)
 
     def summary(self) -> dict:
         out = {"dofs": global_dofs(*self.fields),
