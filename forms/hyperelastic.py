@@ -104,6 +104,57 @@ class Yeoh:
         return self.c10 * x + self.c20 * x**2 + self.c30 * x**3
 
 
+@dataclasses.dataclass(frozen=True)
+class TangentialFibres:
+    """A collagenous coat whose stiffening is carried by tension-only fibres in its own
+    surface: a neo-Hookean matrix and fibre families along ``directions`` (unit vectors in
+    the reference configuration, tangent to the coat: :func:`meridian_and_latitude`),
+
+        W = c10 (Ī1 − 3) + c4 Σ_a max(Ī4,a − 1, 0)⁴,    Ī4,a = a·C̄a.
+
+    The switch is max(·, 0), not a smooth ramp: a shortened fibre carries exactly nothing
+    (collagen buckles), so under in-plane compression -- the sclera's hoop strain under a
+    band -- the coat is as soft as its matrix, where Yeoh's c20 (Ī1 − 3)² stiffens it
+    (Ī1 − 3 ≥ 0 for every isochoric strain). The fourth power makes W three times
+    differentiable at the fibre's rest length, so Newton's tangent is continuous across the
+    switch and a smooth ramp would only leak stiffness into compression. In equibiaxial
+    stretch ε of the coat (inflation) Ī1 − 3 ≈ 12 ε² and each family's Ī4 − 1 ≈ 2 ε, so two
+    families with c4 = 4.5 c20 store Yeoh's energy to leading order: the same
+    pressure–volume curve (tests/test_eye_calibration.py, tests/test_living_eye.py). The
+    moduli may be numbers, Constants or cellwise fields (MPa)."""
+
+    c10: float | ufl.core.expr.Expr
+    c4: float | ufl.core.expr.Expr
+    directions: tuple = ()
+
+    @property
+    def shear_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain shear modulus μ = 2 c10 (the quartic fibres stiffen at finite
+        stretch only)."""
+        return 2.0 * self.c10
+
+    @property
+    def youngs_modulus(self) -> float | ufl.core.expr.Expr:
+        """Small-strain Young's modulus of the incompressible law, E = 3μ = 6 c10."""
+        return 3.0 * self.shear_modulus
+
+    def strain_energy(self, F):
+        I1b, _, J = isochoric_invariants(F)
+        Cb = J ** (-2.0 / 3.0) * F.T * F
+        fibres = sum((ufl.max_value(ufl.dot(a, Cb * a) - 1.0, 0.0) ** 4 for a in self.directions), 0.0)
+        return self.c10 * (I1b - 3) + self.c4 * fibres
+
+
+def meridian_and_latitude(X) -> tuple:
+    """Unit vectors along the meridian and the circle of latitude about the z axis (the
+    eye's optic axis) at the reference point ``X``: the fibre directions of a coat of
+    revolution. Undefined on the axis itself, where no quadrature point lies."""
+    rho = ufl.sqrt(X[0] ** 2 + X[1] ** 2)
+    around = ufl.as_vector((-X[1] / rho, X[0] / rho, 0.0))
+    along = ufl.cross(around, X / ufl.sqrt(ufl.dot(X, X)))
+    return (along, around)
+
+
 def incompressible_energy_density(material: Material, F, p):
     """Mixed u–p energy density W(F) + p (J − 1); its stationary point is the
     incompressible equilibrium and p the Lagrange multiplier."""

@@ -33,7 +33,13 @@ from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, Buckle
 from eyemech.problems.scleral_buckling.measures import Optics, RetinaGaps
 from eyemech.problems.scleral_buckling.parameters import Parameters
 from eyemech.problems.scleral_buckling.suture_terms import BandRow, Sutures, TireRow
-from eyemech.problems.scleral_buckling.terms import CavityLiquid, RetinaContact, Tissues, Zonules
+from eyemech.problems.scleral_buckling.terms import (
+    CavityLiquid,
+    OpticNerveSpring,
+    RetinaContact,
+    Tissues,
+    Zonules,
+)
 from eyemech.problems.solid.cavity import real_pressure_space
 from eyemech.problems.solid.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
 from eyemech.problems.solve.driver import NonlinearSolver
@@ -60,7 +66,8 @@ class BucklingModel:
         fields[-2].name, fields[-1].name = "P", "tire_travel"
         metadata = {"quadrature_degree": family.quadrature_degree}
         self.body = body = Body(self.eye, self.geometry, family, fields, self.eye.dx(metadata),
-                                self.eye.ds(metadata), self._boundary_conditions(fields[0]),
+                                self.eye.ds(metadata),
+                                self._boundary_conditions(fields[0], params.optic_nerve_end_spring == 0),
                                 ctx.comm, ctx.timings)
         self.tissues = Tissues(body, params)
         self.liquid = CavityLiquid(body, params)
@@ -82,9 +89,12 @@ class BucklingModel:
         self.zonules = Zonules(body, params) if params.lens else None
         self.retina = RetinaContact(body, params, self.gaps, self.tissues.youngs_modulus("retina")) \
             if params.retina_contact and self.gaps.detached else None
+        self.nerve_spring = OpticNerveSpring(body, params.optic_nerve_end_spring) \
+            if params.optic_nerve_end_spring > 0 else None
         self.terms = [term for term in (self.tissues, self.liquid, self.contact,
                                         self.tie, self.sutures, self.tire, self.buckle,
-                                        self.zonules, self.retina) if term is not None]
+                                        self.zonules, self.retina, self.nerve_spring)
+                      if term is not None]
         self.solver = self._solver(total_residual(self.terms, tests))
         # the formulation's pattern (solid, liquid row and column, zonule bars), before any
         # contact pair: the retina's preallocated pairs and those added at a solve's start
@@ -98,10 +108,13 @@ class BucklingModel:
         self.controls = {name: control for term in self.terms
                          for name, control in term.controls().items()}
 
-    def _boundary_conditions(self, u) -> list:
-        """The symmetry plane x = 0 (through the tear), the optic nerve's end held."""
+    def _boundary_conditions(self, u, clamped: bool) -> list:
+        """The symmetry plane x = 0 (through the tear); the optic nerve's end held
+        (``clamped``) or on a spring (:class:`~.terms.OpticNerveSpring`)."""
         V = u.function_space
         bcs = symmetry_bcs(V, self.eye, {"symmetry": 0})
+        if not clamped:
+            return bcs
         held = dolfinx.fem.locate_dofs_topological(V, 2, self.eye.facets("optic_nerve_end"))
         bcs.append(dolfinx.fem.dirichletbc(np.zeros(3), held, V))
         return bcs
@@ -165,8 +178,9 @@ class BucklingModel:
                 out |= part.measure()
         out |= self.optics.changes(optics, volume, iop) | self.tie.measure() | self.optics.lengths(optics)
         for part in (self.buckle, self.contact, self.tire, self.liquid, self.gaps,
-                     self.tissues, self.sutures):
-            out |= part.measure()
+                     self.tissues, self.sutures, self.nerve_spring):
+            if part is not None:
+                out |= part.measure()
         return out | self.gaps.margin(out)
 
     def summary(self) -> dict:

@@ -22,6 +22,10 @@ from eyemech.problems.scleral_buckling.settings import NumericalSettings
 # docs/scleral_buckling.md "Calibrated eye"); the cornea keeps Table 1's ratio to the sclera
 CALIBRATED_C20_SCLERA = 56.7
 CORNEA_TO_SCLERA = 0.0333 / 0.0833
+# the fibre coats (material = "fibres"): c4 = 4.5 c20 stores the calibrated coats' energy in
+# the coat's equibiaxial stretch (inflation) to leading order (forms/hyperelastic.py,
+# TangentialFibres; docs/scleral_buckling.md, "A living eye's wall")
+FIBRES_PER_YEOH = 4.5
 # MPa/mm: the frictionless buckle's regularising spring, 3.5 times the slide's own
 # stiffness (≈ 8.5e-4 MPa/mm on the coarse eye): docs/scleral_buckling.md,
 # "The frictionless buckle's spring"
@@ -87,10 +91,13 @@ class EyeParameters(SceneParameters):
     c_retina: float = field(0.0008, "neo-Hooke c of the retina", "MPa", group=PHYSICS)
     c_optic_nerve: float = field(0.05, "neo-Hooke c of the optic nerve", "MPa", group=PHYSICS)
     c_lens: float = field(10.0, "neo-Hooke c of the lens (Table 1)", "MPa", group=PHYSICS)
-    material: Literal["table-1", "calibrated"] = field(
+    material: Literal["table-1", "calibrated", "fibres"] = field(
         "table-1", "laws of the coats: table-1, every tissue neo-Hookean with the c_* above "
         "(seed 002, Table 1); calibrated, the sclera and the cornea stiffen with strain by "
-        "c20 (Ī1 − 3)² (fitted to the eye's pressure–volume curve, Pallikaris et al. 2005)", group=PHYSICS)
+        "c20 (Ī1 − 3)² (fitted to the eye's pressure–volume curve, Pallikaris et al. 2005); "
+        "fibres, the same curve from tension-only fibres along the coats' meridians and "
+        "circles of latitude, c4 max(Ī4 − 1, 0)⁴, which leave the coats soft in compression "
+        "(docs/scleral_buckling.md, A living eye's wall)", group=PHYSICS)
     c20_sclera: float = field(
         CALIBRATED_C20_SCLERA, "Yeoh c20 of the sclera (material=calibrated; fitted: "
         "docs/scleral_buckling.md, Calibrated eye)", "MPa", group=PHYSICS)
@@ -209,6 +216,20 @@ class Parameters(NumericalSettings, EyeParameters):
         "relation for silicone rubber of Shore A 55 (2.5-3.6 MPa over Shore A 50-60; an "
         "assumption: no measured modulus of a #240 band was found)", "MPa", group=PHYSICS)
 
+    c4_sclera: float = field(
+        FIBRES_PER_YEOH * CALIBRATED_C20_SCLERA, "fibre modulus c4 of the sclera "
+        "(material=fibres; 4.5 c20_sclera: the calibrated coat's energy in inflation)", "MPa",
+        group=PHYSICS)
+    c4_cornea: float = field(
+        FIBRES_PER_YEOH * CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA, "fibre modulus c4 of the "
+        "cornea (material=fibres; c4_sclera in Table 1's cornea/sclera ratio 0.4)", "MPa",
+        group=PHYSICS)
+    optic_nerve_end_spring: float = field(
+        0.0, "the optic nerve's cut end held by a spring of this stiffness per area (the "
+        "orbit's soft hold on the globe) instead of clamped: the buckle then rides on the "
+        "globe and the posterior segment may lengthen behind it; 0 = clamped "
+        "(docs/scleral_buckling.md, A living eye's wall)", "MPa/mm", group=PHYSICS)
+
     def validate(self) -> None:
         self._validate_signs()
         if not 1 <= self.coat_layers <= MAX_COAT_LAYERS:
@@ -243,12 +264,15 @@ class Parameters(NumericalSettings, EyeParameters):
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
                                  "contact_smoothing", "frictionless_slip_stiffness", "indentation",
                                  "suture_force", "detachment_height", "tear_radius")
-        if self.material == "table-1":
-            for key, default in (("c20_sclera", CALIBRATED_C20_SCLERA),
-                                 ("c20_cornea", CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA)):
-                if getattr(self, key) != default:
-                    raise ParameterError(key, "is used only with material=calibrated (table-1 "
-                                         "is neo-Hookean)")
+        self.require_nonnegative("c4_sclera", "c4_cornea", "optic_nerve_end_spring")
+        for key, default, material in (
+                ("c20_sclera", CALIBRATED_C20_SCLERA, "calibrated"),
+                ("c20_cornea", CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA, "calibrated"),
+                ("c4_sclera", FIBRES_PER_YEOH * CALIBRATED_C20_SCLERA, "fibres"),
+                ("c4_cornea", FIBRES_PER_YEOH * CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA, "fibres")):
+            if self.material != material and getattr(self, key) != default:
+                raise ParameterError(key, f"is used only with material={material} (the coats "
+                                     f"are {self.material}'s)")
         if self.buckle_attachment == "sutured" \
                 and self.frictionless_slip_stiffness != FRICTIONLESS_SLIP_STIFFNESS:
             raise ParameterError("frictionless_slip_stiffness", "is used only with "
@@ -430,3 +454,7 @@ class Parameters(NumericalSettings, EyeParameters):
     def stiffening(self) -> dict[str, float]:
         """Yeoh c20 per tissue of the calibrated coats (0 elsewhere)."""
         return {"sclera": self.c20_sclera, "cornea": self.c20_cornea}
+
+    def fibre_stiffness(self) -> dict[str, float]:
+        """Fibre modulus c4 per tissue of the fibre coats (0 elsewhere)."""
+        return {"sclera": self.c4_sclera, "cornea": self.c4_cornea}

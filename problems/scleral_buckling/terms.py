@@ -6,10 +6,13 @@ its checkpoint state, its measurements, its controls."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import dolfinx
 import dolfinx.fem
 import dolfinx.mesh
 import numpy as np
+import ufl
 from mpi4py import MPI
 
 from eyemech.forms import (
@@ -24,6 +27,7 @@ from eyemech.forms import (
 )
 from eyemech.forms.cavity import held_liquid
 from eyemech.forms.contact import default_penalty
+from eyemech.forms.hyperelastic import TangentialFibres, meridian_and_latitude
 from eyemech.meshes.eye import zonule_pairs
 from eyemech.problems.contact.node_to_surface import NodeToSurfaceContact
 from eyemech.problems.run.parameters import MMHG
@@ -32,7 +36,7 @@ from eyemech.problems.scleral_buckling.parameters import Parameters
 from eyemech.problems.scleral_buckling.venting import venting_route
 from eyemech.problems.solid.cavity import VentedCavity, check_closed
 from eyemech.problems.solid.mean_dilatation import MeanDilatation
-from eyemech.problems.solid.probes import CellField
+from eyemech.problems.solid.probes import CellField, NodeProbe, facet_nodes
 from eyemech.problems.solid.residual import solid_residual
 from eyemech.problems.solid.zonules import ZonuleBars
 from eyemech.problems.solve.scalars import assemble_scalar
@@ -46,16 +50,23 @@ RETINA_PATTERN_REACH = 0.5
 class Tissues(Term):
     """The incompressible tissues: neo-Hooke, W = c (Ī1 − 3), with c per tissue (paper
     Table 1) in a cellwise field, or (``material = "calibrated"``) Yeoh with the stiffening
-    c20 (Ī1 − 3)² in the sclera and the cornea; incompressible by a pressure multiplier
+    c20 (Ī1 − 3)² in the sclera and the cornea, or (``material = "fibres"``) tension-only
+    fibres c4 max(Ī4 − 1, 0)⁴ along their meridians and circles of latitude;
+    incompressible by a pressure multiplier
     (Q1P0 or Q2P1), Q1P0's DG0 pressure mixed or condensed cell by cell, p̄ = κ (J̄ − 1)
     with κ a fixed multiple of each tissue's shear modulus (``condensed_bulk_ratio``)."""
 
     def __init__(self, body: Body, params: Parameters):
         self.body, self.params = body, params
         self.stiffness = cell_field(body, "c", params.stiffness())
-        # both coefficients cellwise fields: new values compile nothing
-        self.law = NeoHooke(self.stiffness) if params.material == "table-1" \
-            else Yeoh(self.stiffness, cell_field(body, "c20", params.stiffening()))
+        # every coefficient a cellwise field: new values compile nothing
+        if params.material == "fibres":
+            self.law = TangentialFibres(self.stiffness, cell_field(body, "c4", params.fibre_stiffness()),
+                                        meridian_and_latitude(ufl.SpatialCoordinate(body.mesh)))
+        elif params.material == "calibrated":
+            self.law = Yeoh(self.stiffness, cell_field(body, "c20", params.stiffening()))
+        else:
+            self.law = NeoHooke(self.stiffness)
         self.mean_dilatation: MeanDilatation | None = None
         self.pressure = None if params.dg0_pressure == "condensed" else body.fields[1]
         # von Mises of the isochoric law: the deviator of σ is that of the isochoric part
@@ -66,6 +77,8 @@ class Tissues(Term):
     def law_of(self, tissue: str):
         """One tissue's law, its coefficients as numbers."""
         c = self.params.stiffness()[tissue]
+        if self.params.material == "fibres" and tissue in self.params.fibre_stiffness():
+            return dataclasses.replace(self.law, c10=c, c4=self.params.fibre_stiffness()[tissue])
         stiffening = self.params.stiffening() if self.params.material == "calibrated" else {}
         return Yeoh(c, stiffening[tissue]) if tissue in stiffening else NeoHooke(c)
 
@@ -259,6 +272,36 @@ class CavityLiquid(Term):
                                          float(self.initial_pressure.value),
                                          float(self.bulk_modulus.value)))
         return held
+
+
+class OpticNerveSpring(Term):
+    """The optic nerve's cut end held by a spring, k ∫ u·v dA over it (k per area, MPa/mm),
+    instead of clamped: the orbit's soft hold on the globe. With the symmetry plane it
+    removes the rigid motions (translations along y and z, the rotation about x) without
+    holding the posterior pole, so the posterior segment may lengthen behind the band: the
+    band rides on the globe, not on the world (docs/scleral_buckling.md, "A living eye's
+    wall"). The stiffness is a Constant: new values compile nothing."""
+
+    def __init__(self, body: Body, stiffness: float):
+        self.body = body
+        V, geometry = body.u.function_space, body.geometry
+        self.stiffness = dolfinx.fem.Constant(body.mesh, stiffness)
+        self.end = body.ds(body.eye.tag("optic_nerve_end"))
+        # the spring's force on the eye along y and z (x cancels with the mirrored half)
+        self.force_forms = [dolfinx.fem.form(self.stiffness * body.u[i] * self.end) for i in (1, 2)]
+        inner = facet_nodes(V, body.eye.facets("retina_inner"))
+        self.pole = NodeProbe(V, np.array([[0.0, 0.0, -geometry.sclera_radius]]), inner)
+
+    def residual(self, tests):
+        return self.stiffness * ufl.inner(self.body.u, tests[0]) * self.end
+
+    def measure(self) -> dict:
+        """The spring's force on the whole eye (N) and the retina's posterior pole's axial
+        displacement from the unloaded mesh (mm; negative: backwards)."""
+        force = [2.0 * assemble_scalar(form, self.body.comm) for form in self.force_forms]
+        pole = self.pole.positions(self.body.u)[0][2] - self.pole.nodes[0][2]
+        return {"optic_nerve_end_force_N": float(np.hypot(*force)),
+                "posterior_pole_axial_displacement_mm": float(pole)}
 
 
 class Zonules(Term):
