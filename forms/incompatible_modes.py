@@ -61,3 +61,22 @@ def pressure_slopes(slopes: ufl.core.expr.Expr, reference_coordinates: ufl.core.
     4μ in plane strain); π_i holds it, and the modes' dilatations satisfy its inf-sup
     condition cell by cell. ``slopes``: a cellwise-constant vector (π_1, π_2, π_3)."""
     return ufl.dot(slopes, 2 * reference_coordinates - ufl.as_vector([1] * ufl.shape(slopes)[0]))
+
+
+def enhanced_incompressible_energy_density(material, u, modes, slopes, reference_coordinates,
+                                           centre_jacobian, pressure):
+    """W(F) + p (det F₀ − 1) + (Σ π_i ξ_i)(det F − 1), F the enhanced and F₀ = I + Grad u the
+    compatible deformation gradient; p the cell's constant pressure, π its slopes.
+
+    The constant pressure holds the volume the cell's faces enclose (∫_K det F₀ dX, which
+    the 2 × 2 × 2 Gauss rule integrates exactly for trilinear cells), not ∫_K det F dX: a
+    liquid's pressure on the faces does work on that volume, and only when the solid
+    conserves it too do the two cancel in a hydrostatic state, the solid's pressure
+    balancing the liquid's in all its variations (a thin layer in a liquid is not buckled
+    by the liquid's pressure). The modes change the cell's volume at second order only
+    (∫_K G dX = 0), so the small-strain element is the same either way."""
+    F = enhanced_deformation_gradient(u, modes, reference_coordinates, centre_jacobian)
+    dim = ufl.shape(u)[0]
+    compatible = ufl.Identity(dim) + ufl.grad(u)
+    linear = pressure_slopes(slopes, reference_coordinates)
+    return material.strain_energy(F) + linear * (ufl.det(F) - 1) + pressure * (ufl.det(compatible) - 1)

@@ -44,10 +44,7 @@ def cantilever(cells_along: int, layers: int) -> dolfinx.mesh.Mesh:
 def solve(mesh, modes: IncompatibleModes | None, bcs, traction=None, facets=None):
     """The neo-Hookean mixed Q1P0 solid on ``mesh`` (with ``modes``), Dirichlet ``bcs`` on u,
     a ``traction`` on the facets tagged 1 of ``facets``; returns the unknowns."""
-    extra = modes.spaces if modes is not None else []
-    fields, tests = solid_fields(mesh, Q1P0, *extra)
-    if modes is not None:
-        modes.modes, modes.slopes = fields[2], fields[3]
+    fields, tests = solid_fields(mesh, Q1P0, modes=modes)
     dx = ufl.dx(domain=mesh, metadata=QUADRATURE)
     residual = solid_residual(NeoHooke(SHEAR_MODULUS / 2), Q1P0, fields, tests, dx, modes=modes)
     if traction is not None:

@@ -18,6 +18,7 @@ import ufl
 
 from eyemech.forms.incompatible_modes import (
     enhanced_deformation_gradient,
+    enhanced_incompressible_energy_density,
     incompatible_gradient,
     pressure_slopes,
 )
@@ -28,7 +29,8 @@ class IncompatibleModes:
 
     ``region``: the cell tag (or tuple of tags) of the cells with modes and ``elsewhere``
     those of the others, for a ``dx`` that carries the mesh's cell tags; both None: every
-    cell. ``cells``: the local indices of the cells with modes (None: all).
+    cell. ``cells``: the local indices of the cells with modes (None: all; ghosts may be
+    left out).
     ``taylor``: Taylor's centre-Jacobian correction (off only to show why it is needed:
     the patch test fails without it on distorted cells)."""
 
@@ -60,18 +62,26 @@ class IncompatibleModes:
                 ufl.Jacobian(mesh), self.space.element.interpolation_points))
         self.bcs = []
         if cells is not None:
+            # held at zero on this rank's owned cells without modes; the ghosts' owners tell them
             tdim = mesh.topology.dim
             mesh.topology.create_connectivity(tdim, tdim)
-            every = mesh.topology.index_map(tdim).size_local + mesh.topology.index_map(tdim).num_ghosts
-            without = np.setdiff1d(np.arange(every, dtype=np.int32), cells).astype(np.int32)
+            owned = np.arange(mesh.topology.index_map(tdim).size_local, dtype=np.int32)
+            without = np.setdiff1d(owned, cells).astype(np.int32)
             for space in self.spaces:
-                dofs = dolfinx.fem.locate_dofs_topological(space, tdim, without)
+                dofs = dolfinx.fem.locate_dofs_topological(space, tdim, without, remote=True)
                 self.bcs.append(dolfinx.fem.dirichletbc(dolfinx.fem.Function(space), dofs))
 
     def deformation_gradient(self, u) -> ufl.core.expr.Expr:
         """F = I + Grad u + G(α) (a ``ufl.variable``)."""
         return enhanced_deformation_gradient(u, self.modes, self.reference_coordinates,
                                              self.centre_jacobian)
+
+    def energy_density(self, material, u, pressure) -> ufl.core.expr.Expr:
+        """The mixed energy density with the modes, ``pressure`` the cells' constant one
+        (:func:`~eyemech.forms.incompatible_modes.enhanced_incompressible_energy_density`)."""
+        return enhanced_incompressible_energy_density(material, u, self.modes, self.slopes,
+                                                      self.reference_coordinates,
+                                                      self.centre_jacobian, pressure)
 
     def gradient(self, modes=None) -> ufl.core.expr.Expr:
         """G of the amplitudes ``modes`` (default: the unknown α; a trial or test function

@@ -40,15 +40,15 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     if family.pressure_family is None and (bulk_modulus is None or not _value(bulk_modulus) > 0):
         raise ValueError(f"{family.name} is displacement-only and needs a bulk modulus > 0")
     if modes is not None and (condensed_pressure is not None or len(parts) > 1
-                              or family.displacement_degree != 1 or not family.hexahedral):
-        raise ValueError("incompatible modes need Q1 hexahedra, one law and an uncondensed pressure")
+                              or family.name != "Q1P0"):
+        raise ValueError("incompatible modes need Q1P0 (its pressure mixed) and one law")
 
-    def density(law, F, pressure_slopes=0):
+    def density(law, F):
         if condensed_pressure is not None:
             return mean_dilatation_work_density(law, F, condensed_pressure)
         if family.pressure_family is None:
             return nearly_incompressible_energy_density(law, F, bulk_modulus)
-        return incompressible_energy_density(law, F, fields[1] + pressure_slopes)
+        return incompressible_energy_density(law, F, fields[1])
 
     if modes is None:
         F = deformation_gradient(u)
@@ -56,15 +56,14 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     else:
         law = parts[0][1]
         enhanced, plain = modes.measures(dx)
-        slopes = modes.linear_pressure() if family.pressure_family is not None else 0
-        energy = density(law, modes.deformation_gradient(u), slopes) * enhanced
+        energy = modes.energy_density(law, u, fields[1]) * enhanced
         if plain is not None:
             energy += density(law, deformation_gradient(u)) * plain
     residual = ufl.derivative(energy, u, v)
     if family.pressure_family is not None and condensed_pressure is None:
         residual += ufl.derivative(energy, fields[1], tests[1])
     if modes is not None:
-        for block in modes.blocks(fields)[:2 if family.pressure_family is not None else 1]:
+        for block in modes.blocks(fields):
             residual += ufl.derivative(energy, fields[block], tests[block])
     return residual
 
