@@ -16,8 +16,16 @@ cell's centre and weight it by det J₀ / det J, so that its cell integral vanis
 so a homogeneous deformation leaves α = 0 and is reproduced exactly on any mesh (the patch
 test; the uncorrected modes fail it on distorted cells). At finite strain the modes enhance
 the deformation gradient, F = I + Grad u + G(α) (Simo & Armero 1992; Simo & Rifai 1990's
-enhanced assumed strain is the general frame): the energy W(F) + p (det F − 1) is stationary
-in u, p and α. Verified in tests/test_incompatible_modes.py.
+enhanced assumed strain is the general frame).
+
+Incompressible (the mixed Q1P0 element): the modes' dilatations are linear in ξ, which a
+constant pressure per cell does not hold, so each cell's pressure gains a linear part
+(:func:`pressure_slopes`), and the constant part holds the volume the cell's faces enclose
+(:func:`enhanced_incompressible_energy_density`). The energy is stationary in u, p, π and α.
+Hourglassing in finite compression, known for enhanced elements (Wriggers & Reese 1996): a
+plane-strain block of 4 × 4 cells has its first unstable mode at 50 % compression (Q1P0 at
+60 %; with the constant pressure on det F instead, at 40 %). Verified in
+tests/test_incompatible_modes.py.
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Incompatible modes on chosen hexahedra: the unknowns, the centre Jacobians and the
 conditions that switch the modes off elsewhere (the form: :mod:`eyemech.forms.incompatible_modes`).
 
-The amplitudes α (three modes × three components per cell) are a DG0 (d, d) field, one
-more block of the Newton system: cell-local, so they couple only to their cell's
-displacements and pressure. On the cells without modes they are held at zero by a
+The amplitudes α (three modes × three components per cell) are a DG0 (d, d) field and the
+pressure's slopes π a DG0 vector, two more blocks of the Newton system: cell-local, so they
+couple only to their cell's displacements and pressure. On the cells without modes they are held at zero by a
 Dirichlet condition, and the solid's energy there is integrated with the plain gradient
 (:func:`~eyemech.problems.solid.residual.solid_residual`), so those cells neither compile
 nor assemble the modes' terms."""
