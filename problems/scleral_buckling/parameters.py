@@ -177,7 +177,7 @@ class EyeParameters(SceneParameters):
                                           "mm", group=PHYSICS)
     retina_incompatible_modes: bool = field(
         False, "the retina's Q1 cells with Wilson-Taylor incompatible modes and a linear pressure "
-        "per cell: its bending is not locked (Q1P0 one cell thick is 5-28x too stiff in bending on "
+        "per cell: its bending is not locked (Q1P0 one cell thick is 3.6-28x too stiff in bending on "
         "the paper to coarse meshes; with the modes within 2 %: tests/test_incompatible_modes.py); "
         "element Q1P0, dg0_pressure mixed, solver direct", group=GEOMETRY)
 
