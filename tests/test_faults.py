@@ -637,6 +637,39 @@ def test_a_decision_on_one_rank_ends_with_the_lockstep_error(tmp_path):
     assert json.loads((out / "results.json").read_text())["status"] == "error"
 
 
+@pytest.mark.mpi
+def test_a_petsc_error_on_one_rank_ends_the_job(tmp_path):
+    """Rank 1's residual raises a PETSc error inside Newton of step 2, so SNES fails on
+    rank 1 only while rank 0 waits in the solve's collective calls: rank 1 would cut the
+    step and go on alone. It waits for rank 0 to leave the solve with an error too, names
+    it when it does not, and ends the job (exit 1) instead of hanging."""
+    start = time.monotonic()
+    done = eyemech("run", *CORNEA, "--out", str(tmp_path / "out"), *QUIET, "--no-fields",
+                   ranks=2, timeout=120, env={"EYEMECH_TEST_DIVERGE": "petsc:2:1",
+                                              "EYEMECH_LOCKSTEP_SECONDS": LOCKSTEP_TEST_SECONDS})
+    print(f"ended after {time.monotonic() - start:.1f} s")
+    assert done.returncode == 1, done.stderr[-3000:]
+    assert "rank 1 of 2 left a Newton solve with a PETSc error and rank(s) 0 did not" \
+        in done.stderr, done.stderr[-3000:]
+
+
+COOK = ("cook-membrane", "--set", "elements_per_side=2", "--set", "load_steps=3")
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("kind, message", [
+    ("decision", "ranks diverged at the end of step 2 (path 'cook-membrane')"),
+    ("collective", "rank(s) 1 of 2 did not arrive at the end of step 2 (path 'cook-membrane')")])
+def test_a_walk_without_checkpoints_is_checked_in_step(kind, message, tmp_path):
+    """cook-membrane's path follower runs without checkpoints; its walk checks the ranks
+    at each step's end all the same, so a branch on one rank's data ends the job."""
+    done = eyemech("run", *COOK, "--out", str(tmp_path / "out"), *QUIET, "--no-fields",
+                   ranks=2, timeout=120, env={"EYEMECH_TEST_DIVERGE": f"{kind}:2:1",
+                                              "EYEMECH_LOCKSTEP_SECONDS": LOCKSTEP_TEST_SECONDS})
+    assert done.returncode == 1, done.stderr[-3000:]
+    assert message in done.stderr, done.stderr[-3000:]
+
+
 def _wait_for(predicate, seconds: float, what: str) -> None:
     deadline = time.monotonic() + seconds
     while not predicate():

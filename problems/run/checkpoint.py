@@ -57,8 +57,15 @@ import numpy as np
 from mpi4py import MPI
 
 from eyemech.problems.run import signals
-from eyemech.problems.run.faults import KILL_ENV, parse_divergence, parse_kill  # noqa: F401
+from eyemech.problems.run.faults import (  # noqa: F401
+    KILL_ENV,
+    parse_divergence,
+    parse_kill,
+    plant_divergence,
+)
 from eyemech.problems.run.lockstep import Lockstep, label_code
+
+PETSC_ERR_USER = 83  # PETSc's error code for an error raised by user code
 
 log = logging.getLogger("eyemech")
 
@@ -275,9 +282,9 @@ class Checkpoints:
         """Test hook: a kill (or SIGTERM, or a hang) inside Newton of the step about to be
         solved."""
         kind, step, rank = self._kill
-        if self._diverge[0] == "hang":
+        if self._diverge[0] in ("hang", "petsc"):
             kind, step, rank = self._diverge
-        if kind not in ("step", "sigterm", "hang") or self.steps_done + 1 != step:
+        if kind not in ("step", "sigterm", "hang", "petsc") or self.steps_done + 1 != step:
             return
         calls = []
 
@@ -290,6 +297,12 @@ class Checkpoints:
                     print(f"EYEMECH_TEST_DIVERGE: rank {rank} hangs in step {step}",
                           file=sys.stderr, flush=True)
                     self._hang_comm.Barrier()  # no other rank calls it: stuck in C
+                elif kind == "petsc" and rank == self.comm.rank:
+                    from petsc4py import PETSc
+
+                    print(f"EYEMECH_TEST_DIVERGE: rank {rank} raises a PETSc error in step "
+                          f"{step}", file=sys.stderr, flush=True)
+                    raise PETSc.Error(PETSC_ERR_USER)  # SNES fails on this rank only
                 elif kind == "sigterm" and (rank is None or rank == self.comm.rank):
                     os.kill(os.getpid(), signal.SIGTERM)
         solver.residual_hooks.append(hook)
@@ -309,7 +322,7 @@ class Checkpoints:
                     float(self.steps_done), float(path_state.get("step", 0)),
                     float(path_state.get("value", 0.0)), float(path_state.get("increment", 0.0)),
                     float(records[-1].get("iterations", 0)), float(records[-1].get("cuts", 0))]
-        self._planted_divergence(decision)
+        plant_divergence(self.comm, self.steps_done, decision)
         self.lockstep.check(f"the end of step {self.steps_done} (path "
                             f"'{path_state.get('label', '')}')", tuple(decision))
         stop = self.comm.allreduce(signals.requested(), op=MPI.MAX)
@@ -318,17 +331,6 @@ class Checkpoints:
             self.write(path_state)
         if stop:
             raise Interrupted(stop, self.steps_done, self.last if self.enabled else None)
-
-    def _planted_divergence(self, decision: list[float]) -> None:
-        """Test hook (``EYEMECH_TEST_DIVERGE``, problems/run/faults.py): one rank leaves the
-        others' control flow at the end of a step."""
-        kind, step, rank = self._diverge
-        if step != self.steps_done or rank != self.comm.rank:
-            return
-        if kind == "collective":  # one collective call more than the others make
-            self.comm.allreduce(0, op=MPI.SUM)
-        elif kind == "decision":  # another path value than the others reached
-            decision[4] += 1.0
 
     def _due(self) -> bool:
         opts = self.options

@@ -15,7 +15,10 @@ sweep.csv), with ``error_estimate_ratio`` (r) and ``error_estimate_order`` (p). 
 coarse solve is counted in the run's solver counts and timed as ``error_estimate``; it
 writes no fields or pictures. Should it fail (Newton), the estimates are null and
 ``error_estimate_note`` says why; the run's own quantities stand. docs/cli.md, "Error
-estimates", lists the scenes and their quantities.
+estimates", lists the scenes and their quantities. A scene whose meshes form a fixed
+ladder, or whose quantities are not in their asymptotic range, reports Roache's grid
+convergence index instead (:func:`grid_convergence_index`: scleral-buckling), from a second
+solve made by :func:`solve_again`.
 """
 
 from __future__ import annotations
@@ -26,12 +29,14 @@ from typing import Any, Callable
 
 from eyemech.problems.run.parameters import SOLVER, field
 
+RICHARDSON_HELP = ("also solve on a coarser mesh and report Richardson's estimate of the "
+                   "discretisation error of the main quantities as <quantity>_error_estimate and "
+                   "<quantity>_extrapolated (docs/cli.md, Error estimates)")
 
-def error_estimate_field() -> Any:
+
+def error_estimate_field(help: str = RICHARDSON_HELP) -> Any:
     """The ``error_estimate`` parameter of the scenes that offer the estimate."""
-    return field(False, "also solve on a coarser mesh and report Richardson's estimate of the "
-                 "discretisation error of the main quantities as <quantity>_error_estimate and "
-                 "<quantity>_extrapolated (docs/cli.md, Error estimates)", group=SOLVER)
+    return field(False, help, group=SOLVER)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,23 +93,14 @@ def estimate_errors(ctx, run: Callable, params, refinement: Refinement) -> dict[
     """Solve ``run`` again at the coarse resolution (same communicator, quietly) and add
     the estimates of ``refinement.quantities`` to ``ctx.result.quantities``. Returns what
     was added."""
-    from eyemech.problems.run.context import RunOptions  # the context imports this module's users
-    from eyemech.problems.run.newton import SolveFailure
-
     coarse = refinement.coarse(params)
     ratio = refinement.actual_ratio(params, coarse)
-    options = RunOptions(quiet=True, fields=False, pictures=False, newton=ctx.options.newton)
     added: dict[str, Any] = {"error_estimate_ratio": ratio, "error_estimate_order": refinement.order}
     quantities = ctx.result.quantities
-    with ctx.timings("error_estimate"):
-        try:
-            coarse_quantities = run(coarse, comm=ctx.comm, out=None, options=options).quantities
-            note = ""
-        except SolveFailure as failure:
-            coarse_quantities, note = {}, f"the coarse solve failed: {failure}"
+    coarse_quantities, note = solve_again(ctx, run, coarse)
     for name in refinement.quantities:
         fine, rough = quantities.get(name), coarse_quantities.get(name)
-        if _number(fine) and _number(rough) and ratio > 1.0:
+        if is_number(fine) and is_number(rough) and ratio > 1.0:
             extrapolated, estimate = richardson(fine, rough, ratio, refinement.order)
         else:
             extrapolated = estimate = None
@@ -117,7 +113,41 @@ def estimate_errors(ctx, run: Callable, params, refinement: Refinement) -> dict[
     return added
 
 
-def _number(value: Any) -> bool:
+def solve_again(ctx, run: Callable, params) -> tuple[dict[str, Any], str]:
+    """(quantities, "") of ``run`` with ``params`` on the run's communicator, quietly and
+    without fields or pictures, timed as ``error_estimate``; ({}, why) when its Newton
+    solve fails (the run's own quantities stand)."""
+    from eyemech.problems.run.context import RunOptions  # the context imports this module's users
+    from eyemech.problems.run.newton import SolveFailure
+
+    options = RunOptions(quiet=True, fields=False, pictures=False, newton=ctx.options.newton)
+    with ctx.timings("error_estimate"):
+        try:
+            return run(params, comm=ctx.comm, out=None, options=options).quantities, ""
+        except SolveFailure as failure:
+            return {}, f"the coarse solve failed: {failure}"
+
+
+def grid_convergence_index(fine: float, coarse: float, ratio: float, order: float,
+                           safety: float = 3.0, of: str = "fine") -> float:
+    """Roache's grid convergence index (Roache 1994, J. Fluids Eng. 116:405; ASME V&V
+    20-2009 §2-4): a band |q − q_converged| ≤ GCI about the value on the ``fine`` (default)
+    or the ``coarse`` mesh of two solutions whose element sizes differ by ``ratio`` > 1,
+    for a quantity converging at ``order``: GCI_fine = Fs |fine − coarse| / (r^p − 1),
+    GCI_coarse = r^p GCI_fine; ``safety`` Fs = 3 for two grids (1.25 needs three, with the
+    observed order). Richardson's estimate (:func:`richardson`) is the fine one with Fs = 1."""
+    if not ratio > 1.0:
+        raise ValueError(f"the meshes' size ratio must be > 1, got {ratio}")
+    fine_band = safety * abs(fine - coarse) / (ratio ** order - 1.0)
+    if of == "fine":
+        return fine_band
+    if of == "coarse":
+        return fine_band * ratio ** order
+    raise ValueError(f"of must be 'fine' or 'coarse', got {of!r}")
+
+
+def is_number(value: Any) -> bool:
+    """A finite number (not a bool, not None)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 

@@ -26,8 +26,9 @@ The test hooks (environment variables, read where the fault is injected):
   distributed unknown would), ``decision:N:RANK`` (rank RANK records another path value at
   the end of step N, as a branch on local data would), ``hang:N:RANK`` (rank RANK waits
   in a collective call no other rank makes, inside Newton of step N: a job stuck in C for
-  the signal tests). The lock-step check (problems/run/lockstep.py) must turn each into
-  an error.
+  the signal tests), ``petsc:N:RANK`` (rank RANK's residual raises a PETSc error inside
+  Newton of step N: SNES fails on that rank only). The lock-step checks
+  (problems/run/lockstep.py) must turn each into an error.
 """
 
 from __future__ import annotations
@@ -88,9 +89,25 @@ def parse_divergence(spec: str | None = None) -> tuple[str, int, int]:
     if not spec:
         return "", 0, -1
     kind, step, rank = spec.split(":")
-    if kind not in ("collective", "decision", "hang"):
-        raise ValueError(f"{DIVERGE_ENV}={spec}: the kind is collective, decision or hang")
+    if kind not in ("collective", "decision", "hang", "petsc"):
+        raise ValueError(f"{DIVERGE_ENV}={spec}: the kind is collective, decision, hang or "
+                         "petsc")
     return kind, int(step), int(rank)
+
+
+def plant_divergence(comm, steps_done: int, decision: list[float]) -> None:
+    """Test hook (``EYEMECH_TEST_DIVERGE``): at the end of step ``steps_done`` the named
+    rank leaves the others' control flow -- one collective call more, or another path
+    value (``decision[4]``) in the step's lock-step record."""
+    kind, step, rank = parse_divergence()
+    if step != steps_done or comm is None or rank != comm.rank:
+        return
+    if kind == "collective":
+        from mpi4py import MPI
+
+        comm.allreduce(0, op=MPI.SUM)
+    elif kind == "decision":
+        decision[4] += 1.0
 
 
 def collective_error(error: BaseException | None) -> bool:

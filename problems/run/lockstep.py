@@ -45,6 +45,10 @@ DEFAULT_TIMEOUT = 120.0
 TAG_CYCLE = 32000
 
 
+# the tag of :func:`all_left_with_an_error`'s messages (above every lock-step check's)
+SOLVER_ERROR_TAG = TAG_CYCLE + 1
+
+
 class RanksDiverged(RuntimeError):
     """Every rank arrived at a check but with different steps or decisions."""
 
@@ -57,6 +61,53 @@ def timeout_seconds() -> float:
         return max(float(text), 0.0)
     except ValueError:
         return DEFAULT_TIMEOUT
+
+
+def exchange(comm: MPI.Comm, mine: np.ndarray, tag: int, timeout: float,
+             on_missing) -> np.ndarray:
+    """Every rank's ``mine`` (one row per rank) by nonblocking point-to-point messages,
+    polled with a deadline; ``on_missing(ranks)`` is called (and must not return) when
+    some ranks have not sent theirs within ``timeout`` seconds."""
+    table = np.empty((comm.size, len(mine)))
+    table[comm.rank] = mine
+    others = [r for r in range(comm.size) if r != comm.rank]
+    receives = [comm.Irecv(table[r], source=r, tag=tag) for r in others]
+    sends = [comm.Isend(mine, dest=r, tag=tag) for r in others]
+    deadline = time.monotonic() + timeout
+    pause = 5e-5
+    while not MPI.Request.Testall(receives):
+        if time.monotonic() > deadline:
+            missing = [r for r, request in zip(others, receives) if not request.Test()]
+            if missing:
+                on_missing(missing)
+        time.sleep(pause)
+        pause = min(2 * pause, 0.01)
+    MPI.Request.Waitall(sends)
+    return table
+
+
+def all_left_with_an_error(comm: MPI.Comm, where: str, timeout: float | None = None) -> None:
+    """Called by a rank that a library error (a PETSc error inside SNES) took out of a
+    solve: return when every rank of ``comm`` left it the same way, end the job naming
+    the ranks that did not otherwise. Such an error can be raised on one rank only (a
+    factorisation, a callback's PETSc call), and the other ranks then wait inside the
+    solve's collective calls for a rank that has gone on to cut the step: without this
+    check the job hangs or matches unrelated collective calls. Point-to-point messages
+    with their own tag never match a collective call."""
+    timeout = timeout_seconds() if timeout is None else timeout
+    if comm.size == 1 or timeout <= 0:
+        return
+    from eyemech.problems.run.faults import abort_with_message
+
+    def abort(missing: list[int]) -> None:
+        ranks = ", ".join(str(r) for r in missing)
+        abort_with_message(
+            f"ranks out of step: rank {comm.rank} of {comm.size} left {where} with a PETSc "
+            f"error and rank(s) {ranks} did not within {timeout:g} s ({TIMEOUT_ENV}): they "
+            "wait in the solve's collective calls (the error was raised on some ranks only; "
+            "docs/parallel.md, \"Ranks in step\")")
+
+    exchange(comm, np.ones(1), SOLVER_ERROR_TAG, timeout, abort)
 
 
 def label_code(label: str) -> float:
@@ -90,23 +141,9 @@ class Lockstep:
             return
         self.checks += 1
         mine = np.array([self.checks, *record], dtype=np.float64)
-        table = np.empty((comm.size, len(mine)))
-        table[comm.rank] = mine
-        tag = self.checks % TAG_CYCLE
-        others = [r for r in range(comm.size) if r != comm.rank]
-        receives = [comm.Irecv(table[r], source=r, tag=tag) for r in others]
-        sends = [comm.Isend(mine, dest=r, tag=tag) for r in others]
         start = time.monotonic()
-        deadline = start + self.timeout
-        pause = 5e-5
-        while not MPI.Request.Testall(receives):
-            if time.monotonic() > deadline:
-                missing = [r for r, request in zip(others, receives) if not request.Test()]
-                if missing:
-                    self._abort(where, mine, missing)
-            time.sleep(pause)
-            pause = min(2 * pause, 0.01)
-        MPI.Request.Waitall(sends)
+        table = exchange(comm, mine, self.checks % TAG_CYCLE, self.timeout,
+                         lambda missing: self._abort(where, mine, missing))
         self.longest_wait = max(self.longest_wait, time.monotonic() - start)
         differs = np.flatnonzero(np.any(table != table[0], axis=1))
         if len(differs):

@@ -38,6 +38,7 @@ from eyemech.problems.run.checkpoint import CheckpointError
 from eyemech.problems.run.context import RunContext, RunOptions
 from eyemech.problems.run.parameters import MMHG
 from eyemech.problems.run.scene import Scene
+from eyemech.problems.scleral_buckling import error_estimate
 from eyemech.problems.scleral_buckling.measures import DIOPTRES_PER_MM
 from eyemech.problems.scleral_buckling.model import BucklingModel
 from eyemech.problems.scleral_buckling.output import Writer
@@ -87,6 +88,8 @@ def run(params: Parameters, comm: MPI.Comm | None = None, out: str | Path | None
             writer.close()
         ctx.result.quantities.update(model.measure())
         ctx.result.quantities.update(operation.summary())
+        if params.error_estimate:
+            error_estimate.estimate(ctx, run, params)
     return ctx.result
 
 

@@ -97,6 +97,25 @@ class Optics:
                           lambda saved: setattr(self, "preoperative", dict(saved)))
 
 
+def rim_margin(rim_gap_mm: float, tolerance: float) -> float:
+    """The tear's rim against the closure tolerance (mm): positive = closed by that much,
+    negative = open by that much. The rim counts as closed when its widest node-to-surface
+    gap (``tear_rim_gap_max_mm``) is below ``tear_closure_tolerance``, as
+    ``tear_closed_nts`` has it: closed exactly when the margin is > 0."""
+    return tolerance - rim_gap_mm
+
+
+def rim_verdict(margin_mm: float, error_estimate_mm: float | None = None) -> str | None:
+    """``closed`` (margin > 0) or ``open``; with an estimate of the rim gap's
+    discretisation error, ``uncertain`` where |margin| <= it (the mesh-converged rim may
+    lie on the other side of the tolerance). None without a rim (nan)."""
+    if not math.isfinite(margin_mm):
+        return None
+    if error_estimate_mm is not None and abs(margin_mm) <= error_estimate_mm:
+        return "uncertain"
+    return "closed" if margin_mm > 0.0 else "open"
+
+
 class RetinaGaps:
     """The detached retina's gap to the choroid, node by node along the radius to the
     choroid's node it started above (twin nodes of the mesh), and the tear's rim: closed
@@ -152,6 +171,13 @@ class RetinaGaps:
                 dolfinx.fem.Constant(eye.mesh, 1.0) * eye.ds()(eye.tag("retina_detached")),
                 self.body.comm)
         return self._detached_area
+
+    def margin(self, measured: dict) -> dict:
+        """The rim's margin against the tolerance (:func:`rim_margin`), from the rim gap
+        the retina's contact measured (nothing without retina contact)."""
+        if "tear_rim_gap_max_mm" not in measured:
+            return {}
+        return {"tear_rim_margin_mm": rim_margin(measured["tear_rim_gap_max_mm"], self.tolerance)}
 
     def measure(self) -> dict:
         with self.body.timings("contact_search"):

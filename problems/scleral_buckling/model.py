@@ -167,7 +167,7 @@ class BucklingModel:
         for part in (self.buckle, self.contact, self.tire, self.liquid, self.gaps,
                      self.tissues, self.sutures):
             out |= part.measure()
-        return out
+        return out | self.gaps.margin(out)
 
     def summary(self) -> dict:
         out = {"dofs": global_dofs(*self.fields),

@@ -18,6 +18,7 @@ from eyemech.problems.run.output import (
     render_png,
     save_screenshot,
 )
+from eyemech.problems.scleral_buckling.measures import rim_verdict
 
 
 class Writer:
@@ -162,12 +163,13 @@ SCENE_NAME = "scleral-buckling"
 
 
 def _section_title(stage: int, name: str, measured: dict) -> str:
-    """The stage, and what a surgeon reads off the section: the tear's rim gap (closed or
-    open) and the IOP."""
+    """The stage, and what a surgeon reads off the section: the tear's rim gap, closed or
+    open by its margin against the closure tolerance (measures.rim_margin), and the IOP."""
     title = f"step {stage} ({name}): section through the tear"
     if "tear_rim_gap_max_mm" in measured and np.isfinite(measured["tear_rim_gap_max_mm"]):
-        state = "closed" if measured.get("tear_closed") else "open"
-        title += f"\nrim gap {measured['tear_rim_gap_max_mm']:.3f} mm ({state})"
+        margin = measured["tear_rim_margin_mm"]
+        title += (f"\nrim gap {measured['tear_rim_gap_max_mm']:.3f} mm "
+                  f"({rim_verdict(margin)} by {abs(margin):.3f} mm)")
         if "iop_mmHg" in measured:
             title += f", IOP {measured['iop_mmHg']:.0f} mmHg"
     return title

@@ -13,6 +13,7 @@ from typing import Literal
 from eyemech.forms.buckle import KINDS, ORIENTATIONS, BuckleShape
 from eyemech.meshes.eye import RESOLUTIONS, TISSUES, EyeGeometry
 from eyemech.problems.run.parameters import GEOMETRY, PHYSICS, ParameterError, SceneParameters, field
+from eyemech.problems.scleral_buckling import error_estimate
 from eyemech.problems.scleral_buckling.settings import NumericalSettings
 
 # the calibrated coats (material = "calibrated"): c20 of the sclera fitted by least squares to
@@ -197,6 +198,7 @@ class Parameters(NumericalSettings, EyeParameters):
         self._validate_drainage()
         self._validate_buckle()
         self._validate_geometry()
+        error_estimate.validate(self)  # the second solve's mesh, once the run's own are good
 
     def _validate_signs(self) -> None:
         self.require_positive("iop_mmHg", "bulk_modulus", "c_cornea", "c_sclera", "c_ciliary_body",

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+from eyemech.problems.run.error_estimate import error_estimate_field
 from eyemech.problems.run.parameters import SOLVER, ParameterError, field
 from eyemech.problems.solve.linear_solvers import SolverChoice
 
@@ -180,6 +181,13 @@ class NumericalSettings(SolverChoice):
         "limit or a failed line search stops it; with 3, settling steps of 1/8 that creep "
         "for 3 iterations and then converge were cut until the run failed: "
         "docs/scleral_buckling.md, Stalled backtracking, The settling step)", group=SOLVER)
+
+    error_estimate: bool = error_estimate_field(
+        "also solve the operation on the neighbouring mesh of the ladder coarse, default, "
+        "n = 20, paper (the next coarser; the next finer from the coarsest) and report Roache's "
+        "grid convergence index of ΔAL, ΔSE and the tear's rim gap at each stage's end as "
+        "<quantity>_error_estimate, and the rim's verdict closed / open / uncertain "
+        "(docs/scleral_buckling.md, Discretisation error)")
 
     def validate_numerics(self) -> None:
         self._validate_discretisation()

@@ -49,7 +49,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from eyemech.problems.run.faults import RAISE_ENV, raise_test_error, test_raise_rank  # noqa: F401
+from eyemech.problems.run.faults import RAISE_ENV, plant_divergence, raise_test_error, test_raise_rank  # noqa: F401
+from eyemech.problems.run.lockstep import Lockstep, all_left_with_an_error, label_code
 from eyemech.problems.run.newton import (  # noqa: F401  (scenes import these from the driver)
     FACTORISATIONS,
     NewtonOptions,
@@ -542,6 +543,9 @@ class NonlinearSolver:
         except PETSc.Error:  # e.g. a zero pivot from an inverted element
             if self._callback_error is not None:
                 raise self._callback_error from None
+            # cut the step only when every rank left the solve with the error (the
+            # others could still be inside SNES's collective calls)
+            all_left_with_an_error(self.snes.comm.tompi4py(), "a Newton solve")
             raising = False
         finally:
             self.snes.setTolerances(atol=atol)
@@ -909,6 +913,7 @@ class _Walk:
         self.value, self.step = stepping.start, 0
         self.records: list[StepRecord] = []
         self.stage_index = 0
+        self.lockstep: Lockstep | None = None
 
     def at_stop(self, value: float) -> bool:
         return any(abs(value - s) <= 1e-12 * self.span for s in self.stops)
@@ -934,11 +939,17 @@ class _Walk:
             if self.predictor is not None:
                 self.predictor.restart(self.value)
         self.bar = _progress(self.solver, self.label, self.quiet, self.stepping, self.records)
+        # a run with checkpoints checks that its ranks are in step at each step's end
+        # (Checkpoints.step_done); a walk without them checks it here
+        comm = self.solver.unknowns[0].function_space.mesh.comm
+        self.lockstep = Lockstep(comm) if checkpoints is None and comm.size > 1 else None
         try:
             while self.value < stepping.end - 1e-12 * self.span:
                 self._next_step(apply, on_converged)
         finally:
             self.bar.close()
+            if self.lockstep is not None:
+                self.lockstep.free()
         if checkpoints is not None:
             checkpoints.leave_path([dataclasses.asdict(r) for r in self.records])
         return self.records
@@ -1059,6 +1070,13 @@ class _Walk:
             self.checkpoints.step_done({"label": self.label, "step": self.step, "value": self.value,
                                         "increment": self.controller.step,
                                         "records": [dataclasses.asdict(r) for r in self.records]})
+        elif self.lockstep is not None:
+            decision = [0.0, label_code(self.label), float(self.step), float(self.step),
+                        self.value, self.controller.step, float(record.iterations),
+                        float(record.cuts)]
+            plant_divergence(self.solver.unknowns[0].function_space.mesh.comm, self.step, decision)
+            self.lockstep.check(f"the end of step {self.step} (path '{self.label}')",
+                                tuple(decision))
 
 
 def _predict(solver: NonlinearSolver, predictor: "SecantPredictor", target: float,

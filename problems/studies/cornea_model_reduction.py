@@ -77,7 +77,8 @@ def one_case(label: str, overrides: dict, comm) -> dict:
     try:
         result = keratotomy.run(params, comm=comm, options=QUIET)
     except SolveFailure as failure:
-        return row | {"status": f"failed at t = {failure.load:.3g} s"}
+        # a case that should have run: counted as failed by `eyemech study` (exit 4)
+        return row | {"status": "failed", "error": f"no convergence at t = {failure.load:.3g} s"}
     q = result.quantities
     final = {key: q[key][-1] if isinstance(q[key], list) else q[key] for key in QUANTITIES}
     return row | {"status": "ok", **final,

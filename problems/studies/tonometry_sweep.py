@@ -51,12 +51,12 @@ def _reading(comm, **changes) -> dict:
     params = tonometry.Parameters(**changes)
     try:
         result = tonometry.run(params, comm=comm, options=QUIET)
-    except SolveFailure as failure:  # a row that says so, not a lost study
-        return {"central_thickness_um": 1000 * params.central_thickness,
+    except SolveFailure as failure:  # a failed case: a row that says so, counted by `eyemech study`
+        return {"status": "failed", "central_thickness_um": 1000 * params.central_thickness,
                 "youngs_modulus_MPa": params.youngs_modulus, "iop_mmHg": params.iop_mmHg,
-                "iop_reading_mmHg": float("nan"), "failed": str(failure)[:120]}
+                "iop_reading_mmHg": float("nan"), "error": str(failure)[:120]}
     q = result.quantities
-    return {"central_thickness_um": 1000 * params.central_thickness,
+    return {"status": "ok", "central_thickness_um": 1000 * params.central_thickness,
             "youngs_modulus_MPa": params.youngs_modulus,
             "mesh_size_mm": params.mesh_size, "azimuthal_divisions": params.azimuthal_divisions,
             "layers": params.layers, "geometry_degree": params.geometry_degree, "penalty": params.penalty,
