@@ -735,3 +735,36 @@ def pinned_travel_residual(tire_travel, target, test, stiffness, measure, area):
     """Row of a prescribed tire travel: k (δ − δ_target) = 0, k a stiffness of the size
     of the free row's so that switching between the two keeps the Jacobian's scale."""
     return stiffness * (tire_travel - target) / area * test * measure
+
+
+def band_length(centre_radius, band_travel, tire_height=0.0, tire_arc=0.0):
+    """Centreline length of an encircling band moved ``band_travel`` towards its axis:
+    L = 2π (ρ_c − δ) + h_t φ_t, ρ_c the centreline's radius where it was laid, the band
+    raised by the tire's height h_t over the tire's arc φ_t (radians) that rides under
+    it (its two ramps on and off the tire are left out: h_t² over their length, ≈ 0.1 mm
+    of 76 mm with the default 1 mm tire). dL/dδ = −2π whatever the tire."""
+    return 2.0 * math.pi * (centre_radius - band_travel) + tire_height * tire_arc
+
+
+def band_tension(length, set_length, modulus_area):
+    """Hoop tension of the elastic band, T = E A (L − L_set)/L_set: its length L
+    (:func:`band_length`) against the loop's length after the surgeon shortened it,
+    L_set = L_laid − ΔL. Linear both ways: a band looser than its set length pushes out,
+    which keeps its travel defined before it touches the eye."""
+    return modulus_area * (length - set_length) / set_length
+
+
+def band_hoop_residual(contact_energy, band_travel, test, tension, share, other_inward,
+                       measure, area):
+    """Row of the elastic band's radial travel δ (a Real-space unknown): the sclera's
+    push on the band (and the tire under it), ∂Π_c/∂δ, balances the inward resultant of
+    its hoop tension, 2π T (a ring of tension T and radius ρ presses with T/ρ per unit
+    length, over 2π ρ), of which the model carries ``share`` (½ for the half eye), plus
+    ``other_inward`` (the sutures' pull on the tire the band carries):
+
+        r_δ = ∂Π_c/∂δ − share · 2π T(δ) − F_other = 0,
+
+    the stationarity in δ of Π_c + share · ½ E A (L − L_set)²/L_set − F_other δ, since
+    dL/dδ = −2π (:func:`band_length`)."""
+    return tire_travel_residual(contact_energy, band_travel, test,
+                                share * 2.0 * math.pi * tension + other_inward, measure, area)

@@ -1,12 +1,12 @@
 """Bodies for the contact benchmarks.
 
-``quarter_hemisphere``: the lower half (z ≤ 0) of a ball of radius R centred at the
-origin, one quarter (x ≥ 0, y ≥ 0). Tags: cell ``ball``; facets ``contact`` (the
-spherical surface), ``top`` (the equatorial plane z = 0), ``symmetry_x``,
-``symmetry_y``. Elements are graded from ``contact_size`` within ``zone`` of the
-south pole (0, 0, −R) — where the ball touches a plane — to ``far_size``, linearly over
-the distance ``ramp`` beyond the zone (default 2 ``far_size``).
-``quarter_hemisphere_cells`` estimates its number of cells before meshing.
+``quarter_half_space``: a half-space truncated to the lower half (z ≤ 0) of a ball of
+radius L centred at the origin, one quarter (x ≥ 0, y ≥ 0). Tags: cell ``body``; facets
+``contact`` (the flat face z = 0), ``far`` (the spherical surface), ``symmetry_x``,
+``symmetry_y``. Elements are graded from ``contact_size`` within ``zone`` of the origin
+— where an indenter touches the flat face — to ``far_size``, linearly over the distance
+``ramp`` beyond the zone. ``quarter_half_space_cells`` estimates its number of cells
+before meshing.
 
 ``layered_caps``: two concentric spherical caps about the z axis (one quarter), a
 soft inner layer a small ``gap`` inside a stiffer outer one — the detached retina
@@ -24,9 +24,8 @@ from mpi4py import MPI
 from eyemech.meshes.tagged import TaggedMesh, from_gmsh
 
 
-def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone: float,
-                       order: int = 2, comm: MPI.Comm = MPI.COMM_WORLD,
-                       ramp: float | None = None) -> TaggedMesh:
+def quarter_half_space(radius: float, contact_size: float, far_size: float, zone: float,
+                       ramp: float, order: int = 2, comm: MPI.Comm = MPI.COMM_WORLD) -> TaggedMesh:
     if not 0 < contact_size <= far_size:
         raise ValueError("need 0 < contact_size <= far_size")
 
@@ -36,8 +35,8 @@ def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone
         box = occ.addBox(0, 0, -2 * radius, 2 * radius, 2 * radius, 2 * radius)
         quarter, _ = occ.intersect([(3, ball)], [(3, box)])
         occ.synchronize()
-        model.addPhysicalGroup(3, [quarter[0][1]], tag=1, name="ball")
-        groups = {"contact": [], "top": [], "symmetry_x": [], "symmetry_y": []}
+        model.addPhysicalGroup(3, [quarter[0][1]], tag=1, name="body")
+        groups = {"contact": [], "far": [], "symmetry_x": [], "symmetry_y": []}
         tol = 1e-8 * radius
         for dim, tag in model.getBoundary(quarter, oriented=False):
             x, y, z = occ.getCenterOfMass(dim, tag)
@@ -46,14 +45,14 @@ def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone
             elif abs(y) < tol:
                 groups["symmetry_y"].append(tag)
             elif abs(z) < tol:
-                groups["top"].append(tag)
-            else:
                 groups["contact"].append(tag)
+            else:
+                groups["far"].append(tag)
         for tag, (name, surfaces) in enumerate(groups.items(), start=1):
             model.addPhysicalGroup(2, surfaces, tag=tag, name=name)
-        pole = occ.addPoint(0, 0, -radius)
+        centre = occ.addPoint(0, 0, 0)
         occ.synchronize()
-        _graded_field(model, [pole], contact_size, far_size, zone, ramp)
+        _graded_field(model, [centre], contact_size, far_size, zone, ramp)
         model.mesh.generate(3)
         if order > 1:
             model.mesh.setOrder(order)
@@ -61,9 +60,9 @@ def quarter_hemisphere(radius: float, contact_size: float, far_size: float, zone
     return from_gmsh(build, comm)
 
 
-# tetrahedra per h³ of volume in gmsh's Delaunay meshes of the graded ball (a regular
+# tetrahedra per h³ of volume in gmsh's Delaunay meshes of a graded body (a regular
 # tetrahedron of edge h fills h³/(6√2), gmsh's are smaller on average); calibrated on
-# quarter_hemisphere meshes of 300 to 2.5e4 cells, within −40 % … +25 %
+# graded quarter balls of 300 to 2.5e4 cells, within −40 % … +25 %
 CELLS_PER_UNIT_DENSITY = 6.0
 
 
@@ -76,18 +75,15 @@ def graded_size(distance: np.ndarray, fine: float, coarse: float, zone: float,
     return fine + (coarse - fine) * share
 
 
-def quarter_hemisphere_cells(radius: float, contact_size: float, far_size: float, zone: float,
-                             ramp: float | None = None) -> float:
-    """Expected number of tetrahedra of ``quarter_hemisphere``: CELLS_PER_UNIT_DENSITY ·
-    ∫ h⁻³ dV with h the graded field's size. The volume of the ball at distance ρ from its
-    south pole per unit ρ is 2πρ² (1 − ρ/2R) for ρ ≤ R and 2πρ² (R/ρ − ρ/2R) up to √2 R
-    (the part with z ≤ 0); a quarter of it is meshed. Costs microseconds, needs no gmsh."""
-    R = radius
-    # a geometric grid in ρ resolves the fine zone however small it is against R
-    rho = np.geomspace(1e-3 * min(contact_size, zone), np.sqrt(2) * R, 4000)
-    shell = 2 * np.pi * rho**2 * (np.minimum(1.0, R / rho) - rho / (2 * R))
+def quarter_half_space_cells(radius: float, contact_size: float, far_size: float, zone: float,
+                             ramp: float) -> float:
+    """Expected number of tetrahedra of ``quarter_half_space``: CELLS_PER_UNIT_DENSITY ·
+    ∫ h⁻³ dV with h the graded field's size; the body's volume at distance ρ from the centre
+    per unit ρ is πρ²/2 (a quarter of a half ball). Costs microseconds, needs no gmsh."""
+    # a geometric grid in ρ resolves the fine zone however small it is against the body
+    rho = np.geomspace(1e-3 * min(contact_size, zone), radius, 4000)
     h = np.minimum(graded_size(rho, contact_size, far_size, zone, ramp), far_size)
-    integrand = np.maximum(shell, 0.0) / h**3 / 4
+    integrand = np.pi * rho**2 / 2 / h**3
     return float(CELLS_PER_UNIT_DENSITY * np.sum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(rho)))
 
 
@@ -107,7 +103,7 @@ def _graded_field(model, points: list[int], fine: float, coarse: float, zone: fl
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-    # the pole is an embedded point only to carry the field; keep it out of the mesh
+    # the refined point only carries the field; it is not embedded in the mesh
     gmsh.option.setNumber("Mesh.CharacteristicLengthMax", coarse)
 
 

@@ -62,7 +62,7 @@ CASES: dict[str, Case] = {
     # P = 40 of Sze's 400 in 2 load steps: radial displacements 0.65 and 0.71 (16 R h), well
     # into the nonlinear range (linear theory: 1.9), 6 Newton iterations per step
     "hemisphere-nonlinear": Case(dict(divisions=4, force=40.0, load_steps=2)),
-    "hertz": Case(dict(mesh_size=0.03, far_size=0.5)),
+    "hertz": Case(dict(mesh_size=0.03, far_resolution=2.0, extent=20.0)),
     # the lens self-contact (ipctk on rank 0 of the gathered lens) in the coarse
     # fold's first 0.02 s: 9 steps, 107 Newton iterations (+ 6 cut attempts), the same on 1
     # and 2 ranks, the quantities 1e-13 apart. The first step needs 23 iterations: 30

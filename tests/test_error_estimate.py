@@ -42,10 +42,10 @@ def test_richardson_removes_the_leading_error_term():
 def test_coarse_parameters_follow_the_resolution_keys():
     refinement = hertz.ESTIMATE
     coarse = refinement.coarse(hertz.Parameters(error_estimate=True))
-    assert (coarse.resolution, coarse.far_resolution) == (1.3, 2.0) and coarse.error_estimate is False
+    assert (coarse.resolution, coarse.far_resolution) == (1.3, 1.5) and coarse.error_estimate is False
     # an absolute size set by the user is coarsened instead of its resolution
     absolute = refinement.coarse(hertz.Parameters(mesh_size=0.02, error_estimate=True))
-    assert (absolute.mesh_size, absolute.resolution, absolute.far_resolution) == (0.04, 2.6, 2.0)
+    assert (absolute.mesh_size, absolute.resolution, absolute.far_resolution) == (0.04, 2.6, 1.5)
     # divisions are counts: halved and rounded; the actual ratio from the sizes
     plate = plate_clamped.Parameters(divisions=9, error_estimate=True)
     coarse_plate = plate_estimate().coarse(plate)

@@ -132,9 +132,10 @@ def test_hertz(label, case):
     exact = hertz.hertz_force(params, params.indentation)  # 4/3 E* R^½ d^{3/2}
     assert q["contact_force"] == pytest.approx(exact, rel=0.03)
     assert q["contact_radius"] == pytest.approx(np.sqrt(params.radius * params.indentation), rel=0.05)
-    # the default resolution gives about the default mesh (922 cells) whatever the geometry,
-    # and the estimate made before meshing is within its stated −40 % … +25 %
-    assert 500 < q["cells"] < 2000
+    # every mesh length is a multiple of a = √(R d): about the default mesh (1 619 cells)
+    # whatever the geometry, and the estimate made before meshing is within its stated
+    # −40 % … +25 %
+    assert 1000 < q["cells"] < 2500
     assert 0.6 < q["estimated_cells"] / q["cells"] < 1.25
 
 

@@ -5,6 +5,7 @@ is :mod:`eyemech.forms.buckle`'s; these terms ask it, never its kind."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -52,8 +53,9 @@ class RigidBuckle(Term):
     position as Constants (a sweep over them reuses the compiled residual), its base
     radius (far away until :meth:`place` puts it ``buckle_clearance`` outside the inflated
     sclera), the band's travel (control ``band_travel``) and the tire's (the Real unknown
-    δ_tire). Node-wise it refuses a load step that carries the sclera through it
-    (``Stepping.depth_limit``)."""
+    δ_tire); an elastic band (``buckle_control = shortening``) and the tire under it both
+    travel by that unknown (:class:`.suture_terms.BandRow` its row). Node-wise it refuses
+    a load step that carries the sclera through it (``Stepping.depth_limit``)."""
 
     def __init__(self, body: Body, params: Parameters):
         self.body, self.params = body, params
@@ -61,12 +63,16 @@ class RigidBuckle(Term):
         self.angle = geo.limbus_angle + math.degrees(params.buckle_position / geo.sclera_radius)
         self.axial_position = geo.sclera_radius * math.cos(math.radians(self.angle))
         self.base_radius = dolfinx.fem.Constant(mesh, 2 * geo.sclera_radius)
-        self.indentation = dolfinx.fem.Constant(mesh, 0.0)  # the band's (prescribed) travel
+        # the band's travel: prescribed (buckle_control = travel), or the value of the Real
+        # unknown of an elastic band (shortening), which then carries the tire with it
+        self.indentation = dolfinx.fem.Constant(mesh, 0.0)
+        self.elastic_band = params.buckle_control == "shortening"
         shape = params.buckle_shape()
         # which elements there are and whether the tire is arc-limited change the forms'
         # structure; their sizes are numbers in them (docs/atlas/peer-comparison.md)
         self.buckle = Buckle(shape, dolfinx.fem.Constant(mesh, self.axial_position), self.base_radius,
-                             self.indentation, tire_indentation=body.tire_travel,
+                             body.tire_travel if self.elastic_band else self.indentation,
+                             tire_indentation=None if self.elastic_band else body.tire_travel,
                              sizes=BuckleSizes.of(shape, lambda value: dolfinx.fem.Constant(mesh, value)),
                              polar_angle=dolfinx.fem.Constant(mesh, math.radians(self.angle)))
         self.surface = body.eye.ds(contact_quadrature(params.contact_integration, body.family))(
@@ -92,12 +98,28 @@ class RigidBuckle(Term):
         self.under_reference = self.under.positions(self.body.u)
 
     def tire_travel(self) -> float:
+        """The Real unknown's value: the tire's travel, or the elastic band's (which carries
+        the tire). Collective."""
         return self.body.real_value(self.body.tire_travel)
+
+    def band_travel(self) -> float:
+        """The band's radial travel (collective with an elastic band)."""
+        return self.tire_travel() if self.elastic_band else float(self.indentation.value)
+
+    def numbers(self, travel: float | None = None) -> Buckle:
+        """The buckle with its band's travel a number, for the questions asked of it on
+        points (depth, outline, suture anchors): an elastic band's travel is a Real
+        unknown in the forms (``travel``: its value, read when None). Collective."""
+        if not self.elastic_band:
+            return self.buckle
+        travel = self.tire_travel() if travel is None else travel
+        return dataclasses.replace(self.buckle, indentation=travel)
 
     def depth_through(self) -> float:
         """Largest depth of the sclera's outer nodes beyond the buckle's contact face, as a
         fraction of the element's thickness (forms/buckle.py, Buckle.depth_through)."""
-        depth = self.buckle.depth_through(self.body.sclera_outer_positions(), self.tire_travel())
+        travel = self.tire_travel()
+        depth = self.numbers(travel).depth_through(self.body.sclera_outer_positions(), travel)
         return self.body.comm.allreduce(float(depth.max()) if len(depth) else -np.inf, op=MPI.MAX)
 
     def outline(self) -> np.ndarray | None:
@@ -105,7 +127,7 @@ class RigidBuckle(Term):
         segments; None before it is placed. Collective (the tire's travel is a
         distributed unknown): every rank must call it."""
         travel = self.tire_travel()
-        return self.buckle.outline(travel) if self.placed else None
+        return self.numbers(travel).outline(travel) if self.placed else None
 
     def install(self, solver) -> None:
         solver.depth_hooks.append(self.depth_through)
@@ -126,7 +148,7 @@ class RigidBuckle(Term):
         before = (self.under.nodes if self.under_reference is None else self.under_reference)[0]
         indentation = float(self.buckle.axis_distance(before) - self.buckle.axis_distance(under))
         return {"buckle_indentation_mm": indentation,
-                "buckle_travel_mm": float(self.indentation.value)}
+                "buckle_travel_mm": self.band_travel()}
 
 
 class BuckleContact(Term):

@@ -9,7 +9,8 @@ mixed DG0 unknown; condensed: none), the cavity's pressure and the tire's radial
       + δΠ_buckle                    penalty contact with the rigid buckle
       + δΠ_tie                       the sclera tied under the buckle's footprint
       + R_sutures                    suture forces at the bites (lagged directions)
-      + r_δ                          the tire's travel: pinned or balanced
+      + r_δ                          the tire's travel: pinned or balanced; or the
+                                     elastic band's, its hoop tension balanced
       + zonules, retina contact      node by node, after the assembly (solver hooks)
 
 The eye's measurements beyond its terms are :mod:`.measures`'; what moves them along
@@ -31,7 +32,7 @@ from eyemech.problems.scleral_buckling.body import Body, retina_modes
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, BuckleTie, RigidBuckle
 from eyemech.problems.scleral_buckling.measures import Optics, RetinaGaps
 from eyemech.problems.scleral_buckling.parameters import Parameters
-from eyemech.problems.scleral_buckling.suture_terms import Sutures, TireRow
+from eyemech.problems.scleral_buckling.suture_terms import BandRow, Sutures, TireRow
 from eyemech.problems.scleral_buckling.terms import CavityLiquid, RetinaContact, Tissues, Zonules
 from eyemech.problems.solid.cavity import real_pressure_space
 from eyemech.problems.solid.spaces import ELEMENTS, global_dofs, solid_fields, symmetry_bcs
@@ -72,7 +73,11 @@ class BucklingModel:
         # the loop model: the sutures' tension pushes the tire in, whose travel balances it
         loop = params.suture_model == "loop" and self.buckle.buckle.tire is not None
         self.sutures = Sutures(body, params, self.buckle, loop)
-        self.tire = TireRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire)
+        if params.buckle_control == "shortening":  # the elastic band's travel, the tire under it
+            self.tire = BandRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire,
+                                params)
+        else:
+            self.tire = TireRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire)
         self.optics = Optics(body)
         self.gaps = RetinaGaps(body, params.tear_closure_tolerance)
         self.zonules = Zonules(body, params) if params.lens else None

@@ -38,6 +38,13 @@ SEGMENTAL_SUTURE_SPREAD = 0.8
 # the keys a buckle's placement problem names (forms/buckle.py, BuckleShape.placement_problem)
 PLACEMENT_KEYS = {"position": "buckle_position", "length": "tire_length"}
 
+# the elastic band (buckle_control = shortening): Young's modulus of silicone rubber of
+# Shore A 55 by Gent's relation E = 0.0981 (56 + 7.62 S)/(0.1375 (254 − 2.54 S)) MPa
+# (Gent 1958, Trans. IRI 34:46), 2.5 MPa at S = 50 and 3.6 MPa at S = 60; the shortening
+# surgeons take out of an encircling band, ≈ 10 % of its loop
+BAND_MODULUS = 3.0
+BAND_SHORTENING_PERCENT = 10.0
+
 
 @dataclasses.dataclass(frozen=True)
 class EyeParameters(SceneParameters):
@@ -186,7 +193,27 @@ class EyeParameters(SceneParameters):
 
 @dataclasses.dataclass(frozen=True)
 class Parameters(NumericalSettings, EyeParameters):
-    """Every parameter of the scene: :class:`EyeParameters`, then the numerical settings."""
+    """Every parameter of the scene: :class:`EyeParameters`, then the numerical settings,
+    then the surgeon's controls of the buckle."""
+
+    buckle_control: Literal["travel", "shortening"] = field(
+        "travel", "how step 2 tightens the buckle: travel, the rigid buckle moves in by "
+        "indentation (the paper's operation); shortening, an elastic silicone band "
+        "(band_modulus_MPa, band_width x band_thickness) whose loop the surgeon shortens by "
+        "band_shortening_mm or band_shortening_percent, its travel an unknown set by its "
+        "hoop tension against the eye, the tire riding under it (docs/scleral_buckling.md, "
+        "\"The elastic band\")", group=PHYSICS)
+    band_shortening_percent: float = field(
+        BAND_SHORTENING_PERCENT, "with buckle_control=shortening, the length taken out of "
+        "the band's loop, in % of its length as laid on the eye (used unless "
+        "band_shortening_mm is set)", "%", group=PHYSICS)
+    band_shortening_mm: float = field(
+        0.0, "with buckle_control=shortening, the length taken out of the band's loop through its sleeve; 0: "
+        "band_shortening_percent sets it", "mm", group=PHYSICS)
+    band_modulus_MPa: float = field(
+        BAND_MODULUS, "Young's modulus of the silicone band (buckle_control=shortening): 3.0, Gent's "
+        "relation for silicone rubber of Shore A 55 (2.5-3.6 MPa over Shore A 50-60; an "
+        "assumption: no measured modulus of a #240 band was found)", "MPa", group=PHYSICS)
 
     def validate(self) -> None:
         self._validate_signs()
@@ -199,6 +226,7 @@ class Parameters(NumericalSettings, EyeParameters):
         self._validate_drainage()
         self._validate_buckle()
         self._validate_geometry()
+        self._validate_control()
         error_estimate.validate(self)  # the second solve's mesh, once the run's own are good
 
     def _validate_signs(self) -> None:
@@ -311,6 +339,59 @@ class Parameters(NumericalSettings, EyeParameters):
         except Exception as err:
             key = "lens_diameter" if "lens" in str(err) else self.resolution_key()
             raise ParameterError(key, str(err)) from None
+
+    def _validate_control(self) -> None:
+        """The elastic band's shortening: only with a band and buckle_control=shortening,
+        a positive length shorter than the band's loop; the rigid buckle's travel only
+        with buckle_control=travel."""
+        self.require_positive("band_modulus_MPa")
+        mm_set = self.band_shortening_mm != 0.0
+        percent_set = self.band_shortening_percent != BAND_SHORTENING_PERCENT
+        if self.buckle_control == "travel":
+            for key, is_set in (("band_shortening_mm", mm_set),
+                                ("band_shortening_percent", percent_set),
+                                ("band_modulus_MPa", self.band_modulus_MPa != BAND_MODULUS)):
+                if is_set:
+                    raise ParameterError(key, "is used only with buckle_control=shortening (the "
+                                         "rigid buckle moves in by indentation)")
+            return
+        if not self.buckle_shape().has_band:
+            raise ParameterError("buckle_control", f"shortening with buckle={self.buckle}: there "
+                                 "is no band to shorten (buckle=encircling or "
+                                 "encircling+segmental)")
+        if self.indentation != EyeParameters.indentation:
+            raise ParameterError("indentation", "is the rigid buckle's travel "
+                                 "(buckle_control=travel); with shortening the band's travel is "
+                                 "an unknown")
+        if mm_set and percent_set:
+            raise ParameterError("band_shortening_mm", "and band_shortening_percent are both set: "
+                                 "give the shortening one way")
+        loop = self.band_loop_estimate()
+        if mm_set:
+            if not 0 < self.band_shortening_mm < loop:
+                raise ParameterError("band_shortening_mm", f"{self.band_shortening_mm:g} mm: the "
+                                     f"length taken out must be > 0 and below the band's loop "
+                                     f"(≈ {loop:.1f} mm as laid on this eye)")
+        elif not 0 < self.band_shortening_percent < 100:
+            raise ParameterError("band_shortening_percent", f"{self.band_shortening_percent:g} %: "
+                                 "a share of the band's loop, > 0 and < 100")
+
+    def band_loop_estimate(self) -> float:
+        """The band's centreline length as laid on the eye before surgery, from the sclera's
+        radius at rest (the inflated eye's, where the scene lays it, is ≈ 0.1 mm larger):
+        2π (R + clearance + t/2) plus the tire's height over its arc."""
+        shape = self.buckle_shape()
+        radius = self.geometry().sclera_radius + self.buckle_clearance + 0.5 * self.band_thickness
+        tire = self.tire_height * math.radians(min(self.tire_arc_deg, 360.0)) if shape.has_tire else 0.0
+        return 2 * math.pi * radius + tire
+
+    def band_shortening_fraction(self) -> float:
+        """The shortening as a fraction of the loop (band_loop_estimate for a length in mm):
+        sizes the buckling stage's steps; the scene takes the millimetres out of the loop
+        it lays."""
+        if self.band_shortening_mm > 0:
+            return self.band_shortening_mm / self.band_loop_estimate()
+        return self.band_shortening_percent / 100.0
 
     def resolution_key(self) -> str:
         if self.mesh_size > 0:

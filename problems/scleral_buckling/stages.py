@@ -127,9 +127,12 @@ def largest_step(params: Parameters, buckle_step: float = 0.25) -> float:
     the sclera outside the tire, or "converged" in no iteration with the buckle inside
     the eye)."""
     thickness = params.tire_height + params.band_thickness
-    if params.indentation <= 0:
+    travel = params.indentation
+    if params.buckle_control == "shortening":  # at most the slack band's: its radius' share
+        travel = params.band_shortening_fraction() * params.band_loop_estimate() / (2 * math.pi)
+    if travel <= 0:
         return LARGEST_STEP
-    return min(LARGEST_STEP, buckle_step * thickness / params.indentation)
+    return min(LARGEST_STEP, buckle_step * thickness / travel)
 
 
 def operation(params: Parameters) -> list[Stage]:
@@ -148,7 +151,7 @@ def operation(params: Parameters) -> list[Stage]:
         # full Newton steps (a failed solve repeated with bt: plain Newton can cycle
         # between two active sets) or bt, which in the first stage would only cost
         # iterations (12-14 per step instead of 3-4)
-        Stage("buckling", "buckling", ramps=(Ramp("band_travel", 0.0, params.indentation),),
+        Stage("buckling", "buckling", ramps=(tightening(params),),
               end=(hand_the_tire_to_the_sutures,),
               largest_step=largest_step(params, params.buckle_step),
               newton=NewtonSettings(line_search=params.line_search)),
@@ -163,6 +166,15 @@ def operation(params: Parameters) -> list[Stage]:
     if params.settle:
         stages.append(settling(params, iop, largest))
     return stages
+
+
+def tightening(params: Parameters) -> Ramp:
+    """How the buckling stage tightens the buckle (``buckle_control``): the rigid buckle's
+    travel ramped to ``indentation``, or the elastic band's shortening taken out of its loop
+    (control ``band_tightening``, the fraction of it, 0 to 1)."""
+    if params.buckle_control == "shortening":
+        return Ramp("band_tightening", 0.0, 1.0)
+    return Ramp("band_travel", 0.0, params.indentation)
 
 
 def settling(params: Parameters, iop: float, largest: float) -> Stage:

@@ -14,7 +14,13 @@ import dolfinx.fem
 import numpy as np
 import ufl
 
-from eyemech.forms.buckle import pinned_travel_residual, tire_travel_residual
+from eyemech.forms.buckle import (
+    band_hoop_residual,
+    band_length,
+    band_tension,
+    pinned_travel_residual,
+    tire_travel_residual,
+)
 from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.scleral_buckling.body import Body
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, RigidBuckle
@@ -58,7 +64,7 @@ class Sutures(Term):
     def anchors(self) -> np.ndarray:
         """Where each suture leaves the buckle (directions for the next step)."""
         travel = self.buckle.tire_travel() if self.loop else None
-        return self.buckle.buckle.suture_anchors(self.bites, travel)
+        return self.buckle.numbers().suture_anchors(self.bites, travel)
 
     def pull_on_tire(self) -> float:
         """The sutures' inward radial resultant on the tire (half model, N): each tire
@@ -204,6 +210,94 @@ class TireRow(Term):
                 "tire_contact_force_N": 2.0 * self.contact_force(),
                 "tire_suture_pull_N": 2.0 * float(self.suture_pull.value),
                 "tire_free": self.free_}
+
+
+class BandRow(TireRow):
+    """The elastic band's radial travel δ (``buckle_control = shortening``; the Real
+    unknown of :class:`TireRow`, the tire riding under the band): its row balances the
+    sclera's contact force on band and tire, ∂Π_c/∂δ, against the inward resultant of
+    the band's hoop tension, ½ · 2π T (the half eye), and the sutures' pull on the tire
+    (forms/buckle.py, band_hoop_residual). T = E A (L − L_set)/L_set with L the band's
+    centreline length at δ over the tire (band_length) and L_set its length as laid
+    less the shortening, which control ``band_tightening`` (0 → 1 over buckling) takes
+    out. Free from the start: before the band touches the eye its row is the slack
+    band's, T = 0 at δ = ΔL/2π."""
+
+    def __init__(self, body: Body, buckle: RigidBuckle, contact: BuckleContact, loop: bool,
+                 pull: Callable[[], float], params: Parameters):
+        super().__init__(body, buckle, contact, loop, pull)
+        mesh = body.mesh
+        self.tire_free.value = 1.0
+        self.tightening = dolfinx.fem.Constant(mesh, 0.0)
+        self.modulus_area = dolfinx.fem.Constant(
+            mesh, params.band_modulus_MPa * params.band_width * params.band_thickness)
+        shape = buckle.buckle.shape
+        tire = buckle.buckle.tire
+        # the band runs over the tire: raised by its height over its arc
+        self.tire_height = dolfinx.fem.Constant(mesh, params.tire_height if tire is not None else 0.0)
+        self.tire_arc = dolfinx.fem.Constant(mesh, 2.0 * shape.half_arc if tire is not None else 0.0)
+        self.band_thickness = dolfinx.fem.Constant(mesh, params.band_thickness)
+        # ΔL = tightening · (mm + percent/100 · L_laid): one of the two is zero
+        self.shortening_mm = dolfinx.fem.Constant(mesh, params.band_shortening_mm)
+        self.shortening_fraction = dolfinx.fem.Constant(
+            mesh, 0.0 if params.band_shortening_mm > 0 else params.band_shortening_percent / 100.0)
+
+    def lengths(self, travel, value=lambda c: c):
+        """(L, L_laid, L_set): the band's centreline length at the travel ``travel``, as
+        laid (ρ_c, its inner face at the base radius) and after the shortening taken out so
+        far; UFL, or numbers with ``value`` reading the Constants."""
+        centre = value(self.buckle.base_radius) + 0.5 * value(self.band_thickness)
+        height, arc = value(self.tire_height), value(self.tire_arc)
+        laid = band_length(centre, 0.0, height, arc)
+        taken = value(self.tightening) * (value(self.shortening_mm)
+                                          + value(self.shortening_fraction) * laid)
+        return band_length(centre, travel, height, arc), laid, laid - taken
+
+    def residual(self, tests):
+        delta, q = self.body.tire_travel, tests[-1]
+        length, _laid, set_length = self.lengths(delta)
+        tension = band_tension(length, set_length, self.modulus_area)
+        return band_hoop_residual(self.contact.energy, delta, q, tension, 0.5, self.suture_pull,
+                                  self.buckle.surface, self.sclera_area)
+
+    def free(self) -> None:
+        """Free from the start (see the class)."""
+
+    def release_from_band(self) -> None:
+        """The tire rides under the band (one unknown)."""
+
+    def prepare(self) -> None:
+        self.suture_pull.value = self.pull()
+
+    def converged(self) -> None:
+        self.suture_pull.value = self.pull()
+
+    def controls(self) -> dict[str, Control]:
+        return super().controls() | {
+            "band_tightening": Control(lambda: float(self.tightening.value),
+                                       lambda value: setattr(self.tightening, "value", value))}
+
+    def register(self, checkpoints) -> None:
+        super().register(checkpoints)
+        checkpoints.constant("band_tightening", self.tightening)
+
+    def band(self) -> dict:
+        """The band now: travel δ, centreline length L, the length taken out L_laid − L_set,
+        tension T = E A (L − L_set)/L_set. Collective."""
+        travel = self.buckle.tire_travel()
+        length, laid, set_length = self.lengths(travel, lambda c: float(c.value))
+        tension = float(self.modulus_area.value) * (length - set_length) / set_length
+        return {"band_travel_mm": travel, "band_circumference_mm": length,
+                "band_laid_circumference_mm": laid, "band_shortening_mm": laid - set_length,
+                "band_shortening_percent": 100.0 * (laid - set_length) / laid,
+                "band_tension_N": tension,
+                # the inward resultant of the tension on the whole eye, 2π T: the sclera's
+                # contact force on band and tire less the sutures' pull balances it
+                "band_hoop_force_N": 2.0 * math.pi * tension}
+
+    def measure(self) -> dict:
+        # the band's numbers once it is laid on the eye (its base radius is far away before)
+        return super().measure() | (self.band() if self.buckle.placed else {})
 
 
 def _point(centre) -> str:

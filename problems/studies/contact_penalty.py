@@ -19,7 +19,7 @@ QUICK_FACTORS = (10.0, 100.0)
 
 def run(out: Path, quick: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
     out = Path(out)
-    base = dict(mesh_size=0.02, far_size=0.3) if quick else {}
+    base = dict(resolution=1.6, far_resolution=2.0) if quick else {}
     rows = []
     for factor in (QUICK_FACTORS if quick else FACTORS):
         params = hertz.Parameters(penalty=factor, **base)
