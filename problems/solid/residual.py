@@ -32,9 +32,9 @@ def solid_residual(material: Material | Mapping[int, Material], family: ElementF
     ``material`` is one law for the whole mesh, or ``{cell_tag: law}`` integrated over
     ``dx(cell_tag)`` (``dx`` must then carry the cell tags as subdomain data).
 
-    ``modes``: Q1 with incompatible modes on some cells (one law for the mesh, a mixed or
-    displacement-only family): there the energy is that of the enhanced F, and the modes'
-    amplitudes (one of ``fields``) get their residual block."""
+    ``modes``: incompatible modes on some cells (mixed Q1P0, one law for the mesh): there the
+    energy is :func:`~eyemech.forms.incompatible_modes.enhanced_incompressible_energy_density`,
+    and the modes' amplitudes and pressure slopes (among ``fields``) get their blocks."""
     u, v = fields[0], tests[0]
     parts = material.items() if isinstance(material, Mapping) else [(None, material)]
     if family.pressure_family is None and (bulk_modulus is None or not _value(bulk_modulus) > 0):
