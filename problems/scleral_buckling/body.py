@@ -16,6 +16,7 @@ from mpi4py import MPI
 
 from eyemech.meshes.eye import EyeGeometry
 from eyemech.problems.run.results import Timings
+from eyemech.problems.solid.incompatible_modes import IncompatibleModes
 from eyemech.problems.solid.probes import facet_nodes
 from eyemech.problems.solid.spaces import ElementFamily
 
@@ -24,8 +25,9 @@ from eyemech.problems.solid.spaces import ElementFamily
 class Body:
     """The half eye as every term sees it: the tagged mesh, the unknowns [u, p, P, δ_tire]
     (p only with Q1P0's mixed pressure; P the cavity's pressure and δ_tire the tire's
-    radial travel, Real unknowns), the element, its measures, the boundary conditions,
-    and the run's communicator and timings."""
+    radial travel, Real unknowns; with the retina's incompatible modes their amplitudes
+    and pressure slopes after p), the element, its measures, the boundary conditions
+    of u, and the run's communicator and timings."""
 
     eye: object  # meshes.eye.TaggedMesh
     geometry: EyeGeometry
@@ -36,6 +38,7 @@ class Body:
     bcs: list
     comm: MPI.Comm
     timings: Timings
+    modes: IncompatibleModes | None = None  # the retina's incompatible modes, when chosen
 
     @property
     def u(self) -> dolfinx.fem.Function:
@@ -98,3 +101,11 @@ def cell_field(body: Body, name: str, values: dict[str, float]) -> dolfinx.fem.F
             cells = body.eye.cells(tissue)
             c.x.array[space.dofmap.list[cells, 0]] = value
     return c
+
+
+def retina_modes(eye) -> IncompatibleModes:
+    """Incompatible modes on the retina's cells: one cell through its thickness bends
+    without Q1's locking (:mod:`eyemech.forms.incompatible_modes`)."""
+    tissues = [name for name, (dim, _) in eye.names.items() if dim == eye.mesh.topology.dim]
+    return IncompatibleModes(eye.mesh, eye.cells("retina"), eye.tag("retina"),
+                             tuple(eye.tag(name) for name in tissues if name != "retina"))

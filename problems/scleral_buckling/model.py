@@ -28,7 +28,7 @@ import ufl
 from eyemech.meshes.eye import half_eye
 from eyemech.problems.run.context import RunContext
 from eyemech.problems.run.parameters import MMHG
-from eyemech.problems.scleral_buckling.body import Body
+from eyemech.problems.scleral_buckling.body import Body, retina_modes
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, BuckleTie, RigidBuckle
 from eyemech.problems.scleral_buckling.measures import Optics, RetinaGaps
 from eyemech.problems.scleral_buckling.parameters import Parameters
@@ -61,14 +61,15 @@ class BucklingModel:
             self.eye = half_eye(self.geometry, ctx.comm)
         family = ELEMENTS[params.element]
         mesh = self.eye.mesh
+        modes = retina_modes(self.eye) if params.retina_incompatible_modes else None
         fields, tests = solid_fields(mesh, family, real_pressure_space(mesh), real_pressure_space(mesh),
-                                     condensed=params.dg0_pressure == "condensed")
+                                     condensed=params.dg0_pressure == "condensed", modes=modes)
         fields[-2].name, fields[-1].name = "P", "tire_travel"
         metadata = {"quadrature_degree": family.quadrature_degree}
         self.body = body = Body(self.eye, self.geometry, family, fields, self.eye.dx(metadata),
                                 self.eye.ds(metadata),
                                 self._boundary_conditions(fields[0], params.optic_nerve_end_spring == 0),
-                                ctx.comm, ctx.timings)
+                                ctx.comm, ctx.timings, modes)
         self.tissues = Tissues(body, params)
         self.liquid = CavityLiquid(body, params)
         self.buckle = RigidBuckle(body, params)
@@ -137,7 +138,8 @@ class BucklingModel:
                                          params.line_search, params.suture_line_search,
                                          params.settle_line_search} != {"bt"}
                                      else ctx.options.newton.fallback_line_search)
-        return NonlinearSolver(list(ufl.extract_blocks(residual)), body.fields, body.bcs,
+        bcs = body.bcs + (body.modes.bcs if body.modes is not None else [])
+        return NonlinearSolver(list(ufl.extract_blocks(residual)), body.fields, bcs,
                                options=newton, timings=ctx.timings,
                                iterative=params.linear_solver(self.tissues.shear_modulus, body.dx))
 
@@ -166,6 +168,9 @@ class BucklingModel:
         """Everything a restart needs besides the load (docs/restart.md)."""
         for term in self.terms:
             term.register(checkpoints)
+        if self.body.modes is not None:
+            for f in self.body.modes.fields:
+                checkpoints.function(f.name, f)
         self.optics.register(checkpoints)
 
     def measure(self) -> dict:

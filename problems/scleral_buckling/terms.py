@@ -102,7 +102,7 @@ class Tissues(Term):
             self.pressure = self.mean_dilatation.pressure
         condensed = getattr(self.mean_dilatation, "pressure", None)
         return solid_residual(self.law, body.family, body.fields, tests, body.dx,
-                              condensed_pressure=condensed)
+                              condensed_pressure=condensed, modes=body.modes)
 
     def install(self, solver) -> None:
         if self.mean_dilatation is not None:

@@ -102,18 +102,22 @@ def mixed_displacement_pressure(mesh: dolfinx.mesh.Mesh, family: ElementFamily):
 
 
 def solid_fields(mesh: dolfinx.mesh.Mesh, family: ElementFamily, *extra: dolfinx.fem.FunctionSpace,
-                 condensed: bool = False):
+                 condensed: bool = False, modes=None):
     """Unknowns and test functions of a solid of ``family``: [u, p] (mixed families)
     or [u] (displacement only, or ``condensed``: Q1P0's pressure eliminated cell by cell,
-    :mod:`~eyemech.problems.solid.mean_dilatation`), followed by one per ``extra`` space
-    (e.g. a Real space for a cavity pressure), all in one blocked system."""
+    :mod:`~eyemech.problems.solid.mean_dilatation`), then ``modes``' unknowns (its
+    :class:`~eyemech.problems.solid.incompatible_modes.IncompatibleModes`' own functions),
+    followed by one per ``extra`` space (e.g. a Real space for a cavity pressure), all in
+    one blocked system."""
     if condensed and family.name != "Q1P0":
         raise ValueError(f"only Q1P0's DG0 pressure condenses cell by cell, not {family.name}'s")
     spaces = [displacement_space(mesh, family)]
     if family.pressure_family is not None and not condensed:
         spaces.append(pressure_space(mesh, family))
-    spaces += list(extra)
-    return [dolfinx.fem.Function(V) for V in spaces], list(test_functions(*spaces))
+    own = list(modes.fields) if modes is not None else []
+    functions = [dolfinx.fem.Function(V) for V in spaces] + own + [dolfinx.fem.Function(V) for V in extra]
+    spaces += [f.function_space for f in own] + list(extra)
+    return functions, list(test_functions(*spaces))
 
 
 def test_functions(*spaces: dolfinx.fem.FunctionSpace):
