@@ -10,8 +10,11 @@ each):
    V_ini = the volume then, bulk modulus K; seed 002 eq. 5 as P's row), the buckle placed
    ``buckle_clearance`` outside the sclera and tied to it.
 2. buckling — the rigid buckle (a tire on an encircling band) moves radially inward by
-   ``indentation`` against the closed liquid, vented at ``iop_limit_mmHg`` (``venting``:
-   the surgeon's paracentesis); penalty contact on the sclera's outer surface.
+   ``indentation`` (``buckle_control = travel``) or as far as an elastic band shortened by
+   ``band_shortening_percent`` pulls it (``buckle_control = shortening``: the band's hoop
+   tension against the eye's contact force), against the closed liquid, vented at
+   ``iop_limit_mmHg`` (``venting``: the surgeon's paracentesis); penalty contact on the
+   sclera's outer surface.
 3. suturing — forces at the suture bites, tangent to the buckle's outline, directions from
    the last converged step (seed 002, §2.2), spread over each bite (radius
    ``suture_bite_radius``; a point load's response does not converge under refinement).
@@ -20,11 +23,14 @@ each):
    P is pinned again and its target ramped back, the liquid's volume released.
 
 The model (:mod:`.model`) is a sum of terms (:mod:`.terms`, :mod:`.buckle_terms`): the
-tissues (neo-Hooke per tissue, paper Table 1, or the calibrated Yeoh coats), the cavity's
-liquid, the buckle's contact, the tie under its footprint, the tire's row, the sutures,
-the lens' zonules and the retina's contact with the choroid. The
-eye is held at the end of the optic-nerve stub; the symmetry plane x = 0 passes through
-the tear. Its parameters: :mod:`.parameters` (physics and geometry) and :mod:`.settings`
+tissues (neo-Hooke per tissue, paper Table 1; the calibrated Yeoh coats; or tension-only
+fibres in the coats' plane, ``material = fibres``; the retina optionally with incompatible
+modes, ``retina_incompatible_modes``), the cavity's liquid, the buckle's contact, the tie
+under its footprint, the tire's (or the elastic band's) row, the sutures, the lens'
+zonules, the retina's contact with the choroid and, with ``optic_nerve_end_spring`` > 0,
+the spring on the optic nerve's end. The eye is held at the end of the optic-nerve stub
+(clamped, or on that spring so that it may lengthen); the symmetry plane x = 0 passes
+through the tear. Its parameters: :mod:`.parameters` (physics and geometry) and :mod:`.settings`
 (solver and stepping); its reference: docs/scleral_buckling.md.
 """
 
