@@ -23,7 +23,6 @@ TABLES = sorted(STUDIES.glob("*.csv"))
 STALE = {
     "buckling_planning.csv", "buckling_sweep.csv", "eye_calibration.csv",
     "eye_model_reduction.csv", "iol_flip.csv", "iol_speed.csv", "iol_stability.csv",
-    "tonometry_convergence.csv", "tonometry_sweep.csv",
 }
 
 
