@@ -1,4 +1,4 @@
-"""Goldmann applanation in the ``tonometry`` scene (issue 6, item 6): mesh convergence of
+"""Goldmann applanation in the ``tonometry`` scene: mesh convergence of
 the reading, and the reading against central corneal thickness and corneal modulus.
 
 Published trend: readings rise with thickness and stiffness. Ehlers, Bramsen & Sperling
@@ -72,6 +72,15 @@ def _thick(cct: float, **changes) -> dict:
     return dict(central_thickness=cct, limbal_thickness=cct + 0.15, **changes)
 
 
+def _default_modulus() -> float:
+    """The scene's default modulus: the mesh study and the first thickness series use it."""
+    return tonometry.Parameters().youngs_modulus
+
+
+def _default_label() -> str:
+    return f"model default, E = {_default_modulus():g} MPa"
+
+
 def _calibrated_modulus(rows: list[dict]) -> float | None:
     """E at which the reading equals the true IOP (linear interpolation between the
     bracketing moduli), or None if the sweep does not bracket it."""
@@ -138,7 +147,8 @@ def _convergence_chart(path: Path, rows: list[dict]) -> Path:
     ax.set_xscale("log")
     ax.set_xlabel("displacement + pressure dofs")
     ax.set_ylabel("reading (mmHg), true 15")
-    ax.set_title("tonometry: mesh convergence of the reading (520 µm, E = 0.21 MPa)", fontsize=9)
+    ax.set_title(f"tonometry: mesh convergence of the reading (520 µm, E = {_default_modulus():g} MPa)",
+                 fontsize=9)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     save_chart(fig, path, dpi=80)
@@ -153,20 +163,22 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
         mesh = QUICK_MESH
         nominal = _reading(comm, **mesh)
         moduli = [nominal]  # (the tests cover stiffness; quick keeps 'study all' short)
-        thickness = {"model, E = 0.21 MPa": [nominal, _reading(comm, **_thick(0.60, **mesh))]}
+        thickness = {_default_label(): [nominal, _reading(comm, **_thick(0.60, **mesh))]}
     else:
         rows = []
         for label, changes in CONVERGENCE:
             rows.append({"case": label, **_reading(comm, **changes)})
         if comm.rank == 0:
             files.append(write_csv(out / "tonometry_convergence.csv", rows,
-                                   "tonometry: reading at 520 µm, E = 0.21 MPa, IOP 15 mmHg, by mesh"))
+                                   f"tonometry: reading at 520 µm, E = {_default_modulus():g} MPa "
+                                   "(the scene's default), IOP 15 mmHg, by mesh"))
             files.append(_convergence_chart(out / "tonometry_convergence.png", rows))
         mesh = SWEEP_MESH
-        moduli = [_reading(comm, youngs_modulus=E, **mesh) for E in MODULI]
+        moduli = [_reading(comm, youngs_modulus=E, **mesh)
+                  for E in sorted(set(MODULI) | {_default_modulus()})]
         E_cal = _calibrated_modulus(moduli)
-        default = next(r for r in moduli if r["youngs_modulus_MPa"] == 0.21)
-        thickness = {"model, E = 0.21 MPa": [
+        default = next(r for r in moduli if r["youngs_modulus_MPa"] == _default_modulus())
+        thickness = {_default_label(): [
             default if t == NOMINAL_CCT else _reading(comm, **_thick(t, **mesh)) for t in THICKNESSES]}
         if E_cal is not None:
             thickness[f"model, E = {E_cal:.3f} MPa (reads true at 520 µm)"] = [
