@@ -28,7 +28,7 @@ from pathlib import Path
 
 BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
-COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "max_rel_diff", "worst_quantity",
+COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "load", "max_rel_diff", "worst_quantity",
            "lockstep_wait_max_s", "note")
 
 
@@ -108,12 +108,16 @@ def main() -> int:
         for name in names:
             serial = None
             for ranks in counts:
+                load_before = os.getloadavg()[0]
                 code, seconds, result, said = run(name, ranks, Path(scratch) / f"{name}-{ranks}")
+                # the machine's 1-minute load average around the run: a wall time is only
+                # comparable with another measured at a similar load
+                load = round((load_before + os.getloadavg()[0]) / 2, 1)
                 # the longest any rank waited for the others at a step's end (scenes with
                 # checkpoints; docs/parallel.md, "Ranks in step")
                 waited = (result or {}).get("checkpoints", {}).get("lockstep_wait_max_s", "")
                 row = {"scene": name, "ranks": ranks, "exit_code": code,
-                       "wall_s": round(seconds, 1), "max_rel_diff": "", "worst_quantity": "",
+                       "wall_s": round(seconds, 1), "load": load, "max_rel_diff": "", "worst_quantity": "",
                        "lockstep_wait_max_s": waited, "note": said[:160]}
                 if ranks == 1:
                     serial = result
@@ -142,14 +146,15 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
     lines = [f"Every scene at its defaults (`make bench-mpi`, {time.strftime('%Y-%m-%d')}, "
              f"{platform.node()}, {os.cpu_count()} cpus): wall time of `mpiexec -n N eyemech "
              "run NAME` (start-up included) and the largest relative difference of any "
-             "quantity from the serial run.", "",
+             "quantity from the serial run; in brackets the machine's 1-minute load average "
+             "during the run (other jobs included).", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, runs in by_scene.items():
         cells = [f"`{name}`"]
         for r in counts:
             row = runs.get(r)
-            cells.append("" if row is None else f"{row['wall_s']}" if row["exit_code"] == 0
-                         else f"exit {row['exit_code']}")
+            cells.append("" if row is None else f"{row['wall_s']} ({row['load']})"
+                         if row["exit_code"] == 0 else f"exit {row['exit_code']}")
         for r in counts:
             if r > 1:
                 row = runs.get(r, {})
