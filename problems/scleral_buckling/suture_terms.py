@@ -286,7 +286,7 @@ class BandRow(TireRow):
         tension T = E A (L − L_set)/L_set. Collective."""
         travel = self.buckle.tire_travel()
         length, laid, set_length = self.lengths(travel, lambda c: float(c.value))
-        tension = float(self.modulus_area.value) * (length - set_length) / set_length
+        tension = band_tension(length, set_length, float(self.modulus_area.value))
         return {"band_travel_mm": travel, "band_circumference_mm": length,
                 "band_laid_circumference_mm": laid, "band_shortening_mm": laid - set_length,
                 "band_shortening_percent": 100.0 * (laid - set_length) / laid,
