@@ -1,0 +1,33 @@
+"""scripts/bench_mpi.py's comparison of a parallel run with the serial one, without any
+solve: spreads and errors (round-off when the solve is exact) are measured against the
+scale of the quantity they come from, everything else relatively."""
+
+from __future__ import annotations
+
+from eyemech.scripts import bench_mpi
+
+# contact-patch's quantities on 1 and 2 ranks (measured: the spreads are round-off)
+SERIAL = {"pressure_mean": 0.01006030431469909, "pressure_spread": 1.0658141036401503e-11,
+          "stress_spread_lower": 3.87068849194705e-12, "penalty_stiffness": 120.0,
+          "newton_iterations": 8, "dofs": 930}
+PARALLEL = dict(SERIAL, pressure_spread=4.4e-12, stress_spread_lower=3.0e-13)
+
+
+def test_round_off_spreads_are_not_reported_as_differences():
+    worst, where = bench_mpi.largest_difference(SERIAL, PARALLEL)
+    # 6.3e-12 against the pressure's 0.01; 3.6e-12 against the run's largest float, 120
+    assert worst < 1e-8, (worst, where)
+
+
+def test_a_real_difference_is_still_caught():
+    worst, where = bench_mpi.largest_difference(SERIAL, dict(PARALLEL, pressure_mean=0.0102))
+    assert where == "pressure_mean" and abs(worst - 0.0137) < 1e-3
+    worst, where = bench_mpi.largest_difference(SERIAL, dict(PARALLEL, pressure_spread=1e-4))
+    assert where == "pressure_spread" and abs(worst - 1e-4 / 0.01006) < 1e-6
+    worst, where = bench_mpi.largest_difference(SERIAL, dict(PARALLEL, newton_iterations=9))
+    assert where == "newton_iterations" and abs(worst - 1 / 9) < 1e-12
+
+
+def test_a_list_of_another_length_is_a_difference():
+    worst, where = bench_mpi.largest_difference({"x": [1.0, 2.0]}, {"x": [1.0]})
+    assert worst == float("inf") and where.startswith("x")
