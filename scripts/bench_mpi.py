@@ -29,7 +29,7 @@ from pathlib import Path
 BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
 COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "load", "max_rel_diff", "worst_quantity",
-           "lockstep_wait_max_s", "note")
+           "effort_rel_diff", "effort_quantity", "lockstep_wait_max_s", "note")
 
 
 def flat(quantities: dict, prefix: str = "") -> dict[str, object]:
@@ -57,6 +57,15 @@ def numbers(value) -> list[float]:
 # difference of two round-offs says nothing; they are compared against the scale of the
 # quantity they come from
 DIFFERENCE_WORDS = ("spread", "error", "deviation", "residual")
+# the solver's effort (Newton iterations, factorisations, ...) is not a result: near the
+# stopping test, round-off that differs between partitions can cost one iteration more;
+# it is reported in its own column
+EFFORT_WORDS = ("iterations", "factorisations", "jacobians", "attempts", "load_steps",
+                "solves", "krylov", "augmentations")
+
+
+def is_effort(key: str) -> bool:
+    return any(word in key for word in EFFORT_WORDS)
 
 
 def is_difference(key: str) -> bool:
@@ -78,15 +87,16 @@ def scale_of(key: str, quantities: dict[str, object]) -> float:
     return max(floats, default=0.0)
 
 
-def largest_difference(serial: dict, parallel: dict) -> tuple[float, str]:
+def largest_difference(serial: dict, parallel: dict, effort: bool = False) -> tuple[float, str]:
     """The largest relative difference over the numeric quantities (wall-clock ones
-    left out): |a − b| / max(|a|, |b|), or for a difference-quantity (a spread, an error)
+    left out; the solver's effort only, or only the results, as ``effort`` says): |a − b| / max(|a|, |b|), or for a difference-quantity (a spread, an error)
     |a − b| / the scale of the quantity it comes from (``scale_of``); 0 where the scale is
     below 1e-14. Returns it and its key."""
     worst, where = 0.0, ""
     ours, theirs = flat(serial), flat(parallel)
     for key, value in ours.items():
-        if "seconds" in key or "per_second" in key or key not in theirs:
+        if "seconds" in key or "per_second" in key or key not in theirs \
+                or is_effort(key) != effort:
             continue
         a, b = numbers(value), numbers(theirs[key])
         if len(a) != len(b):
@@ -147,12 +157,16 @@ def main() -> int:
                 waited = (result or {}).get("checkpoints", {}).get("lockstep_wait_max_s", "")
                 row = {"scene": name, "ranks": ranks, "exit_code": code,
                        "wall_s": round(seconds, 1), "load": load, "max_rel_diff": "", "worst_quantity": "",
+                       "effort_rel_diff": "", "effort_quantity": "",
                        "lockstep_wait_max_s": waited, "note": said[:160]}
                 if ranks == 1:
                     serial = result
                 elif result is not None and serial is not None:
                     worst, where = largest_difference(serial["quantities"], result["quantities"])
                     row.update(max_rel_diff=f"{worst:.1e}", worst_quantity=where)
+                    worst, where = largest_difference(serial["quantities"], result["quantities"],
+                                                      effort=True)
+                    row.update(effort_rel_diff=f"{worst:.1e}", effort_quantity=where)
                 rows.append(row)
                 print(" ".join(f"{k}={row[k]}" for k in COLUMNS), flush=True)
     out = Path(args.out)
@@ -171,12 +185,15 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
     for row in rows:
         by_scene.setdefault(row["scene"], {})[row["ranks"]] = row
     head = ["scene", *[f"{r} rank{'s' * (r > 1)} (s)" for r in counts],
-            *[f"max rel. diff. {r} ranks" for r in counts if r > 1]]
+            *[f"max rel. diff. {r} ranks" for r in counts if r > 1],
+            *[f"effort {r} ranks" for r in counts if r > 1]]
     lines = [f"Every scene at its defaults (`make bench-mpi`, {time.strftime('%Y-%m-%d')}, "
              f"{platform.node()}, {os.cpu_count()} cpus): wall time of `mpiexec -n N eyemech "
              "run NAME` (start-up included) and the largest relative difference of any "
              "quantity from the serial run (a spread or an error against the scale of the "
-             "quantity it comes from: scripts/bench_mpi.py, scale_of); in brackets the machine's 1-minute load average "
+             "quantity it comes from: scripts/bench_mpi.py, scale_of), and apart from it the "
+             "largest relative difference in the solver's effort (Newton iterations, "
+             "factorisations: round-off near the stopping test may cost an iteration); in brackets the machine's 1-minute load average "
              "during the run (other jobs included).", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, runs in by_scene.items():
@@ -190,6 +207,12 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
                 row = runs.get(r, {})
                 diff = row.get("max_rel_diff", "")
                 cells.append(f"{diff} ({row['worst_quantity']})" if diff else "")
+        for r in counts:
+            if r > 1:
+                row = runs.get(r, {})
+                diff = row.get("effort_rel_diff", "")
+                cells.append("same" if diff in ("0.0e+00",) else
+                             f"{diff} ({row['effort_quantity']})" if diff else "")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
