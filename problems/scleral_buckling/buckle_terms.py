@@ -66,7 +66,7 @@ class RigidBuckle(Term):
         # the band's travel: prescribed (buckle_control = travel), or the value of the Real
         # unknown of an elastic band (shortening), which then carries the tire with it
         self.indentation = dolfinx.fem.Constant(mesh, 0.0)
-        self.elastic_band = params.buckle_control == "shortening"
+        self.elastic_band = params.elastic_band()
         shape = params.buckle_shape()
         # which elements there are and whether the tire is arc-limited change the forms'
         # structure; their sizes are numbers in them (docs/atlas/peer-comparison.md)

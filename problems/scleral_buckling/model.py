@@ -80,7 +80,7 @@ class BucklingModel:
         # the loop model: the sutures' tension pushes the tire in, whose travel balances it
         loop = params.suture_model == "loop" and self.buckle.buckle.tire is not None
         self.sutures = Sutures(body, params, self.buckle, loop)
-        if params.buckle_control == "shortening":  # the elastic band's travel, the tire under it
+        if params.elastic_band():  # the elastic band's travel, the tire under it
             self.tire = BandRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire,
                                 params)
         else:

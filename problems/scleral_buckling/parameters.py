@@ -44,10 +44,23 @@ PLACEMENT_KEYS = {"position": "buckle_position", "length": "tire_length"}
 
 # the elastic band (buckle_control = shortening): Young's modulus of silicone rubber of
 # Shore A 55 by Gent's relation E = 0.0981 (56 + 7.62 S)/(0.1375 (254 − 2.54 S)) MPa
-# (Gent 1958, Trans. IRI 34:46), 2.5 MPa at S = 50 and 3.6 MPa at S = 60; the shortening
-# surgeons take out of an encircling band, ≈ 10 % of its loop
+# (Gent 1958, Trans. IRI 34:46), 2.5 MPa at S = 50 and 3.6 MPa at S = 60. The default
+# shortening, 25 % of the loop, is the least of 20 / 25 / 30 % that closes the tear after
+# suturing on the coarse and default meshes of the living eye (docs/scleral_buckling.md,
+# "The defaults: a living eye, vented, a shortened band"); surgical texts advise ≈ 10 %,
+# which on this eye leaves the band 0.4 mm deep and the tear open
 BAND_MODULUS = 3.0
-BAND_SHORTENING_PERCENT = 10.0
+BAND_SHORTENING_PERCENT = 25.0
+
+# the paper's operation (seed 002): Table 1's neo-Hookean coats, the optic nerve's end
+# clamped, the rigid buckle moved in by ``indentation``, the liquid's volume conserved.
+# ``eyemech run scleral-buckling --set material=table-1 --set optic_nerve_end_spring=0
+# --set buckle_control=travel --set venting=false`` (docs/scleral_buckling.md)
+PAPER_OPERATION = {"material": "table-1", "optic_nerve_end_spring": 0.0,
+                   "buckle_control": "travel", "venting": False}
+# the optic nerve's end spring of the living eye: within 4 % of the free eye's settled axial
+# change and 0.004-0.011 N on the nerve (docs/scleral_buckling.md, "A living eye's wall")
+OPTIC_NERVE_END_SPRING = 0.001
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +105,7 @@ class EyeParameters(SceneParameters):
     c_optic_nerve: float = field(0.05, "neo-Hooke c of the optic nerve", "MPa", group=PHYSICS)
     c_lens: float = field(10.0, "neo-Hooke c of the lens (Table 1)", "MPa", group=PHYSICS)
     material: Literal["table-1", "calibrated", "fibres"] = field(
-        "table-1", "laws of the coats: table-1, every tissue neo-Hookean with the c_* above "
+        "fibres", "laws of the coats: table-1, every tissue neo-Hookean with the c_* above "
         "(seed 002, Table 1); calibrated, the sclera and the cornea stiffen with strain by "
         "c20 (Ī1 − 3)² (fitted to the eye's pressure–volume curve, Pallikaris et al. 2005); "
         "fibres, the same curve from tension-only fibres along the coats' meridians and "
@@ -153,11 +166,11 @@ class EyeParameters(SceneParameters):
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm", group=GEOMETRY)
     indentation: float = field(
-        2.0, "radial inward travel of the buckle in step 2. 2.0: with the buckle at 13.0 mm the "
-        "least travel searched that closes the tear after suturing on every mesh (1.5 mm leaves "
-        "the default mesh's anterior rim 0.065 mm open); it costs an acute IOP of 49–58 "
-        "mmHg and ΔAL ≈ +2.2–2.5 mm acute (docs/scleral_buckling.md, \"The tear at the "
-        "defaults\")", "mm", group=PHYSICS)
+        2.0, "radial inward travel of the rigid buckle in step 2 (buckle_control=travel, or a "
+        "tire without a band). 2.0: on Table 1's eye (the paper's operation) with the buckle "
+        "at 13.0 mm the least travel searched that closes the tear after suturing on every "
+        "mesh; it costs an acute IOP of 49–58 mmHg and ΔAL ≈ +2.2–2.5 mm acute "
+        "(docs/scleral_buckling.md, \"The paper's operation\")", "mm", group=PHYSICS)
     buckle_clearance: float = field(0.05, "gap between buckle and sclera before step 2", "mm", group=GEOMETRY)
     suture_width: float = field(8.9, "distance between the two bites of a suture (paper 8.90)", "mm",
     group=GEOMETRY)
@@ -204,12 +217,13 @@ class Parameters(NumericalSettings, EyeParameters):
     then the surgeon's controls of the buckle."""
 
     buckle_control: Literal["travel", "shortening"] = field(
-        "travel", "how step 2 tightens the buckle: travel, the rigid buckle moves in by "
-        "indentation (the paper's operation); shortening, an elastic silicone band "
+        "shortening", "how step 2 tightens the buckle: shortening, an elastic silicone band "
         "(band_modulus_MPa, band_width x band_thickness) whose loop the surgeon shortens by "
         "band_shortening_mm or band_shortening_percent, its travel an unknown set by its "
         "hoop tension against the eye, the tire riding under it (docs/scleral_buckling.md, "
-        "\"The elastic band\")", group=PHYSICS)
+        "\"The elastic band\"); a tire without a band (buckle=segmental) moves in by "
+        "indentation; travel, the rigid buckle moves in by indentation (the paper's "
+        "operation)", group=PHYSICS)
     band_shortening_percent: float = field(
         BAND_SHORTENING_PERCENT, "with buckle_control=shortening, the length taken out of "
         "the band's loop, in % of its length as laid on the eye (used unless "
@@ -231,9 +245,10 @@ class Parameters(NumericalSettings, EyeParameters):
         "cornea (material=fibres; c4_sclera in Table 1's cornea/sclera ratio 0.4)", "MPa",
         group=PHYSICS)
     optic_nerve_end_spring: float = field(
-        0.0, "the optic nerve's cut end held by a spring of this stiffness per area (the "
+        OPTIC_NERVE_END_SPRING, "the optic nerve's cut end held by a spring of this stiffness per area (the "
         "orbit's soft hold on the globe) instead of clamped: the buckle then rides on the "
-        "globe and the posterior segment may lengthen behind it; 0 = clamped "
+        "globe and the posterior segment may lengthen behind it; 0 = clamped (the paper). "
+        "0.001: within 4 % of the free eye's settled axial change "
         "(docs/scleral_buckling.md, A living eye's wall)", "MPa/mm", group=PHYSICS)
 
     def validate(self) -> None:
@@ -367,22 +382,21 @@ class Parameters(NumericalSettings, EyeParameters):
     def _validate_control(self) -> None:
         """The elastic band's shortening: only with a band and buckle_control=shortening,
         a positive length shorter than the band's loop; the rigid buckle's travel only
-        with buckle_control=travel."""
+        where nothing is shortened (buckle_control=travel, or a tire without a band)."""
         self.require_positive("band_modulus_MPa")
         mm_set = self.band_shortening_mm != 0.0
         percent_set = self.band_shortening_percent != BAND_SHORTENING_PERCENT
-        if self.buckle_control == "travel":
+        if not self.elastic_band():
+            why = ("the rigid buckle moves in by indentation" if self.buckle_control == "travel"
+                   else f"buckle={self.buckle} has no band to shorten: its tire moves in by "
+                        "indentation")
             for key, is_set in (("band_shortening_mm", mm_set),
                                 ("band_shortening_percent", percent_set),
                                 ("band_modulus_MPa", self.band_modulus_MPa != BAND_MODULUS)):
                 if is_set:
-                    raise ParameterError(key, "is used only with buckle_control=shortening (the "
-                                         "rigid buckle moves in by indentation)")
+                    raise ParameterError(key, f"is used only with an elastic band shortened "
+                                         f"(buckle_control=shortening): {why}")
             return
-        if not self.buckle_shape().has_band:
-            raise ParameterError("buckle_control", f"shortening with buckle={self.buckle}: there "
-                                 "is no band to shorten (buckle=encircling or "
-                                 "encircling+segmental)")
         if self.indentation != EyeParameters.indentation:
             raise ParameterError("indentation", "is the rigid buckle's travel "
                                  "(buckle_control=travel); with shortening the band's travel is "
@@ -399,6 +413,11 @@ class Parameters(NumericalSettings, EyeParameters):
         elif not 0 < self.band_shortening_percent < 100:
             raise ParameterError("band_shortening_percent", f"{self.band_shortening_percent:g} %: "
                                  "a share of the band's loop, > 0 and < 100")
+
+    def elastic_band(self) -> bool:
+        """Whether step 2 shortens an elastic band (buckle_control = shortening, with a
+        band); otherwise the rigid buckle (or a tire alone) moves in by ``indentation``."""
+        return self.buckle_control == "shortening" and self.buckle_shape().has_band
 
     def band_loop_estimate(self) -> float:
         """The band's centreline length as laid on the eye before surgery, from the sclera's

@@ -128,7 +128,7 @@ def largest_step(params: Parameters, buckle_step: float = 0.25) -> float:
     the eye)."""
     thickness = params.tire_height + params.band_thickness
     travel = params.indentation
-    if params.buckle_control == "shortening":  # at most the slack band's: its radius' share
+    if params.elastic_band():  # at most the slack band's: its radius' share
         travel = params.band_shortening_fraction() * params.band_loop_estimate() / (2 * math.pi)
     if travel <= 0:
         return LARGEST_STEP
@@ -172,7 +172,7 @@ def tightening(params: Parameters) -> Ramp:
     """How the buckling stage tightens the buckle (``buckle_control``): the rigid buckle's
     travel ramped to ``indentation``, or the elastic band's shortening taken out of its loop
     (control ``band_tightening``, the fraction of it, 0 to 1)."""
-    if params.buckle_control == "shortening":
+    if params.elastic_band():
         return Ramp("band_tightening", 0.0, 1.0)
     return Ramp("band_travel", 0.0, params.indentation)
 
