@@ -205,3 +205,19 @@ def test_a_run_killed_while_venting_resumes_to_the_same_numbers(vented, tmp_path
                  saved["quantities"], 1e-12)
     assert [s["newton_iterations"] for s in saved["steps"]] == \
         [s["newton_iterations"] for s in vented.steps]
+
+
+def test_a_vent_opened_at_a_predicted_start_stays_open():
+    """A tire alone on the living eye (the default wall, 2.0 mm of rigid travel) reaches the
+    limit in the last load step of buckling: the secant predictor starts that step above it
+    (91 mmHg), the vent opens there, and the solve must converge vented at the limit.
+    Measured before the vent was kept open through its step: the solve's memory hook
+    reset the one switch, the holding test closed the vent again at once, and the step
+    converged held at 93.6 mmHg with nothing vented."""
+    params = sb.Parameters(resolution="coarse", buckle="segmental", settle=False)
+    result = sb.run(params, options=RunOptions(pictures=False, fields=False))
+    limit = params.iop_limit_mmHg
+    buckled = result.quantities["after_buckling"]
+    assert buckled["peak_iop_mmHg"] <= limit * (1 + 1e-6)
+    assert buckled["vent_open"] is True and buckled["vented_volume_uL"] > 1.0
+    assert all(s["iop_mmHg"] <= limit * (1 + 1e-6) for s in result.steps)
