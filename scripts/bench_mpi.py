@@ -89,7 +89,8 @@ def scale_of(key: str, quantities: dict[str, object]) -> float:
 
 def largest_difference(serial: dict, parallel: dict, effort: bool = False) -> tuple[float, str]:
     """The largest relative difference over the numeric quantities (wall-clock ones
-    left out; the solver's effort only, or only the results, as ``effort`` says): |a − b| / max(|a|, |b|), or for a difference-quantity (a spread, an error)
+    left out; the solver's effort only, or only the results, as ``effort`` says):
+    |a − b| / max(|a|, |b|), or for a difference-quantity (a spread, an error)
     |a − b| / the scale of the quantity it comes from (``scale_of``); 0 where the scale is
     below 1e-14. Returns it and its key."""
     worst, where = 0.0, ""
@@ -193,7 +194,8 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
              "quantity from the serial run (a spread or an error against the scale of the "
              "quantity it comes from: scripts/bench_mpi.py, scale_of), and apart from it the "
              "largest relative difference in the solver's effort (Newton iterations, "
-             "factorisations: round-off near the stopping test may cost an iteration); in brackets the machine's 1-minute load average "
+             "factorisations: round-off near the stopping test may cost an iteration); in brackets "
+             "the machine's 1-minute load average "
              "during the run (other jobs included).", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, runs in by_scene.items():

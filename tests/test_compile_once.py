@@ -89,7 +89,7 @@ def test_eye_with_a_new_buckle_and_sutures_compiles_nothing_after_its_first_case
 
     def case() -> scleral_buckling.Parameters:
         return scleral_buckling.Parameters(
-            resolution="coarse", settle=False, indentation=0.75,
+            resolution="coarse", settle=False,
             buckle_position=12.0 + random.random(), band_width=2.0 + random.random(),
             tire_width=6.5 + random.random(), tire_height=0.8 + 0.4 * random.random(),
             buckle_corner_radius=0.2 + 0.2 * random.random(), tire_arc_deg=80.0 + 20.0 * random.random(),

@@ -178,7 +178,7 @@ def test_condensed_eye_gives_the_mixed_eye():
 
     def run(dg0_pressure: str) -> dict:
         params = sb.Parameters(resolution="coarse", settle=False, dg0_pressure=dg0_pressure,
-                               condensed_bulk_ratio=1000.0)
+                               condensed_bulk_ratio=1000.0, **sb.PAPER_OPERATION)
         return sb.run(params, options=RunOptions(fields=False, pictures=False, quiet=True)).quantities
 
     mixed, condensed = run("mixed"), run("condensed")

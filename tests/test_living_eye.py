@@ -92,7 +92,7 @@ def test_the_eyes_fibres_lie_along_meridians_and_circles_of_latitude(cube):
 
 def test_bad_fibre_and_spring_input_is_refused():
     with pytest.raises(ParameterError, match="c4_sclera.*material=fibres"):
-        sb.Parameters(c4_sclera=100.0).validate()
+        sb.Parameters(material="table-1", c4_sclera=100.0).validate()
     with pytest.raises(ParameterError, match="c20_sclera.*material=calibrated"):
         sb.Parameters(material="fibres", c20_sclera=10.0).validate()
     with pytest.raises(ParameterError, match="c4_cornea"):
@@ -101,13 +101,15 @@ def test_bad_fibre_and_spring_input_is_refused():
         sb.Parameters(optic_nerve_end_spring=-0.001).validate()
 
 
-RECORDED = Path(__file__).parent / "data" / "scleral_buckling_coarse.json"
+RECORDED = Path(__file__).parent / "data" / "scleral_buckling_coarse_paper.json"
 
 
 @pytest.fixture(scope="module")
 def free_eye():
-    """The coarse eye at the defaults, its optic nerve's end on a soft spring."""
-    params = sb.Parameters(resolution="coarse", optic_nerve_end_spring=0.001)
+    """The coarse eye of the paper's operation (Table 1's wall, 2.0 mm of rigid travel),
+    its optic nerve's end on a soft spring (the default living eye's spring)."""
+    params = sb.Parameters(resolution="coarse", **{**sb.PAPER_OPERATION,
+                                                   "optic_nerve_end_spring": 0.001})
     return sb.run(params, comm=MPI.COMM_SELF, options=RunOptions(fields=False, pictures=False))
 
 

@@ -38,7 +38,7 @@ CORNEA = dict(mesh_size=1.5, azimuthal_divisions=8, t_end=1800.0, first_dt=900.0
 # adaptive steps between the outputs at 900 and 1800 s
 ADAPTIVE_CORNEA = dict(mesh_size=1.5, azimuthal_divisions=8, t_end=1800.0, first_dt=900.0,
                        dt_growth=1.0, incisions=4, symmetry="quarter")
-EYE = dict(resolution="coarse")  # the defaults: 26 converged load steps over the four stages
+EYE = dict(resolution="coarse")  # the defaults: 40 converged load steps over the four stages
 QUIET = ("--no-fields", "--no-pictures", "--quiet")
 NTS = ("max_penetration_mm", "retina_choroid_gap_nts_min_mm", "retina_contact_force_N",
        "retina_penalty_contact_area_mm2")

@@ -22,7 +22,8 @@ from eyemech.problems.scleral_buckling.stages import ramp_value as settle_pressu
 
 # the buckle as measured in docs/scleral_buckling.md ("The settling step"), pinned so that a
 # change of the scene's buckle defaults does not change what this test measures
-EYE = {"resolution": "coarse", "buckle_position": 12.5, "indentation": 1.5}
+EYE = {"resolution": "coarse", "buckle_position": 12.5, "indentation": 1.5,
+       **scleral_buckling.PAPER_OPERATION}
 SETTLED = ("axial_length_change_mm", "refraction_change_D", "iop_mmHg", "cavity_volume_mm3")
 
 

@@ -22,7 +22,6 @@ TABLES = sorted(STUDIES.glob("*.csv"))
 # it leaves this list
 STALE = {
     "buckling_planning.csv", "buckling_sweep.csv", "eye_model_reduction.csv", "iol_flip.csv",
-    "iol_speed.csv",
 }
 
 

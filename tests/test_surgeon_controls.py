@@ -81,8 +81,8 @@ def test_a_stiff_band_shortened_by_2pi_mm_indents_1_mm():
 
 def test_the_band_carries_the_tire_and_the_sutures_pull(band, tmp_path):
     """The scene's operation (band over a 90° tire, sutures at 0, 90 and 180°, the loop
-    model, settling, fields and pictures) on Table 1's clamped eye, the band tightened by 10 %: the band's laid
-    length includes its rise over the tire, h_t φ_t = 1 mm × π/2 beyond the band alone's
+    model, settling, fields and pictures) on Table 1's clamped eye, the band tightened by
+    10 %: the band's laid length includes its rise over the tire, h_t φ_t = 1 mm × π/2 beyond the band alone's
     (same eye, same placement: measured to 5e-14 mm); after suturing and settled, the
     sclera's contact force on band and tire balances the band's 2π T plus the sutures'
     pull on the tire (its row; Newton's tolerance): measured 1.577 = 1.348 + 0.229 N sewn,

@@ -211,6 +211,9 @@ class VentedCavity:
         self._volume = dolfinx.fem.form(enclosed_volume(u, wall_measure))
         self.branch_switches = 0
         self._switched = False  # this solve's one switch is spent
+        # the vent opened in this load step (not carried from an accepted step): its state
+        # is not on the kink, and the test for holding again does not apply until accept()
+        self._opened_this_step = False
 
     @property
     def enabled(self) -> bool:
@@ -249,28 +252,39 @@ class VentedCavity:
         Holding reads P, not V: with K = 2083 MPa a Newton iterate's volume error of 1 µL is
         a law pressure of thousands of mmHg. One switch a solve: where the state sits on the
         kink (little liquid leaves per step) the two tests otherwise flip the branch every
-        iteration (docs/hyperelastic.md, "The vented cavity"). P and V are values every rank shares."""
+        iteration (docs/hyperelastic.md, "The vented cavity"). A vent opened in this load step
+        stays open until :meth:`accept` (which holds again if the wall took more than the
+        liquid left): the holding test is for a state carried from an accepted step, and a
+        vent opened at a predicted start — before the solve's memory hook resets its one
+        switch — would otherwise be closed again at once and the solve converge held, far
+        above the limit. P and V are values every rank shares."""
         if not (self.enabled and float(self.held.value) == 1.0) or self._switched:
             return
         limit = float(self.limit.value)
         if float(self.venting.value) == 0.0:
             branch = 1.0 if pressure > limit else 0.0
+        elif self._opened_this_step:
+            return
         else:  # a venting state after accept() sits on the kink: law = limit to round-off
             branch = 1.0 if self.law_pressure(self.volume()) >= (1.0 - HOLD_MARGIN) * limit else 0.0
         if branch != float(self.venting.value):
             self.venting.value = branch
             self.branch_switches += 1
             self._switched = True
+            self._opened_this_step = branch == 1.0
 
     def memory(self) -> tuple[float, float]:
         """At the start of a solve (the solver's memory hook): the branch and the liquid
-        held, and a new solve's one switch."""
+        held at the load step's start (a vent opened in this step, at a predicted start,
+        was closed there), and a new solve's one switch."""
         self._switched = False
-        return float(self.venting.value), float(self.liquid_volume.value)
+        branch = 0.0 if self._opened_this_step else float(self.venting.value)
+        return branch, float(self.liquid_volume.value)
 
     def restore_memory(self, saved: tuple[float, float]) -> None:
         self.venting.value, self.liquid_volume.value = saved
         self._switched = False
+        self._opened_this_step = False
 
     def accept(self, pressure: float) -> float:
         """After a converged load step: the liquid the cavity holds now, V + V_ini (P −
@@ -278,6 +292,7 @@ class VentedCavity:
         venting state whose wall took more volume than the liquid left (its one switch
         spent) holds again from the next load step. Returns the volume vented in the step."""
         self._switched = False
+        self._opened_this_step = False
         if float(self.held.value) != 1.0 or float(self.venting.value) != 1.0:
             return 0.0
         before = float(self.liquid_volume.value)
