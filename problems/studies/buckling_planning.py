@@ -92,13 +92,13 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     rows = []
     for factor, overrides in cases(quick):
         varied = {k: v for k, v in overrides.items() if k not in BASE}
-        name = "_".join(f"{k}={v}" for k, v in varied.items()) or DEFAULTS_FACTOR
-        folder = out / "buckling_planning_cases" / name
+        setting = ", ".join(f"{k}={v}" for k, v in varied.items()) or DEFAULTS_FACTOR
+        folder = out / "buckling_planning_cases" / setting.replace(", ", "_")
         key = next(iter(varied), "buckle")
         grid = {key: [overrides.get(key, getattr(scleral_buckling.Parameters(), key))]}
         base = {k: v for k, v in overrides.items() if k != key}
         swept = run_sweep(scleral_buckling.SCENE, base, grid, folder, options=QUIET, comm=comm)
-        rows += [_row(factor, overrides, case) for case in swept]
+        rows += [_row(factor, setting, overrides, case) for case in swept]
     if comm.rank != 0:
         return []
     table = write_csv(out / "buckling_planning.csv", rows,
@@ -109,11 +109,11 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     return [table, chart]
 
 
-def _row(factor: str, overrides: dict[str, str], case: dict[str, Any]) -> dict[str, Any]:
-    """One CSV row: the case's factor and parameters, its status, and per stage the tear's
-    verdict and the costs."""
+def _row(factor: str, setting: str, overrides: dict[str, str], case: dict[str, Any]) -> dict[str, Any]:
+    """One CSV row: the case's factor, what it changed and its parameters, its status, and
+    per stage the tear's verdict and the costs."""
     params = build(scleral_buckling.Parameters, overrides)
-    row: dict[str, Any] = {"factor": factor}
+    row: dict[str, Any] = {"factor": factor, "setting": setting}
     row |= {column: getattr(params, name) for name, column in NAMED}
     row["status"] = case["status"]
     if case["status"] in FAILED:
@@ -121,12 +121,23 @@ def _row(factor: str, overrides: dict[str, str], case: dict[str, Any]) -> dict[s
     for prefix, stage in STAGES:
         row |= {f"{prefix}_{column}": case.get(f"{stage}.{quantity}")
                 for column, quantity in STAGE_COLUMNS}
+        row[f"{prefix}_tear_rim_gap_meshes_apart_mm"] = _meshes_apart(
+            row[f"{prefix}_tear_rim_gap_band_mm"], case)
     peaks = [case.get(f"{stage}.peak_iop_mmHg") for stage in ("after_buckling", "after_suturing")]
     row["operation_peak_iop_mmHg"] = max((p for p in peaks if p is not None), default=None)
     row["error_estimate_mesh"] = case.get("error_estimate_mesh")
     row["error_estimate_note"] = case.get("error_estimate_note", "")
     row["wall_time_s"] = case.get("wall_time_s")
     return row
+
+
+def _meshes_apart(band: float | None, case: dict[str, Any]) -> float | None:
+    """|q_default − q_coarse|: the two meshes' difference behind a band about the coarse
+    eye's value, GCI = Fs |Δ| r^p / (r^p − 1) (error_estimate.py), read back."""
+    if band is None:
+        return None
+    grow = case["error_estimate_ratio"] ** case["error_estimate_order"]
+    return band * (grow - 1.0) / (case["error_estimate_safety_factor"] * grow)
 
 
 def tear_centre_mm() -> float:
@@ -147,9 +158,10 @@ def _number(value) -> float:
     return float(value) if value not in (None, "") else math.nan
 
 
-# chart rows: (label, [(column, band column or None, stage label)])
-PANELS = (("tear's rim gap (mm)\n± band", [("acute_tear_rim_gap_max_mm", "acute_tear_rim_gap_band_mm"),
-                                          ("settled_tear_rim_gap_max_mm", "settled_tear_rim_gap_band_mm")]),
+# chart rows: (label, [(column, its band's column or None)]), the acute stage first
+RIM = "tear's rim gap (mm)\n± band (clipped)"
+PANELS = ((RIM, [("acute_tear_rim_gap_max_mm", "acute_tear_rim_gap_band_mm"),
+                 ("settled_tear_rim_gap_max_mm", "settled_tear_rim_gap_band_mm")]),
           ("ΔAL (mm)\n± band", [("acute_axial_length_change_mm", "acute_axial_length_change_band_mm"),
                                 ("settled_axial_length_change_mm", "settled_axial_length_change_band_mm")]),
           ("ΔSE (D)", [("acute_refraction_change_D", None), ("settled_refraction_change_D", None)]),
@@ -190,10 +202,12 @@ def _chart(rows: list[dict], path: Path) -> None:
         bottom.set_xlabel(_axis_label(factor), fontsize=8)
     for ax, (label, _) in zip(axes[:, 0], PANELS):
         ax.set_ylabel(label, fontsize=8)
-    _legend(axes[0, 0], tolerance)
+    _clip_rim_row(axes[0, 0], rows, tolerance)
+    _legend(fig, tolerance)
     fig.suptitle("scleral-buckling planning map, living eye (coarse, Q1P0): one factor at a time "
                  "from the defaults (dotted)\nblue after suturing, orange settled; marker: the "
-                 "tear's verdict; bars: the error estimate against the default mesh", fontsize=9)
+                 "tear's verdict; bars: the error estimate against the default mesh", fontsize=9,
+                 x=0.02, ha="left")
     save_chart(fig, path, dpi=90, rect=(0, 0.03, 1, 0.97))
 
 
@@ -218,6 +232,15 @@ def _plot(ax, xs: list[float], cases: list[dict], key: str, band: str | None, co
             ax.plot(x, 0.0, "rx", ms=9, mew=2)
 
 
+def _clip_rim_row(ax, rows: list[dict], tolerance: float) -> None:
+    """The rim gaps' row scaled to the gaps, not to their bands (up to 4 mm where the
+    meshes disagree by 0.4 mm): a bar leaving the panel is clipped at its edge."""
+    gaps = [_number(r.get(f"{stage}_tear_rim_gap_max_mm")) for r in rows for stage in ("acute", "settled")
+            if r["status"] not in FAILED]
+    top = max([g for g in gaps if math.isfinite(g)] + [tolerance])
+    ax.set_ylim(-0.25 * top, 1.25 * top)
+
+
 def _axis_label(factor: str) -> str:
     if factor == "buckle_position":
         return f"buckle position (mm behind limbus;\ntear centre {tear_centre_mm():.1f})"
@@ -228,13 +251,17 @@ def _axis_label(factor: str) -> str:
         .replace(" deg", " (°)").replace(" N", " (N)").replace(" percent", " (%)")
 
 
-def _legend(ax, tolerance: float) -> None:
-    ax.plot([], [], "ko", label="closed")
-    ax.plot([], [], "ko", mfc="white", label="open")
-    ax.plot([], [], "ko", fillstyle="left", markerfacecoloralt="white", label="uncertain")
-    ax.plot([], [], "rx", label="failed")
-    ax.plot([], [], "k--", lw=0.8, label=f"tolerance {tolerance:g} mm")
-    ax.legend(fontsize=6, loc="upper left")
+def _legend(fig, tolerance: float) -> None:
+    """The verdicts' markers and the closure tolerance, above the panels on the right."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="k", marker="o", ls="", label="closed"),
+               Line2D([], [], color="k", marker="o", ls="", mfc="white", label="open"),
+               Line2D([], [], color="k", marker="o", ls="", fillstyle="left",
+                      markerfacecoloralt="white", label="uncertain (|margin| ≤ band)"),
+               Line2D([], [], color="r", marker="x", ls="", label="failed"),
+               Line2D([], [], color="k", ls="--", lw=0.8, label=f"tolerance {tolerance:g} mm")]
+    fig.legend(handles=handles, loc="upper right", ncol=3, fontsize=7, frameon=False)
 
 
 STUDY = Study("buckling-planning", "which buckles close the tear on the living eye (closed / "
