@@ -67,8 +67,9 @@ for label, key in rows:
 
 # %% [markdown]
 # ## Along the load path
-# The load parameter runs 0→1 (IOP), 1→2 (buckle indentation), 2→3 (suture pull), 3→4
-# (settling). Step 1's points carry no change (the reference is its end).
+# The load parameter runs 0→1 (IOP), 1→2 (the band shortened, the IOP vented at its
+# limit), 2→3 (suture pull), 3→4 (settling). Step 1's points carry no change (the
+# reference is its end).
 
 # %%
 steps = results["steps"]

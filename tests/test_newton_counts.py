@@ -681,7 +681,8 @@ def test_full_steps_in_the_settling_step_save_factorisations():
     full, backtracking = (scleral_buckling.run(
         scleral_buckling.Parameters(resolution="coarse", settle_line_search=line_search,
                                     settle_start="converged", settle_step=0.0,
-                                    stagnation_window=3, settle_reuse_test="residual"),
+                                    stagnation_window=3, settle_reuse_test="residual",
+                                    **scleral_buckling.PAPER_OPERATION),
         options=options) for line_search in ("basic", "bt"))
     expected, actual = backtracking.quantities["after_settling"], full.quantities["after_settling"]
     for key in ("axial_length_change_mm", "iop_mmHg"):
@@ -824,7 +825,8 @@ def test_energy_line_search_in_the_suture_step_saves_factorisations():
     options = RunOptions(fields=False, pictures=False, quiet=True)
     energy, backtracking = (scleral_buckling.run(
         scleral_buckling.Parameters(settle=False, buckle_position=12.5, indentation=1.5,
-                                    suture_line_search=line_search),
+                                    suture_line_search=line_search,
+                                    **scleral_buckling.PAPER_OPERATION),
         options=options) for line_search in ("cp", "bt"))
     expected, actual = backtracking.quantities["after_suturing"], energy.quantities["after_suturing"]
     for key in ("axial_length_change_mm", "iop_mmHg", "refraction_change_D"):
@@ -919,7 +921,8 @@ def test_stopping_stalled_backtracking_costs_the_default_eye_nothing():
     # the settling this was measured with: from the converged P, the other steps' load steps
     # (tests/test_settle.py for the default settling, which stops no solve)
     former = {"buckle_position": 12.5, "indentation": 1.5, "settle_start": "converged",
-              "settle_step": 0.0, "settle_reuse_test": "residual"}
+              "settle_step": 0.0, "settle_reuse_test": "residual",
+              **scleral_buckling.PAPER_OPERATION}
     stopped, plain = (scleral_buckling.run(scleral_buckling.Parameters(
         stagnation_window=window, **former), options=options) for window in (3, 0))
     assert_same_eye(plain, stopped, rim_gap_tolerance=1e-5, relative=1e-4,
