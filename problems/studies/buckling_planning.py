@@ -1,114 +1,173 @@
-"""A planning map for scleral buckling (issue 21, item 8): the paper's planning factors
-(seed 002 §1: buckle shape, location, buckling strength, suture width and force) swept on
-the coarse eye, with what each setting costs the patient — the axial length change and the
-refraction change from the eye before surgery (acute, after suturing; settled, after the
-IOP has returned) and the acute IOP rise — and whether it closes the tear
-(``tear_closed_nts`` after suturing).
+"""A planning map for scleral buckling on the living eye: the surgeon's factors swept one
+at a time from the scene's defaults on the coarse eye, each case's tear verdict after
+suturing and settled (closed / open / uncertain, the last where the margin to the closure
+tolerance lies within the discretisation's error band), and what each setting costs: the
+axial length and refraction changes from the eye before surgery, the peak IOP and the
+liquid vented.
 
-Sweeps, each from the scene's defaults (buckle 13.0 mm behind the limbus, travel 2.0 mm,
-0.2 N sutures 8.9 mm wide): the buckle kind (encircling band with the tire at the tear,
-band alone, tire alone) × the band's travel; then, for the default kind and travel, the
-buckle position, the suture force and the suture width, one at a time (the default case
-of the kind sweep stands for each sweep's default value). Sutures at the tear's meridian
-only (``suture_azimuths=0``), so that every kind holds them. ``quick``: two cases.
+Factors (each case changes one from ``scleral_buckling.Parameters()``): the buckle kind
+(band + tire, the band alone, the tire alone moving in by ``indentation``), the band's
+shortening and width, the tire's width and arc, the buckle's position against the tear,
+the sutures' width and force, the venting limit (Gardner et al. 1993: 48-110 mmHg) and the
+detachment's height (1.0 mm: bullous). A tire wider than the default sutures' bites keeps
+the default bites' overhang (the scene refuses bites narrower than the tire). Every case
+runs with ``error_estimate=true``: the operation is solved again on the default mesh and
+each stage reports ``tear_verdict`` and the bands (docs/scleral_buckling.md,
+"Discretisation error"). ``quick``: the defaults and the tire alone.
 """
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
+from typing import Any
 
 from mpi4py import MPI
 
 from eyemech.problems import scleral_buckling
-from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import build
 from eyemech.problems.run.sweep import run_sweep
-from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, write_csv
+from eyemech.problems.studies import FAILED, Study
+from eyemech.problems.studies._common import QUIET, save_chart, write_csv
 
-BASE = {"resolution": "coarse", "suture_azimuths": "0"}
-DEFAULTS = {"buckle": "encircling+segmental", "indentation": "2.0", "buckle_position": "13.0",
-            "suture_force": "0.2", "suture_width": "8.9"}
-# (factor, grid): each sweep varies its grid's keys; the other factors keep DEFAULTS.
-SWEEPS = (("kind", {"buckle": ["encircling+segmental", "encircling", "segmental"],
-                    "indentation": ["1.0", "1.5", "2.0"]}),
-          ("position", {"buckle_position": ["11.0", "11.5", "12.0", "12.5"]}),
-          ("suture_force", {"suture_force": ["0.1", "0.3"]}),
-          ("suture_width", {"suture_width": ["7.5", "11.0"]}))
-QUICK_SWEEPS = (("kind", {"buckle": ["encircling+segmental", "segmental"],
-                          "indentation": ["2.0"]}),)
-# tear_closed_nts: every node of the tear's rim within this of the choroid
-CLOSED_GAP_MM = scleral_buckling.Parameters().tear_closure_tolerance
-# one-factor panels of the chart: (factor, parameter, axis label)
-ONE_FACTOR = (("position", "buckle_position", "buckle centre behind the limbus (mm); "
-               "tear centre at 11.5"),
-              ("suture_force", "suture_force", "suture force (N)"),
-              ("suture_width", "suture_width", "suture width (mm)"))
-COSTS = (("tear_rim_gap_after_suturing_mm", "tear's rim gap after\nsuturing (mm)"),
-         ("acute_axial_mm", "ΔAL acute (mm)"), ("acute_refraction_D", "ΔSE acute (D)"),
-         ("acute_iop_change_mmHg", "ΔIOP acute (mmHg)"),
-         ("settled_refraction_D", "ΔSE settled (D)"))
+BASE = {"resolution": "coarse", "error_estimate": "true"}
+DEFAULTS_FACTOR = "defaults"
+# (parameter, values other than the scene's default): one case per value
+FACTORS = (("buckle", ("encircling", "segmental")),
+           ("band_shortening_percent", ("10", "15", "20", "30")),
+           ("band_width", ("1.0", "2.0")),
+           ("tire_width", ("5.0", "9.0")),
+           ("tire_arc_deg", ("60", "180")),
+           ("buckle_position", ("12.0", "12.5", "13.5")),
+           ("suture_width", ("8.0", "10.0")),
+           ("suture_force", ("0.1", "0.5")),
+           ("iop_limit_mmHg", ("48", "110")),
+           ("detachment_height", ("0.25", "1.0")))
+QUICK_FACTORS = (("buckle", ("segmental",)),)
+BUCKLE_KINDS = {"encircling+segmental": "band + tire", "encircling": "band alone",
+                "segmental": "tire alone"}
+# (CSV prefix, the scene's stage): acute after suturing, settled after the IOP returned
+STAGES = (("acute", "after_suturing"), ("settled", "after_settling"))
+# (CSV column, the scene's quantity) per stage
+STAGE_COLUMNS = (("tear_rim_gap_max_mm", "tear_rim_gap_max_mm"),
+                 ("tear_rim_gap_band_mm", "tear_rim_gap_max_mm_error_estimate"),
+                 ("tear_rim_margin_mm", "tear_rim_margin_mm"),
+                 ("tear_verdict", "tear_verdict"),
+                 ("axial_length_change_mm", "axial_length_change_mm"),
+                 ("axial_length_change_band_mm", "axial_length_change_mm_error_estimate"),
+                 ("refraction_change_D", "refraction_change_D"),
+                 ("refraction_change_band_D", "refraction_change_D_error_estimate"),
+                 ("peak_iop_mmHg", "peak_iop_mmHg"),
+                 ("vented_volume_uL", "vented_volume_uL"),
+                 ("venting_route", "venting_route"),
+                 ("band_tension_N", "band_tension_N"),
+                 ("buckle_indentation_mm", "buckle_indentation_mm"))
+# the parameters a row names, with their units in the column's name
+NAMED = (("buckle", "buckle"), ("band_shortening_percent", "band_shortening_percent"),
+         ("band_width", "band_width_mm"), ("tire_width", "tire_width_mm"),
+         ("tire_arc_deg", "tire_arc_deg"), ("buckle_position", "buckle_position_mm"),
+         ("suture_width", "suture_width_mm"), ("suture_force", "suture_force_N"),
+         ("iop_limit_mmHg", "iop_limit_mmHg"), ("detachment_height", "detachment_height_mm"))
+VERDICT_STYLE = {"closed": "full", "open": "none", "uncertain": "left"}
+
+
+def cases(quick: bool = False) -> list[tuple[str, dict[str, str]]]:
+    """(factor, the scene's overrides) of every case, the defaults first; each built (so
+    validated) here, before anything runs: a refused value stops the study, exit 2."""
+    defaults = scleral_buckling.Parameters()
+    out = [(DEFAULTS_FACTOR, dict(BASE))]
+    for factor, values in QUICK_FACTORS if quick else FACTORS:
+        for value in values:
+            overrides = BASE | {factor: value}
+            if factor == "tire_width":  # the bites keep the default's overhang of the tire
+                overrides["suture_width"] = f"{float(value) + defaults.suture_width - defaults.tire_width:g}"
+            out.append((factor, overrides))
+    for _, overrides in out:
+        build(scleral_buckling.Parameters, overrides)
+    return out
 
 
 def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
     out = Path(out)
-    rows: list[dict] = []
-    for factor, grid in QUICK_SWEEPS if quick else SWEEPS:
-        folder = out / "buckling_planning_cases" / factor
-        base = BASE | {k: v for k, v in DEFAULTS.items() if k not in grid}
-        swept = run_sweep(scleral_buckling.SCENE, base, grid, folder,
-                          options=RunOptions(fields=False, pictures=False), comm=comm)
-        rows += [_stages({"factor": factor, **DEFAULTS, **row}, folder) for row in swept]
+    rows = []
+    for factor, overrides in cases(quick):
+        varied = {k: v for k, v in overrides.items() if k not in BASE}
+        setting = ", ".join(f"{k}={v}" for k, v in varied.items()) or DEFAULTS_FACTOR
+        folder = out / "buckling_planning_cases" / setting.replace(", ", "_")
+        key = next(iter(varied), "buckle")
+        grid = {key: [overrides.get(key, getattr(scleral_buckling.Parameters(), key))]}
+        base = {k: v for k, v in overrides.items() if k != key}
+        swept = run_sweep(scleral_buckling.SCENE, base, grid, folder, options=QUIET, comm=comm)
+        rows += [_row(factor, setting, overrides, case) for case in swept]
     if comm.rank != 0:
         return []
-    table = write_csv(out / "buckling_planning.csv", rows)
+    table = write_csv(out / "buckling_planning.csv", rows,
+                      "acute: after suturing; settled: after the IOP has returned; *_band_*: "
+                      "the scene's error_estimate (GCI, the coarse eye against the default mesh)")
     chart = out / "buckling_planning.png"
     _chart(rows, chart)
     return [table, chart]
 
 
-def _stages(row: dict, folder: Path) -> dict:
-    """The acute (after suturing) and settled values of one case, from its results.json."""
-    path = folder / f"case_{int(row['case']):04d}" / "results.json"
-    if row.get("status") != "ok" or not path.exists():
-        return row
-    quantities = json.loads(path.read_text())["quantities"]
-    acute, settled = quantities["after_suturing"], quantities.get("after_settling", {})
-    return row | {"acute_axial_mm": acute["axial_length_change_mm"],
-                  "acute_refraction_D": acute["refraction_change_D"],
-                  "acute_iop_change_mmHg": acute["iop_change_mmHg"],
-                  "tear_closed_after_suturing": acute["tear_closed_nts"],
-                  "tear_rim_gap_after_suturing_mm": acute["tear_rim_gap_max_mm"],
-                  "acute_indentation_mm": acute["buckle_indentation_mm"],
-                  "tire_free_after_suturing": acute.get("tire_free"),
-                  "settled_axial_mm": settled.get("axial_length_change_mm"),
-                  "settled_refraction_D": settled.get("refraction_change_D"),
-                  "tear_closed_settled": settled.get("tear_closed_nts"),
-                  "tear_rim_gap_settled_mm": settled.get("tear_rim_gap_max_mm")}
+def _row(factor: str, setting: str, overrides: dict[str, str], case: dict[str, Any]) -> dict[str, Any]:
+    """One CSV row: the case's factor, what it changed and its parameters, its status, and
+    per stage the tear's verdict and the costs."""
+    params = build(scleral_buckling.Parameters, overrides)
+    row: dict[str, Any] = {"factor": factor, "setting": setting}
+    row |= {column: getattr(params, name) for name, column in NAMED}
+    row["status"] = case["status"]
+    if case["status"] in FAILED:
+        return row | {"error": case.get("error", "")}
+    for prefix, stage in STAGES:
+        row |= {f"{prefix}_{column}": case.get(f"{stage}.{quantity}")
+                for column, quantity in STAGE_COLUMNS}
+        row[f"{prefix}_tear_rim_gap_meshes_apart_mm"] = _meshes_apart(
+            row[f"{prefix}_tear_rim_gap_band_mm"], case)
+    peaks = [case.get(f"{stage}.peak_iop_mmHg") for stage in ("after_buckling", "after_suturing")]
+    row["operation_peak_iop_mmHg"] = max((p for p in peaks if p is not None), default=None)
+    row["error_estimate_mesh"] = case.get("error_estimate_mesh")
+    row["error_estimate_note"] = case.get("error_estimate_note", "")
+    row["wall_time_s"] = case.get("wall_time_s")
+    return row
 
 
-def _is_default_case(row: dict) -> bool:
-    return row["factor"] == "kind" and all(str(row[k]) == DEFAULTS[k]
-                                           for k in ("buckle", "indentation"))
+def _meshes_apart(band: float | None, case: dict[str, Any]) -> float | None:
+    """|q_default − q_coarse|: the two meshes' difference behind a band about the coarse
+    eye's value, GCI = Fs |Δ| r^p / (r^p − 1) (error_estimate.py), read back."""
+    if band is None:
+        return None
+    grow = case["error_estimate_ratio"] ** case["error_estimate_order"]
+    return band * (grow - 1.0) / (case["error_estimate_safety_factor"] * grow)
 
 
-def _one_factor_rows(rows: list[dict], factor: str) -> list[dict]:
-    """A one-factor sweep's cases with the default case (the kind sweep's) in its place."""
-    return [r for r in rows if r["factor"] == factor or _is_default_case(r)]
+def tear_centre_mm() -> float:
+    """The tear's centre behind the limbus along the sclera, as ``buckle_position`` is
+    measured (the eye's geometry: the tear at polar angle ``tear_angle``)."""
+    eye = scleral_buckling.Parameters().geometry()
+    return eye.sclera_radius * math.radians(eye.tear_angle - eye.limbus_angle)
 
 
-def _plot(ax, xs: list[float], cases: list[dict], key: str, label: str | None) -> None:
-    """A line of ``key`` against ``xs``; filled markers where the tear closed after
-    suturing, hollow where it stayed open, a red cross at 0 where the case failed."""
-    done = [(x, r) for x, r in zip(xs, cases) if r.get(key) is not None]
-    line, = ax.plot([x for x, _ in done], [float(r[key]) for _, r in done], "-", label=label)
-    for x, r in done:
-        closed = bool(r.get("tear_closed_after_suturing"))
-        ax.plot(x, float(r[key]), "o", color=line.get_color(),
-                mfc=line.get_color() if closed else "white")
-    for x, r in zip(xs, cases):
-        if r.get("status") != "ok":
-            ax.plot(x, 0.0, "rx", ms=10, mew=2)
+def _value(row: dict, factor: str) -> float:
+    """The row's position on its factor's axis (the buckle kind by its place)."""
+    if factor == "buckle":
+        return float(list(BUCKLE_KINDS).index(row["buckle"]))
+    return float(row[dict(NAMED)[factor]])
+
+
+def _number(value) -> float:
+    return float(value) if value not in (None, "") else math.nan
+
+
+# chart rows: (label, [(column, its band's column or None)]), the acute stage first
+RIM = "tear's rim gap (mm)\n± band (clipped)"
+PANELS = ((RIM, [("acute_tear_rim_gap_max_mm", "acute_tear_rim_gap_band_mm"),
+                 ("settled_tear_rim_gap_max_mm", "settled_tear_rim_gap_band_mm")]),
+          ("ΔAL (mm)\n± band", [("acute_axial_length_change_mm", "acute_axial_length_change_band_mm"),
+                                ("settled_axial_length_change_mm", "settled_axial_length_change_band_mm")]),
+          ("ΔSE (D)", [("acute_refraction_change_D", None), ("settled_refraction_change_D", None)]),
+          ("peak IOP (mmHg)", [("operation_peak_iop_mmHg", None)]),
+          ("vented (µL)", [("acute_vented_volume_uL", None)]))
+STAGE_COLOURS = ("tab:blue", "tab:orange")
 
 
 def _chart(rows: list[dict], path: Path) -> None:
@@ -117,44 +176,94 @@ def _chart(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    factors = [f for f, _, _ in ONE_FACTOR if any(r["factor"] == f for r in rows)]
-    fig, axes = plt.subplots(len(COSTS), 1 + len(factors), squeeze=False,
-                             sharey="row", figsize=(4.2 * (1 + len(factors)), 2.4 * len(COSTS)))
-    kinds = list(dict.fromkeys(r["buckle"] for r in rows if r["factor"] == "kind"))
-    for kind in kinds:
-        cases = [r for r in rows if r["factor"] == "kind" and r["buckle"] == kind]
-        xs = [float(r["indentation"]) for r in cases]
-        for ax, (key, _) in zip(axes[:, 0], COSTS):
-            _plot(ax, xs, cases, key, kind)
-    axes[-1, 0].set_xlabel("buckle travel (mm)")
-    axes[0, 0].set_title(f"buckle kind × travel (at {DEFAULTS['buckle_position']} mm)",
-                         fontsize=9)
-    for column, factor in enumerate(factors, start=1):
-        _, parameter, label = next(f for f in ONE_FACTOR if f[0] == factor)
-        cases = sorted(_one_factor_rows(rows, factor), key=lambda r: float(r[parameter]))
-        xs = [float(r[parameter]) for r in cases]
-        for ax, (key, _) in zip(axes[:, column], COSTS):
-            _plot(ax, xs, cases, key, None)
-            ax.axvline(float(DEFAULTS[parameter]), color="0.6", ls=":", lw=1)
-        axes[-1, column].set_xlabel(label)
-        axes[0, column].set_title(f"{factor.replace('_', ' ')} (band + tire, "
-                                  f"{DEFAULTS['indentation']} mm; dotted: default)", fontsize=9)
-    for ax in axes.flat:
-        ax.grid(alpha=0.3)
-    for ax in axes[0]:  # the closure criterion of tear_closed_nts
-        ax.axhline(CLOSED_GAP_MM, color="k", ls="--", lw=0.8)
-    for ax, (_, label) in zip(axes[:, 0], COSTS):
-        ax.set_ylabel(label)
-    legend = axes[1, 0]  # its upper left is empty: small changes at 1 mm of travel
-    legend.plot([], [], "ko", label="tear closed after suturing")
-    legend.plot([], [], "ko", mfc="white", label="tear open")
-    legend.plot([], [], "rx", label="solve failed")
-    legend.plot([], [], "k--", lw=0.8, label=f"closed below {CLOSED_GAP_MM:g} mm")
-    legend.legend(fontsize=7, loc="upper left")
-    fig.suptitle("scleral-buckling planning map: coarse eye, Q1P0, sutures at the tear's "
-                 "meridian; changes from the eye before surgery")
-    save_chart(fig, path, dpi=100, rect=(0, 0.03, 1, 0.96))
+    factors = list(dict.fromkeys(r["factor"] for r in rows if r["factor"] != DEFAULTS_FACTOR))
+    defaults = [r for r in rows if r["factor"] == DEFAULTS_FACTOR]
+    fig, axes = plt.subplots(len(PANELS), max(len(factors), 1), squeeze=False, sharey="row",
+                             figsize=(2.3 * max(len(factors), 2) + 1, 2.0 * len(PANELS) + 0.8))
+    tolerance = scleral_buckling.Parameters().tear_closure_tolerance
+    for column, factor in enumerate(factors):
+        cases = sorted([r for r in rows if r["factor"] == factor] + defaults,
+                       key=lambda r: _value(r, factor))
+        xs = [_value(r, factor) for r in cases]
+        for ax, (label, lines) in zip(axes[:, column], PANELS):
+            for (key, band), colour in zip(lines, STAGE_COLOURS):
+                _plot(ax, xs, cases, key, band, colour, connect=factor != "buckle")
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=7)
+        axes[0, column].axhline(tolerance, color="k", ls="--", lw=0.8)
+        bottom = axes[-1, column]
+        if factor == "buckle":
+            for ax in axes[:, column]:
+                ax.set_xticks(range(len(BUCKLE_KINDS)), list(BUCKLE_KINDS.values()))
+                ax.set_xlim(-0.4, len(BUCKLE_KINDS) - 0.6)
+        elif defaults:
+            for ax in axes[:, column]:
+                ax.axvline(_value(defaults[0], factor), color="0.6", ls=":", lw=1)
+        bottom.set_xlabel(_axis_label(factor), fontsize=8)
+    for ax, (label, _) in zip(axes[:, 0], PANELS):
+        ax.set_ylabel(label, fontsize=8)
+    _clip_rim_row(axes[0, 0], rows, tolerance)
+    _legend(fig, tolerance)
+    fig.suptitle("scleral-buckling planning map, living eye (coarse, Q1P0): one factor at a time "
+                 "from the defaults (dotted)\nblue after suturing, orange settled; marker: the "
+                 "tear's verdict; bars: the error estimate against the default mesh", fontsize=9,
+                 x=0.02, ha="left")
+    save_chart(fig, path, dpi=90, rect=(0, 0.03, 1, 0.97))
 
 
-STUDY = Study("buckling-planning", "which buckles close the tear, and their cost in axial "
-              "length, refraction and IOP", run)
+def _plot(ax, xs: list[float], cases: list[dict], key: str, band: str | None, colour: str,
+          connect: bool = True) -> None:
+    """``key`` against ``xs`` with its band as error bars; the marker's fill is the stage's
+    tear verdict (full closed, hollow open, half uncertain); a red cross where a case failed.
+    ``connect``: a line through the points (not between categories)."""
+    stage = key.split("_", 1)[0] if key.split("_", 1)[0] in ("acute", "settled") else "acute"
+    done = [(x, r) for x, r in zip(xs, cases) if r["status"] not in FAILED and r.get(key) is not None]
+    ys = [_number(r[key]) for _, r in done]
+    if connect:
+        ax.plot([x for x, _ in done], ys, "-", color=colour, lw=1)
+    for (x, r), y in zip(done, ys):
+        if band is not None and r.get(band) not in (None, ""):
+            ax.errorbar(x, y, yerr=_number(r[band]), color=colour, lw=0.8, capsize=2)
+        verdict = r.get(f"{stage}_tear_verdict") or "open"
+        ax.plot(x, y, "o", color=colour, fillstyle=VERDICT_STYLE.get(verdict, "none"),
+                markerfacecoloralt="white", mfc=colour if verdict != "open" else "white", ms=6)
+    for x, r in zip(xs, cases):
+        if r["status"] in FAILED:
+            ax.plot(x, 0.0, "rx", ms=9, mew=2)
+
+
+def _clip_rim_row(ax, rows: list[dict], tolerance: float) -> None:
+    """The rim gaps' row scaled to the gaps, not to their bands (up to 4 mm where the
+    meshes disagree by 0.4 mm): a bar leaving the panel is clipped at its edge."""
+    gaps = [_number(r.get(f"{stage}_tear_rim_gap_max_mm")) for r in rows for stage in ("acute", "settled")
+            if r["status"] not in FAILED]
+    top = max([g for g in gaps if math.isfinite(g)] + [tolerance])
+    ax.set_ylim(-0.25 * top, 1.25 * top)
+
+
+def _axis_label(factor: str) -> str:
+    if factor == "buckle_position":
+        return f"buckle position (mm behind limbus;\ntear centre {tear_centre_mm():.1f})"
+    if factor == "tire_width":
+        return "tire width (mm; bites\nkeep their overhang)"
+    column = dict(NAMED)[factor]
+    return column.replace("_", " ").replace(" mmHg", " (mmHg)").replace(" mm", " (mm)") \
+        .replace(" deg", " (°)").replace(" N", " (N)").replace(" percent", " (%)")
+
+
+def _legend(fig, tolerance: float) -> None:
+    """The verdicts' markers and the closure tolerance, above the panels on the right."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="k", marker="o", ls="", label="closed"),
+               Line2D([], [], color="k", marker="o", ls="", mfc="white", label="open"),
+               Line2D([], [], color="k", marker="o", ls="", fillstyle="left",
+                      markerfacecoloralt="white", label="uncertain (|margin| ≤ band)"),
+               Line2D([], [], color="r", marker="x", ls="", label="failed"),
+               Line2D([], [], color="k", ls="--", lw=0.8, label=f"tolerance {tolerance:g} mm")]
+    fig.legend(handles=handles, loc="upper right", ncol=3, fontsize=7, frameon=False)
+
+
+STUDY = Study("buckling-planning", "which buckles close the tear on the living eye (closed / "
+              "open / within the discretisation's error), and their cost in ΔAL, ΔSE, peak IOP "
+              "and vented volume", run)
