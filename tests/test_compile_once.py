@@ -80,7 +80,7 @@ def test_eye_with_new_moduli_penalty_and_mesh_compiles_nothing_after_its_first_c
 
 def test_eye_with_a_new_buckle_and_sutures_compiles_nothing_after_its_first_case(compilations):
     """The planning map's factors (``eyemech study buckling-planning``): the coarse eye
-    twice, settle = false, 0.75 mm of travel, the second case with a new buckle
+    twice, settle = false, the band shortened (the default), the second case with a new buckle
     position, band and tire widths, tire height, corner radius, tire arc, suture width,
     bite radius and penalty smoothing ε (> 0 in both: ε = 0 is another form). The
     buckle's sizes and position, the bites' centres and radius and ε are Constants
