@@ -57,11 +57,12 @@ def numbers(value) -> list[float]:
 # difference of two round-offs says nothing; they are compared against the scale of the
 # quantity they come from
 DIFFERENCE_WORDS = ("spread", "error", "deviation", "residual")
-# the solver's effort (Newton iterations, factorisations, ...) is not a result: near the
-# stopping test, round-off that differs between partitions can cost one iteration more;
+# the solver's effort (Newton iterations, factorisations, the Jacobian's stored nonzeros,
+# ...) is not a result: near the stopping test, round-off that differs between partitions
+# can cost one iteration more, and a partition stores the couplings across its cut twice;
 # it is reported in its own column
 EFFORT_WORDS = ("iterations", "factorisations", "jacobians", "attempts", "load_steps",
-                "solves", "krylov", "augmentations")
+                "solves", "krylov", "augmentations", "nonzeros", "mallocs")
 
 
 def is_effort(key: str) -> bool:
