@@ -26,7 +26,7 @@ RADIAL = dict(buckle="segmental", tire_orientation="radial", suture_azimuths="0"
 
 
 # measured on the paper's operation (Table 1's clamped eye, rigid travel)
-PAPER = {key: str(value) for key, value in sb.PAPER_OPERATION.items()}  # the paper's operation
+PAPER = sb.PAPER_SETTINGS
 
 
 def _run(**overrides):

@@ -15,7 +15,7 @@ QUIET = RunOptions(fields=False, pictures=False)
 
 
 # the buckle kinds compared on the paper's operation (Table 1's clamped eye, rigid travel)
-PAPER = {key: str(value) for key, value in sb.PAPER_OPERATION.items()}  # the paper's operation
+PAPER = sb.PAPER_SETTINGS
 
 
 def _run(**overrides):

@@ -85,7 +85,7 @@ def test_bad_solver_choice_is_refused(overrides, key):
 # result can depend on its load path: docs/scleral_buckling.md, "Not done / not verified").
 # the paper's operation (Table 1's clamped eye) with 1 mm of rigid travel
 BUCKLING = ["--set", "resolution=coarse", "--set", "indentation=1.0", "--set", "settle=false",
-            *[a for k, v in scleral_buckling.PAPER_OPERATION.items() for a in ("--set", f"{k}={v}")]]
+            *[a for k, v in scleral_buckling.PAPER_SETTINGS.items() for a in ("--set", f"{k}={v}")]]
 QUANTITIES = ("axial_length_change_mm", "buckle_indentation_mm", "iop_mmHg", "cavity_volume_mm3",
               "retina_choroid_gap_min_mm", "retina_choroid_gap_mean_mm", "von_mises_max_MPa",
               "zonule_force_total_N")

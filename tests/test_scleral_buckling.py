@@ -20,7 +20,7 @@ from eyemech.problems.solve.driver import NewtonOptions
 COARSE = dict(resolution="coarse")
 # the paper's operation (Table 1's clamped eye, rigid travel, conserved liquid) as --set
 # strings, for the tests measured on it
-PAPER = {key: str(value) for key, value in sb.PAPER_OPERATION.items()}
+PAPER = sb.PAPER_SETTINGS
 
 
 @pytest.fixture(scope="module")

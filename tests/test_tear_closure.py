@@ -22,7 +22,7 @@ QUIET = RunOptions(fields=False, pictures=False)
 REFERENCE_STEPPING = dict(predictor="none", jacobian_reuse="0", buckle_step="0.25",
                           step_effort="iterations", hard_step_effort="0")
 # the paper's operation (Table 1's clamped eye), where the numbers below were measured
-PAPER = {key: str(value) for key, value in sb.PAPER_OPERATION.items()}
+PAPER = sb.PAPER_SETTINGS
 SEWN = dict(resolution="coarse", buckle="segmental", suture_azimuths="0", indentation="0.2",
             suture_force="0.3", settle="false", buckle_position="12.5", **REFERENCE_STEPPING,
             **PAPER)

@@ -52,14 +52,16 @@ from eyemech.problems.scleral_buckling.parameters import (
     CALIBRATED_C20_SCLERA,
     CORNEA_TO_SCLERA,
     PAPER_OPERATION,
+    PAPER_SETTINGS,
     Parameters,
 )
 from eyemech.problems.scleral_buckling.stages import Operation, largest_step, ramp_value
 from eyemech.problems.solve.driver import SecantPredictor, SolveFailure
 
 __all__ = ["BENCHMARK", "CALIBRATED_C20_SCLERA", "CORNEA_TO_SCLERA", "DIOPTRES_PER_MM", "MMHG",
-           "PAPER_OPERATION", "SCENE", "BucklingModel", "Operation", "Parameters", "SolveFailure", "Writer",
-           "largest_step", "ramp_value", "run", "slide_note"]
+           "PAPER_OPERATION", "PAPER_SETTINGS", "SCENE", "BucklingModel", "Operation",
+           "Parameters", "SolveFailure", "Writer", "largest_step", "ramp_value", "run",
+           "slide_note"]
 
 # `eyemech bench scleral-buckling`: the whole operation (IOP, buckling, suturing, settling)
 # at the paper's resolution (>= 7,421 hexahedra); `make bench` adds the default mesh's row

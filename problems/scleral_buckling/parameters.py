@@ -58,6 +58,8 @@ BAND_SHORTENING_PERCENT = 25.0
 # --set buckle_control=travel --set venting=false`` (docs/scleral_buckling.md)
 PAPER_OPERATION = {"material": "table-1", "optic_nerve_end_spring": 0.0,
                    "buckle_control": "travel", "venting": False}
+# the same as `--set` / TOML strings (for ``build``, sweeps and command lines)
+PAPER_SETTINGS = {key: str(value) for key, value in PAPER_OPERATION.items()}
 # the optic nerve's end spring of the living eye: within 4 % of the free eye's settled axial
 # change and 0.004-0.011 N on the nerve (docs/scleral_buckling.md, "A living eye's wall")
 OPTIC_NERVE_END_SPRING = 0.001

@@ -25,7 +25,7 @@ from eyemech.problems.studies._common import save_chart, with_units, write_csv
 # on the paper's operation (Table 1's clamped eye, the rigid buckle moved in by its
 # indentation, the liquid conserved): the indentation is the swept control
 BASE = {"resolution": "coarse", "tire_height": "0", "suture_width": "4.0",
-        **{key: str(value) for key, value in scleral_buckling.PAPER_OPERATION.items()}}
+        **scleral_buckling.PAPER_SETTINGS}
 # a band narrower than about two elements is not resolved by the coarse eye (1 mm bands
 # needed hundreds of cut steps and failed at 1 mm indentation): widths from 2.5 mm
 GRID = {"indentation": ["0.5", "1.0", "1.5"], "band_width": ["2.5", "4.0"]}
