@@ -6,7 +6,9 @@ difference of its quantities from the serial run (``make bench-mpi``).
 Each run is ``mpiexec -n N eyemech run NAME --json --quiet`` with the scene's defaults
 (fields and pictures on), timed from outside (interpreter start-up included). Writes
 ``OUT/mpi-scenes.csv`` (one row per scene and rank count) and ``OUT/mpi-scenes.md``
-(the table docs/parallel.md shows). Left out: ``iol-injection`` (its default folds the
+(the table docs/parallel.md shows); with ``--merge`` the rows measured now replace those of
+the same scene and rank count in ``OUT/mpi-scenes.csv`` and the others are kept (a scene
+measured apart from the hour-long whole, on a quieter machine). Left out: ``iol-injection`` (its default folds the
 lens first, 10–20 min serially; ``--scenes iol-injection`` runs it); ``iol-speed``
 measures one core and refuses more ranks (its row records the refusal).
 """
@@ -29,7 +31,7 @@ from pathlib import Path
 BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
 COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "load", "max_rel_diff", "worst_quantity",
-           "effort_rel_diff", "effort_quantity", "lockstep_wait_max_s", "note")
+           "effort_rel_diff", "effort_quantity", "lockstep_wait_max_s", "note", "date")
 
 
 def flat(quantities: dict, prefix: str = "") -> dict[str, object]:
@@ -146,6 +148,8 @@ def main() -> int:
     parser.add_argument("--scenes", default="", help="comma-separated (default: all but "
                         + ", ".join(LEFT_OUT) + ")")
     parser.add_argument("--out", default="docs/bench")
+    parser.add_argument("--merge", action="store_true",
+                        help="keep the rows of OUT/mpi-scenes.csv not measured now")
     args = parser.parse_args()
     counts = [int(r) for r in args.ranks.split(",")]
     names = args.scenes.split(",") if args.scenes else \
@@ -166,7 +170,8 @@ def main() -> int:
                 row = {"scene": name, "ranks": ranks, "exit_code": code,
                        "wall_s": round(seconds, 1), "load": load, "max_rel_diff": "", "worst_quantity": "",
                        "effort_rel_diff": "", "effort_quantity": "",
-                       "lockstep_wait_max_s": waited, "note": said[:160]}
+                       "lockstep_wait_max_s": waited, "note": said[:160],
+                       "date": time.strftime("%Y-%m-%d")}
                 if ranks == 1:
                     serial = result
                 elif result is not None and serial is not None:
@@ -179,13 +184,37 @@ def main() -> int:
                 print(" ".join(f"{k}={row[k]}" for k in COLUMNS), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    table = merged(read_rows(out / "mpi-scenes.csv"), rows) if args.merge else rows
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=COLUMNS)
     writer.writeheader()
-    writer.writerows(rows)
+    writer.writerows(table)
     (out / "mpi-scenes.csv").write_text(buffer.getvalue())
-    (out / "mpi-scenes.md").write_text(markdown(rows, counts))
+    shown = sorted({int(r["ranks"]) for r in table})
+    (out / "mpi-scenes.md").write_text(markdown(table, shown))
     return 0 if all(r["exit_code"] == 0 or "measures one core" in r["note"] for r in rows) else 1
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows of an earlier table (none if it is missing); numbers as the CSV holds them."""
+    if not path.exists():
+        return []
+    with path.open(newline="") as stream:
+        rows = list(csv.DictReader(stream, restval=""))
+    for row in rows:
+        row["ranks"], row["exit_code"] = int(row["ranks"]), int(row["exit_code"])
+        row["date"] = row.get("date") or ""
+    return rows
+
+
+def merged(earlier: list[dict], now: list[dict]) -> list[dict]:
+    """Earlier rows with those measured now in their place (same scene and rank count);
+    a scene new to the table goes after the others."""
+    fresh = {(r["scene"], r["ranks"]): r for r in now}
+    table = [fresh.pop((r["scene"], r["ranks"]), r) for r in earlier]
+    table += [r for r in now if (r["scene"], r["ranks"]) in fresh]
+    order = list(dict.fromkeys(r["scene"] for r in table))
+    return sorted(table, key=lambda r: (order.index(r["scene"]), r["ranks"]))
 
 
 def markdown(rows: list[dict], counts: list[int]) -> str:
@@ -195,7 +224,9 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
     head = ["scene", *[f"{r} rank{'s' * (r > 1)} (s)" for r in counts],
             *[f"max rel. diff. {r} ranks" for r in counts if r > 1],
             *[f"effort {r} ranks" for r in counts if r > 1]]
-    lines = [f"Every scene at its defaults (`make bench-mpi`, {time.strftime('%Y-%m-%d')}, "
+    dates = sorted({str(r.get("date") or "") for r in rows} - {""}) or [time.strftime("%Y-%m-%d")]
+    when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
+    lines = [f"Every scene at its defaults (`make bench-mpi`, {when}, "
              f"{platform.node()}, {os.cpu_count()} cpus): wall time of `mpiexec -n N eyemech "
              "run NAME` (start-up included) and the largest relative difference of any "
              "quantity from the serial run (a spread or an error against the scale of the "
@@ -210,7 +241,7 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
         for r in counts:
             row = runs.get(r)
             cells.append("" if row is None else f"{row['wall_s']} ({row['load']})"
-                         if row["exit_code"] == 0 else f"exit {row['exit_code']}")
+                         if int(row["exit_code"]) == 0 else f"exit {row['exit_code']}")
         for r in counts:
             if r > 1:
                 row = runs.get(r, {})

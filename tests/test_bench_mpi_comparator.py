@@ -44,3 +44,25 @@ def test_a_count_of_the_partition_is_not_a_result():
     worst, where = bench_mpi.largest_difference({"contact_pairs_across_ranks": 0, "gap": 1.0},
                                                 {"contact_pairs_across_ranks": 12, "gap": 1.0})
     assert worst == 0.0 and where == ""
+
+
+def test_a_merge_replaces_the_rows_measured_again_and_keeps_the_others(tmp_path):
+    def row(scene, ranks, wall, date="2026-11-29"):
+        return {**dict.fromkeys(bench_mpi.COLUMNS, ""), "scene": scene, "ranks": ranks,
+                "exit_code": 0, "wall_s": wall, "load": 1.0, "date": date}
+
+    earlier = [row("hertz", 1, 16.4), row("hertz", 2, 8.2), row("iol-fold", 1, 753.2),
+               row("iol-fold", 2, 508.0)]
+    now = [row("iol-fold", 1, 700.0, "2026-12-06"), row("iol-fold", 3, 600.0, "2026-12-06"),
+           row("keratotomy", 1, 50.0, "2026-12-06")]
+    table = bench_mpi.merged(earlier, now)
+    assert [(r["scene"], r["ranks"], r["wall_s"]) for r in table] == [
+        ("hertz", 1, 16.4), ("hertz", 2, 8.2), ("iol-fold", 1, 700.0), ("iol-fold", 2, 508.0),
+        ("iol-fold", 3, 600.0), ("keratotomy", 1, 50.0)]
+    # a CSV written before the date column reads back with an empty date
+    path = tmp_path / "mpi-scenes.csv"
+    path.write_text("scene,ranks,exit_code,wall_s\nhertz,1,0,16.4\n")
+    assert bench_mpi.read_rows(path) == [{"scene": "hertz", "ranks": 1, "exit_code": 0,
+                                          "wall_s": "16.4", "date": ""}]
+    text = bench_mpi.markdown(table, [1, 2, 3])
+    assert "2026-11-29 to 2026-12-06" in text and "| `keratotomy` | 50.0 (1.0) |  |  |" in text
