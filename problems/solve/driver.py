@@ -3,7 +3,8 @@ follower (load or time stepping) that cuts the step on divergence and grows it
 after easy steps.
 
 Design notes
-- The residual and Jacobian callbacks are DOLFINx's own; we wrap them only to
+- The residual and Jacobian callbacks are DOLFINx's own (the residual without lifting
+  conditions the iterate already satisfies: problems/solve/residual.py); we wrap them only to
   time assembly and to let a scene add global terms (contact forces, a
   substituted cavity pressure) after the local assembly.
 - A failed Newton solve restores the last converged unknowns before retrying, so
@@ -69,6 +70,7 @@ from eyemech.problems.run.results import (
     record_stopping_criterion,
 )
 from eyemech.problems.solve.callbacks import petsc_callback
+from eyemech.problems.solve.residual import Residual
 from eyemech.problems.solve.stale_factorisation import StaleFactorisation
 from eyemech.problems.solve.stepping import StepController
 
@@ -259,10 +261,17 @@ class NonlinearSolver:
         for obj in (problem.solver, problem.A, problem.P_mat, problem.b, problem.x):
             if obj is not None:
                 obj.destroy()
+        if getattr(self, "residual_assembly", None) is not None:
+            self.residual_assembly.destroy()
         forget_solver(self.serial)
 
     def _wrap_callbacks(self) -> None:
-        b, self._assemble_residual = self.snes.getFunction()
+        b, (f_call, f_args, f_kargs) = self.snes.getFunction()
+        if f_call is dolfinx.fem.petsc.assemble_residual:
+            # the same residual without lifting conditions the iterate already satisfies
+            self.residual_assembly = Residual()
+            f_call = self.residual_assembly
+        self._assemble_residual = (f_call, f_args, f_kargs)
         A, P, self._assemble_jacobian = self.snes.getJacobian()
         self._raise_on = test_raise_rank(self.unknowns[0].function_space.mesh.comm)
         self._residual_calls = 0
