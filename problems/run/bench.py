@@ -1,7 +1,9 @@
 """Performance benchmarks: a scene at a stated size, timed phase by phase.
 
 A scene module may define ``BENCHMARK`` (parameter overrides, e.g. the paper's
-resolution). ``eyemech bench NAME`` runs it once on the current communicator and
+resolution) and ``bench_operation(params) -> str``, the row's ``operation``: what the
+parameters amount to in words (the main job's defaults changed from Table 1's eye to a
+living one, and a row's ``settings`` only lists what differs from the defaults of its day). ``eyemech bench NAME`` runs it once on the current communicator and
 appends one row to ``OUT/NAME.csv``; ``OUT/NAME.md`` is the table of all rows,
 with the machine and the method stated, regenerated every time.
 """
@@ -22,7 +24,7 @@ from eyemech.problems.run.parameters import build
 from eyemech.problems.run.results import versions, write_text_atomic
 
 PHASES = ("mesh", "form_compilation", "assembly", "solve", "contact_search", "output", "total")
-COLUMNS = ("date", "machine", "ranks", "settings", "dofs", "cells", *PHASES, "peak_memory_mb",
+COLUMNS = ("date", "machine", "ranks", "settings", "operation", "dofs", "cells", *PHASES, "peak_memory_mb",
            "newton_iterations", "newton_iterations_all", "failed_newton_solves", "factorisations",
            "symbolic_factorisations", "krylov_iterations", "matrix_mallocs", "status")
 # what the counts mean (the table's notes)
@@ -57,6 +59,7 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
     row = {"date": datetime.date.today().isoformat(),
            "machine": f"{platform.node()} ({platform.machine()}, {__import__('os').cpu_count()} cpus)",
            "ranks": comm.size, "settings": _settings(overrides),
+           "operation": getattr(module, "bench_operation", lambda _: "")(params),
            "dofs": result.quantities.get("dofs"),
            "cells": result.quantities.get("cells"),
            **{k: round(timings.get(k, 0.0), 2) for k in PHASES},
@@ -68,7 +71,7 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
                                        "factorisations", "symbolic_factorisations",
                                        "krylov_iterations", "matrix_mallocs")})
     table = Path(out) / f"{scene.name}.csv"
-    rows = list(csv.DictReader(table.open())) if table.exists() else []
+    rows = list(csv.DictReader(table.open(), restval="")) if table.exists() else []
     rows.append({k: row[k] for k in COLUMNS})
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=COLUMNS)

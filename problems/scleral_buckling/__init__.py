@@ -60,12 +60,24 @@ from eyemech.problems.solve.driver import SecantPredictor, SolveFailure
 
 __all__ = ["BENCHMARK", "CALIBRATED_C20_SCLERA", "CORNEA_TO_SCLERA", "DIOPTRES_PER_MM", "MMHG",
            "PAPER_OPERATION", "PAPER_SETTINGS", "SCENE", "BucklingModel", "Operation",
-           "Parameters", "SolveFailure", "Writer", "largest_step", "ramp_value", "run",
-           "slide_note"]
+           "Parameters", "SolveFailure", "Writer", "bench_operation", "largest_step",
+           "ramp_value", "run", "slide_note"]
 
 # `eyemech bench scleral-buckling`: the whole operation (IOP, buckling, suturing, settling)
 # at the paper's resolution (>= 7,421 hexahedra); `make bench` adds the default mesh's row
 BENCHMARK = {"resolution": "paper"}
+
+
+
+def bench_operation(params: Parameters) -> str:
+    """A benchmark row's operation in words: the eye, how the buckle is set, the venting."""
+    eye = {"table-1": "Table 1 eye", "calibrated": "calibrated eye", "fibres": "living eye"}
+    tightening = (f"band shortened {100 * params.band_shortening_fraction():.0f} %"
+                  if params.elastic_band() else f"travel {params.indentation:g} mm")
+    vent = f"vented at {params.iop_limit_mmHg:g} mmHg" if params.venting else "not vented"
+    return (f"{eye[params.material]}, {params.buckle}, {tightening}, {vent}, "
+            + ("settled" if params.settle else "not settled"))
+
 
 # what this scene's checkpoints hold: one written with another state is refused
 STATE_LAYOUT = "terms-and-stages-2"
