@@ -24,7 +24,7 @@
 # the cheapest honest lens run itself (about half a minute): **the deformation-only
 # injection** — `contact=false`, so no cartridge, plunger, capsule or self-contact — starting
 # from the lens rolled in closed form onto a 3 mm cylinder (the start of the `iol-speed`
-# benchmark) instead of the 10-minute `iol-fold`, on a coarser optic (1.2 mm triangles).
+# benchmark) instead of `iol-fold` (10–20 min here), on a coarser optic (1.2 mm triangles).
 # What it shows is the released lens unrolling in the damping fluid, not an injection.
 
 # %%
