@@ -15,7 +15,7 @@
 # incised cornea over the creep period, the power change (negative = flattening, the
 # surgery's aim), the gape of the cuts, and the deformed incised cornea in pyvista.
 # Point `EYEMECH_RUN_DIR` at a run's output folder; without it the notebook runs a coarse
-# case itself (2 mm planform elements, 8 incisions, 1 h of creep: about a minute).
+# case itself (2 mm planform elements, 8 incisions, 1 h of creep: about 20 s here).
 # `shown` collects the numbers displayed with where they are in `results.json`
 # (tests/test_notebooks.py checks them).
 

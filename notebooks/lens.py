@@ -19,11 +19,12 @@
 #
 # Point `EYEMECH_RUN_DIR` at a run's output folder, e.g. of the whole operation
 # (`eyemech run iol-fold --out F` then `eyemech run iol-injection --set
-# folded_state=F/folded_state.npz --out I`: 20–40 min here). Without one, the notebook makes
+# folded_state=F/folded_state.npz --out I`: about 54 min here, fold 9.6 and injection 44,
+# docs/iol.md). Without one, the notebook makes
 # the cheapest honest lens run itself (about half a minute): **the deformation-only
 # injection** — `contact=false`, so no cartridge, plunger, capsule or self-contact — starting
 # from the lens rolled in closed form onto a 3 mm cylinder (the start of the `iol-speed`
-# benchmark) instead of the 16-minute `iol-fold`, on a coarser optic (1.2 mm triangles).
+# benchmark) instead of `iol-fold` (10–20 min here), on a coarser optic (1.2 mm triangles).
 # What it shows is the released lens unrolling in the damping fluid, not an injection.
 
 # %%

@@ -56,7 +56,8 @@ print(f"applanation force {q['applanation_force_g']:.3f} g at depth {q['applanat
 # what the Imbert–Fick formula would give at each disc size: the cornea's resistance to
 # flattening makes it depend on the disc size, which is why Goldmann fixed 3.06 mm. (On the
 # coarse default of this notebook the disc grows node ring by node ring, so the curve is
-# jagged; the scene's default mesh is four times finer in the planform.)
+# jagged; the scene's default mesh has half this element size in the planform, 0.5 mm:
+# 416 cells against 256, docs/studies/tonometry_convergence.csv.)
 
 # %%
 from eyemech.problems.run.parameters import MMHG
