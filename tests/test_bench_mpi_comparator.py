@@ -66,3 +66,13 @@ def test_a_merge_replaces_the_rows_measured_again_and_keeps_the_others(tmp_path)
                                           "wall_s": "16.4", "date": ""}]
     text = bench_mpi.markdown(table, [1, 2, 3])
     assert "2026-11-29 to 2026-12-06" in text and "| `keratotomy` | 50.0 (1.0) |  |  |" in text
+
+
+def test_a_volume_swept_by_the_wall_is_compared_against_the_cavity():
+    # the default eye after its IOP step on 1 and 2 ranks: the swept volume is round-off
+    serial = {"after_iop": {"wall_inward_volume_uL": -1.18e-11, "cavity_volume_mm3": 4663.198}}
+    parallel = {"after_iop": {"wall_inward_volume_uL": -0.54e-11, "cavity_volume_mm3": 4663.198}}
+    worst, where = bench_mpi.largest_difference(serial, parallel)
+    assert worst < 1e-14, (worst, where)
+    parallel["after_iop"]["wall_inward_volume_uL"] = 1.0  # a microlitre is a difference
+    assert bench_mpi.largest_difference(serial, parallel)[0] > 1e-4
