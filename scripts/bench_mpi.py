@@ -8,9 +8,10 @@ Each run is ``mpiexec -n N eyemech run NAME --json --quiet`` with the scene's de
 ``OUT/mpi-scenes.csv`` (one row per scene and rank count) and ``OUT/mpi-scenes.md``
 (the table docs/parallel.md shows); with ``--merge`` the rows measured now replace those of
 the same scene and rank count in ``OUT/mpi-scenes.csv`` and the others are kept (a scene
-measured apart from the hour-long whole, on a quieter machine). Left out: ``iol-injection`` (its default folds the
-lens first, 10–20 min serially; ``--scenes iol-injection`` runs it); ``iol-speed``
-measures one core and refuses more ranks (its row records the refusal).
+measured apart from the hour-long whole, on a quieter machine). Left out:
+``iol-injection`` (its default folds the lens first, 10–20 min serially; ``--scenes
+iol-injection`` runs it); ``iol-speed`` measures one core and refuses more ranks (its row
+records the refusal).
 """
 
 from __future__ import annotations

@@ -190,6 +190,12 @@ BAD_INPUT = [
     ("petsc-view-parent", [*SPHERE, "--petsc", "snes_view=ascii:../up.txt"],
      ["--petsc", "'..'"], None),
     ("petsc-draw", [*SPHERE, "--petsc", "ksp_view=draw"], ["--petsc", "window"], None),
+    # a viewer's file the run's folder cannot take is named as given (not PETSc's trial's
+    # "a value of the wrong kind" with the trial's scratch path)
+    ("petsc-view-subfolder", [*SPHERE, "--petsc", "snes_view=ascii:sub/snes.txt"],
+     ["--petsc", "snes_view=ascii:sub/snes.txt", "without a folder"], None),
+    ("petsc-view-name-too-long", [*SPHERE, "--petsc", f"snes_view=ascii:{'a' * 300}.txt"],
+     ["--petsc", f"snes_view=ascii:{'a' * 300}.txt", "File name too long"], None),
 ]
 
 

@@ -3,11 +3,11 @@
 PETSc's viewer options (``snes_view``, ``ksp_view_mat``, ``snes_monitor``,
 ``log_view``, ...) take a value ``[type][:file][:format][:mode]``: ``ascii:out.txt``,
 ``binary:A.bin``, ``hdf5:x.h5``, ``vtk:u.vts``. A run may write such a file only inside
-its own output folder: the file name must be relative, without ``..``, and is placed in
-the folder (each sweep case's own); an absolute path, one that leaves the folder, one of
-eyemech's own files, and viewers that open windows or network connections are refused
-(exit 2) before anything is built. ``ascii`` without a file (or ``stdout``/``stderr``)
-prints, as before.
+its own output folder: the file name is a name without a folder part and is placed in
+the folder itself (each sweep case's own); an absolute path, one that leaves the folder or
+names a sub-folder, one of eyemech's own files, a name the file system cannot take, and
+viewers that open windows or network connections are refused (exit 2) before anything is
+built. ``ascii`` without a file (or ``stdout``/``stderr``) prints, as before.
 """
 
 from __future__ import annotations
@@ -50,6 +50,11 @@ def _refusal(key: str, value: str) -> str | None:
                 "relative to it (no absolute path, no '..')")
     if path.parts[0] in OWN_FILES:
         return f"{key}={value}: {path.parts[0]} is eyemech's own file in the run's folder"
+    if len(path.parts) > 1:
+        # the run's folder has no sub-folders for it: PETSc's trial (and the run) could not
+        # open the file, which PETSc reports as a value it cannot use
+        return (f"{key}={value}: a viewer's file is written in the run's folder itself; give "
+                "a file name without a folder")
     return None
 
 
@@ -93,6 +98,18 @@ def confined(petsc: dict[str, str], folder: Path | None) -> dict[str, str]:
 
 def for_trial(petsc: dict[str, str], scratch: str | Path) -> dict[str, str]:
     """The options with their files in ``scratch`` (the option check's trial solve
-    writes them there, not in the run's folder)."""
+    writes them there, not in the run's folder). A file that cannot be made there (a
+    name longer than the file system takes) is refused here, naming the option as given:
+    PETSc's trial would report it as "a value of the wrong kind", naming the scratch path."""
     check_files(petsc)
+    for key, value in petsc.items():
+        if _writes(value):
+            name = _viewer(value)[1]
+            path = Path(scratch) / name
+            try:
+                path.open("x").close()
+                path.unlink()
+            except OSError as err:
+                raise ParameterError("--petsc", f"{key}={value}: cannot make this file in the "
+                                     f"run's folder ({err.strerror})") from None
     return _rewritten(petsc, Path(scratch))
