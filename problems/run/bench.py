@@ -3,9 +3,10 @@
 A scene module may define ``BENCHMARK`` (parameter overrides, e.g. the paper's
 resolution) and ``bench_operation(params) -> str``, the row's ``operation``: what the
 parameters amount to in words (the main job's defaults changed from Table 1's eye to a
-living one, and a row's ``settings`` only lists what differs from the defaults of its day). ``eyemech bench NAME`` runs it once on the current communicator and
-appends one row to ``OUT/NAME.csv``; ``OUT/NAME.md`` is the table of all rows,
-with the machine and the method stated, regenerated every time.
+living one, and a row's ``settings`` only lists what differs from the defaults of its day).
+``eyemech bench NAME`` runs it once on the current communicator and appends one row to
+``OUT/NAME.csv``; ``OUT/NAME.md`` is the table of all rows, with the machine and the method
+stated, regenerated every time.
 """
 
 from __future__ import annotations
