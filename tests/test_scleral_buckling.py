@@ -267,6 +267,22 @@ def test_the_tear_closes_after_suturing_on_the_default_mesh():
     assert q["after_buckling"]["tear_rim_gap_max_mm"] < q["after_iop"]["tear_rim_gap_max_mm"]
 
 
+@pytest.mark.xfail(strict=True,
+                   reason="the settling stalls for a band alone with bites 4 mm apart: the "
+                   "residual stays near 0.84 from load 3.28 on (DIVERGED_MAX_IT) while the "
+                   "step is cut; with the default 8.9 mm bites it settles "
+                   "(docs/atlas/buckling-sweep.md)")
+def test_a_band_alone_with_close_bites_settles(tmp_path):
+    # a subprocess: a failed run's traceback would keep its mesh past the module's end
+    settings = dict(resolution="coarse", buckle="encircling", suture_width="4.0",
+                    indentation="1.0", **PAPER)
+    code, out, err = run_cli("run", "scleral-buckling", "--out", str(tmp_path), "--json",
+                             "--quiet", "--no-pictures", "--no-fields",
+                             *[f"--set={key}={value}" for key, value in settings.items()])
+    assert code == 0, err[-400:]
+    assert last_json(out)["quantities"]["after_settling"]["iop_mmHg"] < 15.01
+
+
 # a thinner detachment: the retina reaches the choroid in step 2 (the buckle at 12.5 mm
 # with 1.3 mm of travel, where the numbers below were measured)
 CLOSING = dict(resolution="coarse", detachment_height="0.2", indentation="1.3",

@@ -20,12 +20,7 @@ from eyemech.problems.studies._common import sidecar, stamp
 
 EYEMECH = Path(sys.executable).parent / "eyemech"
 # studies whose quick cases fail today, and why: each fails here (strictly) once fixed
-FAILING = {
-    "buckling-sweep": "scleral-buckling's settling stalls for a band alone with sutures 4 mm "
-                      "apart (tire_height 0, suture_width 4, coarse): at indentation 1.0 the "
-                      "residual stays at 0.8415 from load 3.3780 on (DIVERGED_MAX_IT, steps cut to "
-                      "4e-4); the default suture_width 8.9 settles (docs/atlas/buckling-sweep.md)",
-}
+FAILING: dict[str, str] = {}
 
 
 def _cases():

@@ -20,12 +20,12 @@ from eyemech.problems.run.sweep import run_sweep
 from eyemech.problems.studies import Study
 from eyemech.problems.studies._common import save_chart, with_units, write_csv
 
-# an encircling band alone (no tire), so that its width is what touches the sclera:
+# an encircling band alone (buckle = encircling: no tire; a tire of zero height made the
+# settling stall), so that its width is what touches the sclera:
 # the clinical comparison (myopic shift for band widths 1–2.5 mm) is for bands
 # on the paper's operation (Table 1's clamped eye, the rigid buckle moved in by its
 # indentation, the liquid conserved): the indentation is the swept control
-BASE = {"resolution": "coarse", "tire_height": "0", "suture_width": "4.0",
-        **scleral_buckling.PAPER_SETTINGS}
+BASE = {"resolution": "coarse", "buckle": "encircling", **scleral_buckling.PAPER_SETTINGS}
 # a band narrower than about two elements is not resolved by the coarse eye (1 mm bands
 # needed hundreds of cut steps and failed at 1 mm indentation): widths from 2.5 mm
 GRID = {"indentation": ["0.5", "1.0", "1.5"], "band_width": ["2.5", "4.0"]}
@@ -44,7 +44,7 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     # a failed case's row has an ``error`` column and no quantities: union of the keys;
     # the acute and settled values are the stage columns (after_suturing., after_settling.)
     table = write_csv(out / "buckling_sweep.csv", with_units(rows, scleral_buckling.Parameters),
-                      "scleral-buckling: an encircling band alone (tire_height 0), coarse eye, "
+                      "scleral-buckling: an encircling band alone (buckle encircling), coarse eye, "
                       "Q1P0; acute = after_suturing.*, settled = after_settling.*")
     chart = out / "buckling_sweep.png"
     _chart(rows, grid, chart)
