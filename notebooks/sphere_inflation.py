@@ -80,10 +80,11 @@ final = reader.read()[0]
 points = final.points + final.point_data["displacement"]
 radii = np.linalg.norm(points, axis=1)
 inner = radii[np.isclose(np.linalg.norm(final.points, axis=1), A, atol=1e-6 * A)]
-print(f"load factor {reader.time_values[-1]:g}: deformed inner radius {inner.mean():.6g} mm "
+print(f"load factor {reader.active_time_value:g}: deformed inner radius {inner.mean():.6g} mm "
       f"(results.json {quantities['inner_radius_deformed']:.6g}), pressure field "
       f"{final['pressure'].min():.4g} … {final['pressure'].max():.4g} MPa")
-shown.append((str(run_dir / "results.json"), "steps.-1.load_factor", reader.time_values[-1]))
+# the state drawn is the one the reader holds: its load factor must be the last step's
+shown.append((str(run_dir / "results.json"), "steps.-1.load_factor", reader.active_time_value))
 warped = final.warp_by_vector("displacement")
 plotter = pv.Plotter(off_screen=True, window_size=(700, 500))
 plotter.add_mesh(warped, scalars="pressure", show_edges=True, cmap="viridis",

@@ -169,7 +169,7 @@ if all(series):
         along = next((k for k in ("load_factor", "load", "time") if steps and k in steps[0]), None)
         if along:
             shown.append((str(path.parent / "results.json"), f"steps.-1.{along}",
-                          reader.time_values[-1]))
+                          reader.active_time_value))  # the state drawn: the last step's
     top = max(float(g["displacement (mm)"].max()) for g in grids)
     plotter = pv.Plotter(off_screen=True, shape=(1, 2), window_size=(1000, 450))
     for column, (r, grid) in enumerate(zip(pair, grids)):

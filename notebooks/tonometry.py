@@ -99,7 +99,7 @@ pv.OFF_SCREEN = True
 reader = pv.get_reader(str(run_dir / "state.pvd"))  # one state: the reading, at its depth
 reader.set_active_time_value(reader.time_values[-1])
 grid = reader.read()[0]
-shown.append((where, "quantities.applanation_depth_mm", reader.time_values[-1]))
+shown.append((where, "quantities.applanation_depth_mm", reader.active_time_value))
 grid.point_data["displacement (mm)"] = np.linalg.norm(grid.point_data["displacement"], axis=1)
 deformed = grid.warp_by_vector("displacement", factor=1.0)
 section = deformed.slice(normal="y", origin=(0.0, 0.0, 0.0))
