@@ -15,10 +15,13 @@ import pytest
 from eyemech.problems import scenes
 from eyemech.problems.run.output import picture_record, render_png
 
-IMAGES = Path(__file__).resolve().parents[1] / "docs" / "img"
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+# the scenes' pictures the README and the docs show (docs/iol's are the lens scenes'
+# animation frames, of runs up to 44 min, some at the paper's resolution: no record)
+IMAGES = [DOCS / "img", DOCS / "shell"]
 # the lens and zonules' section is a view drawn outside the scene's writer: it carries no record
 UNRECORDED = {"buckling-lens-section.png"}
-DOCS_PICTURES = sorted(p for p in IMAGES.glob("*.png") if p.name not in UNRECORDED)
+DOCS_PICTURES = sorted(p for folder in IMAGES for p in folder.glob("*.png") if p.name not in UNRECORDED)
 
 
 @pytest.mark.parametrize("path", DOCS_PICTURES, ids=[p.stem for p in DOCS_PICTURES])
@@ -40,6 +43,7 @@ def _grid():
     grid.point_data["displacement (mm)"] = 1e-18 + np.linspace(0.0, 0.4, grid.n_points)
     grid.point_data["p (MPa)"] = np.linspace(-0.2, 0.4, grid.n_points)
     grid.point_data["p"] = np.linspace(-0.2, 0.4, grid.n_points)
+    grid.point_data["w (mm)"] = np.linspace(-3.7e-7, 0.126, grid.n_points)  # an edge's ripple
     return grid
 
 
@@ -62,9 +66,11 @@ def test_a_magnitudes_bar_starts_at_zero(tmp_path, monkeypatch):
     bars = _bars(monkeypatch)
     render_png(_grid(), tmp_path / "a.png", scalars="displacement (mm)")
     render_png(_grid(), tmp_path / "b.png", scalars="p (MPa)")
+    render_png(_grid(), tmp_path / "w.png", scalars="w (mm)")
     assert bars[0]["clim"] == (0.0, pytest.approx(0.4))
     assert bars[0]["scalar_bar_args"]["title"] == "displacement (mm)"
     assert bars[1]["clim"] is None  # a signed field keeps its range
+    assert bars[2]["clim"] == (0.0, pytest.approx(0.126))  # round-off below zero: from zero
 
 
 def test_a_bar_without_a_unit_is_refused(tmp_path):
