@@ -98,3 +98,38 @@ def test_a_scene_picture_records_its_parameters(tmp_path):
     record = picture_record(tmp_path / "deformed.png")
     assert record["scene"] == "sphere-inflation" and record["parameters"]["mesh_size"] == 3.0
     assert record["caption"] == "sphere-inflation, p = 0.01 MPa"
+
+
+def test_the_eyes_section_names_its_stage_gap_scale_and_directions(monkeypatch):
+    """What a surgeon reads off the eye's section besides the tissues' legend: the stage
+    and the rim gap with its verdict and the IOP in the title, a 2 mm scale bar, and
+    arrows naming anterior (+z) and outside (+y)."""
+    import pyvista as pv
+
+    from eyemech.problems.scleral_buckling.output import _scale_and_directions, _section_title
+
+    title = _section_title(3, "suturing", {"tear_rim_gap_max_mm": 0.014, "tear_rim_margin_mm": 0.036,
+                                           "iop_mmHg": 79.2})
+    assert title == "step 3 (suturing): section through the tear\n" \
+                    "rim gap 0.014 mm (closed by 0.036 mm), IOP 79 mmHg"
+    assert "open by 0.020 mm" in _section_title(4, "settling", {"tear_rim_gap_max_mm": 0.07,
+                                                                 "tear_rim_margin_mm": -0.02})
+    labels, lines, arrows = [], [], []
+    monkeypatch.setattr(pv.Plotter, "add_point_labels",
+                        lambda self, points, texts, **kw: labels.extend(zip(texts, np.asarray(points))))
+    monkeypatch.setattr(pv.Plotter, "add_lines", lambda self, points, **kw: lines.append(np.asarray(points)))
+    add_mesh = pv.Plotter.add_mesh
+    monkeypatch.setattr(pv.Plotter, "add_mesh",
+                        lambda self, mesh, **kw: (arrows.append(mesh), add_mesh(self, mesh, **kw))[1])
+    plotter = pv.Plotter(off_screen=True)
+    try:
+        _scale_and_directions(plotter, (-1.0, 5.0, -3.0))
+    finally:
+        plotter.close()
+    (bar,) = lines
+    assert np.linalg.norm(bar[1] - bar[0]) == pytest.approx(2.0)
+    named = dict(labels)
+    assert set(named) == {"2 mm", "anterior", "outside"}
+    assert len(arrows) == 2
+    corner = np.array([-1.0, 5.0, -3.0]) + (0.0, -3.0, 0.8)  # where the arrows start
+    assert named["anterior"][2] > corner[2] and named["outside"][1] > corner[1]
