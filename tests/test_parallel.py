@@ -299,6 +299,23 @@ def test_contact_pairs_cross_the_partition(runs):
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3])
+def test_a_wall_that_one_rank_touches_does_not_hang_the_others(ranks):
+    """The lens' rigid-wall Jacobian hook assembles the matrix (a collective call) on every
+    rank when any rank pressed a node (tests/mpi_rigid_wall.py: a plane acting on rank 0's
+    nodes only). Each rank decided alone before, and iol-fold at its defaults on 3 ranks
+    hung there: rank 0 in MatAssemblyBegin, the others in the next hook's gather."""
+    command = [str(BIN / "mpiexec"), "-n", str(ranks), sys.executable,
+               str(Path(__file__).parent / "mpi_rigid_wall.py")]
+    env = dict(os.environ, PYTHONUNBUFFERED="1", OMP_NUM_THREADS="1")
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = last_json(done.stdout)
+    assert report["pressed_nodes"][0] > 0 and report["pressed_nodes"][1:] == [0] * (ranks - 1)
+    assert report["trace_added"] == pytest.approx(report["expected"], rel=1e-12)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [2, 3])
 def test_lens_self_contact_hooks_equal_serial(ranks):
     """The lens self-contact on N ranks (ipctk on rank 0 of the gathered surface, forces and
     Hessian rows sent to their owners; problems/contact/ipc.py) against its serial self,

@@ -170,7 +170,10 @@ class NodalContact:
             dofs = np.arange(3 * node, 3 * node + 3, dtype=np.int32)
             J.setValuesLocal(dofs, dofs, block.ravel(), addv=PETSc.InsertMode.ADD_VALUES)
             added = True
-        if added:
+        # J.assemble() is collective: when any rank added a block every rank assembles (a
+        # rank whose nodes touch nothing skipped it and left the others waiting in it: the
+        # fold on 3 ranks; tests/mpi_rigid_wall.py)
+        if self.comm.allreduce(added, op=MPI.LOR):
             J.assemble()
         self.seconds += PETSc.Log.getTime() - start
 
