@@ -242,7 +242,7 @@ def _scene_help(command: str, name: str) -> int:
     import textwrap
 
     parser = _parser()
-    print(parser.commands[command].format_help())
+    lines = [parser.commands[command].format_help()]
     from eyemech import problems
     from eyemech.problems.run.parameters import groups
 
@@ -252,15 +252,32 @@ def _scene_help(command: str, name: str) -> int:
         print(f"eyemech: error: {err.args[0]}", file=sys.stderr)
         return EXIT_BAD_INPUT
     width = max(80, min(shutil.get_terminal_size((100, 24)).columns, 120))
-    print(f"{scene.name}: {scene.summary}\n\nparameters (--set KEY=VALUE, or KEY = VALUE in "
-          f"--config FILE.toml; all scenes: docs/parameters.md):")
+    lines.append(f"{scene.name}: {scene.summary}\n\nparameters (--set KEY=VALUE, or KEY = VALUE "
+                 f"in --config FILE.toml; all scenes: docs/parameters.md):")
     for group, rows in groups(scene.parameters).items():
-        print(f"\n  {group}:")
+        lines.append(f"\n  {group}:")
         for key, kind, default, unit, text in rows:
-            head = f"    {key} = {default!s}" + (f" {unit}" if unit else "") + f"  ({kind})"
-            print(head)
-            print(textwrap.fill(text, width, initial_indent=" " * 8, subsequent_indent=" " * 8))
+            lines.append(f"    {key} = {default!s}" + (f" {unit}" if unit else "") + f"  ({kind})")
+            lines.append(textwrap.fill(text, width, initial_indent=" " * 8,
+                                       subsequent_indent=" " * 8))
+    _write_out("\n".join(lines) + "\n")
     return 0
+
+
+def _write_out(text: str) -> None:
+    """Standard output for a reader that may stop early (``eyemech run NAME --help | head``):
+    the rest is dropped quietly. The scenes' imports start PETSc, whose handler turns
+    SIGPIPE into an abort (exit 15, "Caught signal number 13"), so Python's own is put back
+    first: the signal ignored, the write raising BrokenPipeError."""
+    import os
+    import signal
+
+    signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    try:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 def _only_rank_0_reports(rank: int, verbose: bool) -> None:

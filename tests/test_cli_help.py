@@ -38,3 +38,15 @@ def test_an_unknown_key_gets_a_did_you_mean(tmp_path):
     assert done.returncode == 2
     assert "did you mean 'pressure'" in done.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_reader_that_stops_early_ends_the_help_quietly():
+    """`eyemech run NAME --help | head`: the reader is gone before the help is written (its
+    end of the pipe closed at once). The scenes' imports start PETSc, whose SIGPIPE handler
+    aborted with exit 15 and "Caught signal number 13 Broken Pipe"."""
+    proc = subprocess.Popen([str(EYEMECH), "run", "scleral-buckling", "--help"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 0, err[-2000:]
+    assert "PETSC ERROR" not in err and "Broken Pipe" not in err
