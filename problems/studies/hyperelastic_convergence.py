@@ -38,13 +38,20 @@ QUIET = RunOptions(fields=False, pictures=False)
 
 
 def _attempt(run, params, comm):
-    """A run, or None when Newton fails (recorded as a gap in the chart, not a crash)."""
+    """(the run's result, its failure's message): a failed Newton solve is a case that did
+    not run, recorded as a row with ``status`` failed (the study then exits 4)."""
     try:
-        return run(params, comm=comm, options=QUIET)
+        return run(params, comm=comm, options=QUIET), ""
     except SolveFailure as failure:
-        if comm.rank == 0:
-            print(f"hyperelastic-convergence: skipped {params}: {failure}")
-        return None
+        return None, str(failure)
+
+
+def _failed(case: dict, why: str) -> dict:
+    return {**case, "status": "failed", "error": why[:300]}
+
+
+def _ok(rows: list[dict]) -> list[dict]:
+    return [r for r in rows if r["status"] == "ok"]
 
 
 def _wall_time(result) -> float:
@@ -56,12 +63,14 @@ def sphere_rows(quick: bool, comm) -> list[dict]:
     rows = []
     for family in FAMILIES:
         for size in (SPHERE_SIZES[family][:1] if quick else SPHERE_SIZES[family]):
-            result = _attempt(sphere_inflation.run, sphere_inflation.Parameters(
+            result, why = _attempt(sphere_inflation.run, sphere_inflation.Parameters(
                 element=family, mesh_size=size, pressure=0.02), comm)
+            case = {"element": family, "mesh_size": size}
             if result is None:
+                rows.append(_failed(case, why))
                 continue
             q = result.quantities
-            rows.append({"element": family, "mesh_size": size, "dofs": q["dofs"],
+            rows.append({**case, "status": "ok", "dofs": q["dofs"],
                          "displacement_error": q["displacement_error"],
                          "inner_radius_error": abs(q["inner_radius_error"]),
                          "wall_time_s": _wall_time(result)})
@@ -72,15 +81,17 @@ def cook_rows(quick: bool, comm) -> tuple[list[dict], float]:
     rows = []
     for family in FAMILIES:
         for n in (COOK_SIDES[family][:1] if quick else COOK_SIDES[family]):
-            result = _attempt(cook_membrane.run,
-                              cook_membrane.Parameters(element=family, elements_per_side=n), comm)
+            result, why = _attempt(cook_membrane.run,
+                                   cook_membrane.Parameters(element=family, elements_per_side=n), comm)
+            case = {"element": family, "elements_per_side": n}
             if result is None:
+                rows.append(_failed(case, why))
                 continue
-            rows.append({"element": family, "elements_per_side": n, "dofs": result.quantities["dofs"],
+            rows.append({**case, "status": "ok", "dofs": result.quantities["dofs"],
                          "tip_displacement": result.quantities["tip_displacement"],
                          "wall_time_s": _wall_time(result)})
-    reference = _richardson([r["tip_displacement"] for r in rows if r["element"] == "Q2P1"])
-    for row in rows:
+    reference = _richardson([r["tip_displacement"] for r in _ok(rows) if r["element"] == "Q2P1"])
+    for row in _ok(rows):
         row["tip_error"] = abs(row["tip_displacement"] / reference - 1.0)
     return rows, reference
 
@@ -101,13 +112,15 @@ def cavity_rows(quick: bool, comm) -> list[dict]:
     rows = []
     for family, size in (CAVITY_CASES[:1] if quick else CAVITY_CASES):
         for formulation in ("real", "substituted"):
-            result = _attempt(liquid_sphere.run, liquid_sphere.Parameters(
+            result, why = _attempt(liquid_sphere.run, liquid_sphere.Parameters(
                 element=family, mesh_size=size, cavity_formulation=formulation), comm)
+            case = {"element": family, "mesh_size": size, "formulation": formulation}
             if result is None:
+                rows.append(_failed(case, why))
                 continue
             q = result.quantities
-            rows.append({"element": family, "mesh_size": size, "formulation": formulation,
-                         "dofs": q["dofs"], "jacobian_nonzeros": q["jacobian_nonzeros"],
+            rows.append({**case, "status": "ok", "dofs": q["dofs"],
+                         "jacobian_nonzeros": q["jacobian_nonzeros"],
                          "newton_iterations": q["newton_iterations"],
                          "seconds_per_newton_step": q["seconds_per_newton_step"],
                          "cavity_pressure_error": abs(q["cavity_pressure_error"])})
@@ -123,7 +136,7 @@ def _chart(path: Path, rows: list[dict], error_key: str, title: str, ylabel: str
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
     for family in FAMILIES:
-        mine = [r for r in rows if r["element"] == family and r[error_key] > 0]
+        mine = [r for r in _ok(rows) if r["element"] == family and r[error_key] > 0]
         if not mine:
             continue
         for ax, x_key in zip(axes, ("dofs", "wall_time_s")):
@@ -160,7 +173,7 @@ def _cavity_chart(path: Path, rows: list[dict]) -> Path:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
     for formulation, marker in (("real", "o-"), ("substituted", "s--")):
-        mine = [r for r in rows if r["formulation"] == formulation]
+        mine = [r for r in _ok(rows) if r["formulation"] == formulation]
         for ax, key in zip(axes, ("jacobian_nonzeros", "seconds_per_newton_step")):
             for family in dict.fromkeys(r["element"] for r in mine):
                 fam = [r for r in mine if r["element"] == family]
