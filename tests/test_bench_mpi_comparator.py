@@ -76,3 +76,13 @@ def test_a_volume_swept_by_the_wall_is_compared_against_the_cavity():
     assert worst < 1e-14, (worst, where)
     parallel["after_iop"]["wall_inward_volume_uL"] = 1.0  # a microlitre is a difference
     assert bench_mpi.largest_difference(serial, parallel)[0] > 1e-4
+
+
+def test_a_count_of_ccd_limited_updates_is_effort():
+    # iol-fold on 1 and 3 ranks: the collision-free fraction is 0.9999... on one partition
+    # and 1.0 on another, so the count of "limited" updates differs while the fold agrees
+    serial = {"ccd_limited_updates": 7, "min_self_distance_mm": 0.1499551}
+    parallel = {"ccd_limited_updates": 1, "min_self_distance_mm": 0.1499551}
+    assert bench_mpi.largest_difference(serial, parallel) == (0.0, "")
+    worst, where = bench_mpi.largest_difference(serial, parallel, effort=True)
+    assert where == "ccd_limited_updates" and worst > 0.8
