@@ -297,6 +297,16 @@ def test_contact_pairs_cross_the_partition(runs):
     assert _result(runs(1), "retina-reattachment", 1)["quantities"]["contact_pairs_across_ranks"] == 0
 
 
+def _mpi_script(name: str, ranks: int, timeout: float) -> dict:
+    """The JSON line rank 0 of ``mpiexec -n ranks python tests/NAME`` prints."""
+    command = [str(BIN / "mpiexec"), "-n", str(ranks), sys.executable,
+               str(Path(__file__).parent / name)]
+    env = dict(os.environ, PYTHONUNBUFFERED="1", OMP_NUM_THREADS="1")
+    done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return last_json(done.stdout)
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3])
 def test_a_wall_that_one_rank_touches_does_not_hang_the_others(ranks):
@@ -304,12 +314,7 @@ def test_a_wall_that_one_rank_touches_does_not_hang_the_others(ranks):
     rank when any rank pressed a node (tests/mpi_rigid_wall.py: a plane acting on rank 0's
     nodes only). Each rank decided alone before, and iol-fold at its defaults on 3 ranks
     hung there: rank 0 in MatAssemblyBegin, the others in the next hook's gather."""
-    command = [str(BIN / "mpiexec"), "-n", str(ranks), sys.executable,
-               str(Path(__file__).parent / "mpi_rigid_wall.py")]
-    env = dict(os.environ, PYTHONUNBUFFERED="1", OMP_NUM_THREADS="1")
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
-    assert done.returncode == 0, done.stderr[-3000:]
-    report = last_json(done.stdout)
+    report = _mpi_script("mpi_rigid_wall.py", ranks, timeout=120)
     assert report["pressed_nodes"][0] > 0 and report["pressed_nodes"][1:] == [0] * (ranks - 1)
     assert report["trace_added"] == pytest.approx(report["expected"], rel=1e-12)
 
@@ -325,12 +330,7 @@ def test_lens_self_contact_hooks_equal_serial(ranks):
     Tolerance 1e-12 of the largest entry: the same sums in another order (measured ≤ 2.5e-14
     on 3 ranks; two serial evaluations already differ by 4e-16, ipctk sums in parallel);
     a row sent to the wrong rank, counted twice or lost is an O(1) error."""
-    command = [str(BIN / "mpiexec"), "-n", str(ranks), sys.executable,
-               str(Path(__file__).parent / "mpi_self_contact.py")]
-    env = dict(os.environ, PYTHONUNBUFFERED="1", OMP_NUM_THREADS="1")
-    done = subprocess.run(command, capture_output=True, text=True, timeout=600, env=env)
-    assert done.returncode == 0, done.stderr[-3000:]
-    report = last_json(done.stdout)
+    report = _mpi_script("mpi_self_contact.py", ranks, timeout=600)
     assert report["ranks"] == ranks and min(report["owned_nodes"]) > 0
     assert report["nodes_with_contact_force"] > 50 and report["hessian_share"] > 0.5
     assert report["gradient_difference"] < 1e-12
