@@ -7,8 +7,8 @@ import csv
 
 from mpi4py import MPI
 
-from eyemech.problems.studies import studies
 from eyemech.problems.studies import hyperelastic_convergence as study
+from eyemech.problems.studies import studies
 from eyemech.problems.studies.hyperelastic_convergence import FAMILIES
 
 
