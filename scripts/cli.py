@@ -302,13 +302,9 @@ def _list_from_source() -> int:
     from eyemech.scripts.catalogue import scene_catalogue
 
     rank = next((os.environ[k] for k in ("PMI_RANK", "OMPI_COMM_WORLD_RANK") if k in os.environ), "0")
-    if rank == "0":
-        try:
-            for entry in scene_catalogue():
-                print(f"{entry.name:24s} {entry.kind:10s} {entry.summary}")
-            sys.stdout.flush()
-        except BrokenPipeError:  # `eyemech list | head`: the reader has all it wanted
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    if rank == "0":  # `eyemech list | head`: the reader may stop early
+        _write_out("".join(f"{entry.name:24s} {entry.kind:10s} {entry.summary}\n"
+                           for entry in scene_catalogue()))
     return 0
 
 

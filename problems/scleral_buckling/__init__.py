@@ -68,7 +68,6 @@ __all__ = ["BENCHMARK", "CALIBRATED_C20_SCLERA", "CORNEA_TO_SCLERA", "DIOPTRES_P
 BENCHMARK = {"resolution": "paper"}
 
 
-
 def bench_operation(params: Parameters) -> str:
     """A benchmark row's operation in words: the eye, how the buckle is set, the venting."""
     eye = {"table-1": "Table 1 eye", "calibrated": "calibrated eye", "fibres": "living eye"}
