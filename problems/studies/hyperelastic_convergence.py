@@ -25,7 +25,7 @@ from eyemech.problems import cook_membrane, liquid_sphere, sphere_inflation
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, write_csv
+from eyemech.problems.studies._common import save_chart, with_units, write_csv
 
 FAMILIES = ("P2P1", "P2P0", "Q1P0", "Q2P1", "P1")
 SPHERE_SIZES = {"P2P1": (2.0, 1.0, 0.7), "P2P0": (2.0, 1.0, 0.7), "Q1P0": (2.0, 1.0, 0.7, 0.5),
@@ -232,18 +232,19 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
     if comm.rank != 0:
         return []
     files = [
-        write_csv(out / "sphere_inflation_convergence.csv", sphere,
+        write_csv(out / "sphere_inflation_convergence.csv",
+                  with_units(sphere, sphere_inflation.Parameters),
                    "sphere-inflation, p = 0.02 MPa: errors against the exact solution"),
         _chart(out / "sphere_inflation_convergence.png", sphere, "displacement_error",
                "sphere-inflation (exact solution): relative L² displacement error",
                "‖u − u_exact‖ / ‖u_exact‖", extra=_slopes),
-        write_csv(out / "cook_membrane_convergence.csv", cook,
+        write_csv(out / "cook_membrane_convergence.csv", with_units(cook, cook_membrane.Parameters),
                    f"cook-membrane: tip error against {reference:.5f} mm (Richardson, Q2P1); "
                    f"published ≈ {PUBLISHED_TIP} mm"),
         _chart(out / "cook_membrane_convergence.png", cook, "tip_error",
                f"cook-membrane: tip displacement error (reference {reference:.4f} mm, "
                f"published ≈ {PUBLISHED_TIP})", "|u_tip / u_ref − 1|"),
-        write_csv(out / "cavity_formulations.csv", cavity,
+        write_csv(out / "cavity_formulations.csv", with_units(cavity, liquid_sphere.Parameters),
                    "liquid-sphere: Real-space pressure against the substituted formulation"),
         _cavity_chart(out / "cavity_formulations.png", cavity),
     ]
