@@ -15,7 +15,7 @@ from mpi4py import MPI
 from eyemech.problems import contact_patch
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 CASES = (
     ("default", {}),
@@ -38,7 +38,7 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     if comm.rank != 0:  # serial study: rank 0 does the work
         return []
     rows = [_row(label, changes) for label, changes in (QUICK_CASES if quick else CASES)]
-    table = write_csv(out / "contact_patch_range.csv", rows,
+    table = write_csv(out / "contact_patch_range.csv", with_units(rows, contact_patch.Parameters),
                       "stress spread: (max - min) / p of the cell-wise P_zz in each block")
     return [table, _chart(out / "contact_patch_range.png", rows)]
 
