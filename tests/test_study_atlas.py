@@ -30,7 +30,6 @@ STALE = {
 # here once its study writes the unit and the table carries it (made again, or its header
 # relabelled as the study now names it: the values do not change), so that it leaves this list
 NO_UNITS = {
-    "hertz_convergence_range.csv",
     "iol_flip.csv",
     "iol_speed.csv",
     "iol_stability.csv",

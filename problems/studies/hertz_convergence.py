@@ -36,7 +36,7 @@ from eyemech.problems import hertz
 from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 INDENTATIONS = (0.001, 0.002, 0.005, 0.01, 0.02)  # d/R
 LEVELS = (1.0, 1.5, 2.25)  # resolution and far_resolution × these
@@ -67,12 +67,12 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     range_rows = [_range_row(*case, fit) for case in (QUICK_RANGE if quick else RANGE)]
     stem = "hertz_convergence"
     note = "force_error: F / F_Hertz - 1; error_vs_converged: F / F_converged - 1 (same d/R)"
-    files = [write_csv(out / f"{stem}.csv", level_rows, note,
+    files = [write_csv(out / f"{stem}.csv", with_units(level_rows, hertz.Parameters), note,
                        "meshes: resolution = 2.6 level, far_resolution = 3 level"),
-             write_csv(out / f"{stem}_converged.csv", converged + [fit],
+             write_csv(out / f"{stem}_converged.csv", with_units(converged + [fit], hertz.Parameters),
                        "Richardson from the augmented-Lagrangian solves of the last three levels; "
                        "the last row: converged_force_error = c0 + c1 (a/R) fitted"),
-             write_csv(out / f"{stem}_range.csv", range_rows, note,
+             write_csv(out / f"{stem}_range.csv", with_units(range_rows, hertz.Parameters), note,
                        "converged: the fit of hertz_convergence_converged.csv at the case's d/R")]
     files.append(_chart(out / f"{stem}.png", level_rows, converged, fit, range_rows))
     return files
