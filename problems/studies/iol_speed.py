@@ -21,7 +21,7 @@ from mpi4py import MPI
 
 from eyemech.problems import iol_speed
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 # label, overrides (on top of the common settings)
 VARIANTS = [
@@ -117,7 +117,7 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
     notes = (f"iol-speed variants, {duration} s of the released rolled lens, best of {repeats} runs; "
              "reference: Newton rtol 1e-9 at dt/4 = 2.5 ms (lagged Jacobian, refreshed on stall)",
              f"machine load average (1 min) at the end: {os.getloadavg()[0]:.2f}")
-    files = [write_csv(out / "iol_speed.csv", rows, *notes)]
+    files = [write_csv(out / "iol_speed.csv", with_units(rows, iol_speed.Parameters), *notes)]
     files.append(_chart(rows, out / "iol_speed.png"))
     files.append(_phases(rows, out / "iol_speed_phases.png"))
     files.append(_table(rows, out / "iol_speed_table.md"))
