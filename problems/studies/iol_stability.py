@@ -36,7 +36,7 @@ from mpi4py import MPI
 
 from eyemech.problems import iol_speed
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 
 def _csr(A) -> scipy.sparse.csr_matrix:
@@ -145,7 +145,7 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
                          "time_step": 0.01, "steps": implicit_steps, **r})
     notes = ("largest stable step: explicit central difference (HRZ-lumped mass) vs implicit backward Euler;"
              " lens of iol-speed released from the roll", f"load average {os.getloadavg()[0]:.2f}")
-    files = [write_csv(out / "iol_stability.csv", rows, *notes)]
+    files = [write_csv(out / "iol_stability.csv", with_units(rows, iol_speed.Parameters), *notes)]
     files.append(_chart(rows, out / "iol_stability.png"))
     return files
 
