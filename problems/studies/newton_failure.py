@@ -27,7 +27,7 @@ from eyemech.problems.reference import analytic
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import NewtonOptions, SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, write_csv
+from eyemech.problems.studies._common import save_chart, with_units, write_csv
 
 FRACTIONS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.98, 0.995, 1.05)
 QUICK_FRACTIONS = (0.3, 0.9, 1.05)
@@ -73,7 +73,7 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm | None = None) -> list[Pa
             for f in (QUICK_FRACTIONS if quick else FRACTIONS)]
     if comm.rank != 0:
         return []
-    table = write_csv(out / "newton_failure.csv", rows,
+    table = write_csv(out / "newton_failure.csv", with_units(rows, sphere_inflation.Parameters),
                       f"sphere-inflation {base['element']} h = {base['mesh_size']} mm, one initial "
                       f"load step to p = f * p_limit (p_limit = {p_limit:.6g} MPa, exact)",
                       "outcome: direct = first Newton solve converged; cut = the driver halved "
