@@ -90,7 +90,7 @@ def test_nonlinear_hemisphere_is_the_studys_coarse_row_and_the_study_converges(h
     """The study's 8-division rows are this computation; its 16-division rows are
     within 5.5 % of Sze's table at every load and closer than the 8-division ones."""
     rows = read_csv(STUDY_CSV)
-    coarse = {float(r["force"]): r for r in rows if r["divisions"] == "8"}
+    coarse = {float(r["force_N"]): r for r in rows if r["divisions"] == "8"}
     for step in hemisphere_coarse.steps:
         row = _row_at(coarse, step["force"])
         assert step["radial_displacement_x"] == pytest.approx(float(row["outward"]), rel=1e-6)
@@ -100,7 +100,7 @@ def test_nonlinear_hemisphere_is_the_studys_coarse_row_and_the_study_converges(h
                   float(row["inward"]) / float(row["inward_sze"]) - 1.0]
         if row["divisions"] == "16":
             assert all(-0.055 < e < 0.0 for e in errors)
-            coarse_row = _row_at(coarse, float(row["force"]))
+            coarse_row = _row_at(coarse, float(row["force_N"]))
             assert float(coarse_row["outward"]) < float(row["outward"]) < float(row["outward_sze"])
             assert float(coarse_row["inward"]) < float(row["inward"]) < float(row["inward_sze"])
 

@@ -26,7 +26,7 @@ from eyemech.problems import hemisphere_nonlinear as scene
 from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 SZE_DIVISIONS = (8, 16)
 THICK = 0.2
@@ -53,12 +53,12 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                              outward_sze=step["radial_displacement_x_sze"],
                              inward_sze=step["radial_displacement_y_sze"],
                              newton_iterations=step["newton_iterations"]))
-    csv_path = write_csv(out / "shell_hemisphere_nonlinear.csv", rows,
+    csv_path = write_csv(out / "shell_hemisphere_nonlinear.csv", with_units(rows, scene.Parameters),
                          "pinched hemisphere R 10, h 0.04, E 6.825e7, nu 0.3, P2 crossed, whole shell; "
                          "displacements radial, inward positive for the pushed point",
                          "reference: Sze, Liu & Lo (2004) problem 3.4 table")
     thick = thick_rows(QUICK_THICK_RESOLUTIONS if quick else THICK_RESOLUTIONS)
-    thick_path = write_csv(out / "shell_hemisphere_thick.csv", thick,
+    thick_path = write_csv(out / "shell_hemisphere_thick.csv", with_units(thick, scene.Parameters),
                            f"h = {THICK}, P = {THICK_FORCE:g} in {THICK_LOAD_STEPS} load steps; "
                            "reference: Richardson from the three resolutions (observed order)")
     return [csv_path, thick_path, _chart(out, rows)]
