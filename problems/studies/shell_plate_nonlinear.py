@@ -24,7 +24,7 @@ from eyemech.problems.shell.model import (
     LEVY_POISSON_RATIO,
 )
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 
 def _curve(case: str, **overrides) -> list[dict]:
@@ -52,7 +52,7 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                   poisson_ratio=LEVY_POISSON_RATIO, q=levy_top * load_scale, load_steps=2)
     rows += _curve("immovable, nu 0.3", divisions=divisions, q=1.0 if quick else 5.0,
                    load_steps=2 if quick else 10)
-    csv_path = write_csv(out / "shell_plate_nonlinear.csv", rows,
+    csv_path = write_csv(out / "shell_plate_nonlinear.csv", with_units(rows, plate_clamped.Parameters),
                          "clamped square plate L 10, h 0.1, E 1.092e6, P2 crossed, uniform dead load",
                          "reference: Levy, NACA TN 847 (1942) Table 5, sliding edges, nu 0.316")
     return [csv_path, _chart(out, rows)]
