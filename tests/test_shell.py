@@ -112,7 +112,7 @@ def _resolution_reference(scene: str, thickness: float) -> float:
     """The study's extrapolated value (Richardson over cells per bending length) for the
     scene at ``thickness`` (docs/atlas/shell-resolution.md)."""
     rows = [r for r in read_csv(RESOLUTION_CSV) if r["scene"] == scene and r["status"] == "ok"
-            and np.isclose(float(r["thickness"]), thickness)]
+            and np.isclose(float(r["thickness_mm"]), thickness)]
     return float(rows[0]["reference"])
 
 

@@ -23,7 +23,7 @@ from eyemech.problems import hemisphere, plate_clamped, plate_simply_supported, 
 from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 PLATE_DIVISIONS = (8, 16, 32, 64)
 PLATE_THICKNESS_FACTORS = (0.1, 5.0)
@@ -48,9 +48,13 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                           resolutions)
               + curved_rows(scordelis_lo, (0.25,) if quick else ROOF_THICKNESSES, resolutions))
     add_references(curved)
-    files = [write_csv(out / "shell_resolution_plates.csv", plates,
+    # the columns that are parameters named with their units: both plates share one
+    # Parameters, each curved row takes its scene's
+    parameters = {module.SCENE.name: module.Parameters for module in (hemisphere, scordelis_lo)}
+    files = [write_csv(out / "shell_resolution_plates.csv", with_units(plates, plate_clamped.Parameters),
                        "error: centre deflection / (c q L^4 / D) - 1, Timoshenko's c"),
-             write_csv(out / "shell_resolution_curved.csv", curved,
+             write_csv(out / "shell_resolution_curved.csv",
+                       [with_units([row], parameters[row["scene"]])[0] for row in curved],
                        "value: hemisphere c = u E h^3 / (F R^2); roof edge deflection; "
                        "error against the Richardson value of the finest three resolutions")]
     files.append(_chart(out / "shell_resolution.png", plates, curved))
