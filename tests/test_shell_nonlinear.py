@@ -194,7 +194,7 @@ def test_slit_plate_default_mesh_follows_sze_within_two_percent():
 
     levels = [f * slit_annular_plate.SZE_MAX_LINE_LOAD for f in slit_annular_plate.SZE_LOAD_FRACTION]
     rows = [r for r in read_csv(SLIT_CSV) if r["divisions"] == "48"
-            and np.isclose(float(r["line_load"]), levels, rtol=1e-6).any()]
+            and np.isclose(float(r["line_load_N/mm"]), levels, rtol=1e-6).any()]
     assert len(rows) == 11
     for row in rows:
         assert float(row["deflection_a"]) == pytest.approx(float(row["deflection_a_sze"]),

@@ -24,7 +24,7 @@ from eyemech.problems import slit_annular_plate as scene
 from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 MESHES = ((32, 4), (48, 6), (72, 9))
 SZE_MESHES = MESHES[:2]
@@ -42,10 +42,10 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     line_load = QUICK_LINE_LOAD if quick else scene.SZE_MAX_LINE_LOAD
     sze = sze_rows(QUICK_MESHES if quick else SZE_MESHES, line_load)
     thick = thick_rows(QUICK_MESHES if quick else MESHES)
-    files = [write_csv(out / "shell_slit_plate.csv", sze,
+    files = [write_csv(out / "shell_slit_plate.csv", with_units(sze, scene.Parameters),
                        "slit annular plate, Sze's h = 0.03; deflection_a inner, deflection_b outer point",
                        "reference: Sze, Liu & Lo (2004) table 4; extrapolated: Richardson of the meshes"),
-             write_csv(out / "shell_slit_plate_thick.csv", thick,
+             write_csv(out / "shell_slit_plate_thick.csv", with_units(thick, scene.Parameters),
                        f"h = {THICK}, q = {THICK_LINE_LOAD:g} in {THICK_LOAD_STEPS} load steps; "
                        "reference: Richardson from the meshes (observed order)")]
     files.append(_chart(out / "shell_slit_plate.png", sze))
