@@ -31,7 +31,6 @@ STALE = {
 # relabelled as the study now names it: the values do not change), so that it leaves this list
 NO_UNITS = {
     "iol_flip.csv",
-    "shell_thickness.csv",
 }
 
 

@@ -21,7 +21,7 @@ from mpi4py import MPI
 
 from eyemech.problems import hemisphere
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
 
 SLENDERNESS = (25, 50, 100, 250, 500, 1000, 2500)  # R / h
 # (degree, divisions): P2 and P3 on the fixed mesh of 16 divisions (80 around), and P2
@@ -50,7 +50,7 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                              slenderness=ratio, thickness=h, force=force, radial_displacement_x=u,
                              scaled_displacement=u * E * h ** 3 / (force * R ** 2),
                              assembly_solve_seconds=result.timings["assembly"] + result.timings["solve"]))
-    csv_path = write_csv(out / "shell_thickness.csv", rows,
+    csv_path = write_csv(out / "shell_thickness.csv", with_units(rows, hemisphere.Parameters),
                          "linear pinched hemisphere R 10, 18 deg hole, E 6.825e7, nu 0.3, crossed; "
                          "F = 2 (h/0.04)^3; scaled = u E h^3 / (F R^2)",
                          "benchmark (R/h 250): u = 0.093 for F = 2, i.e. scaled 2.03")
