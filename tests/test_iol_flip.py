@@ -39,7 +39,7 @@ def test_walls_chart_takes_rows_read_back_from_the_csv(tmp_path):
     lacks a column) as well as from fresh runs (numbers)."""
     from PIL import Image
 
-    from eyemech.problems.studies._common import read_csv, stamp, write_csv
+    from eyemech.problems.studies._common import read_csv, stamp, with_units, write_csv
 
     base = {"haptic_thickness": 0.13, "friction": 0.2, "damping": 2e4, "start_ramp": 0.02}
     rows = [{**base, "cartridge_friction": mu, "injector_twist": 180.0, "optic_normal_z": z}
@@ -47,7 +47,8 @@ def test_walls_chart_takes_rows_read_back_from_the_csv(tmp_path):
     rows.append({**base, "capsule_friction": 1.0, "optic_normal_z": 0.98})
     rows.append({**base, "haptic_thickness": 0.35, "cartridge_friction": 0.3, "injector_twist": 180.0,
                  "friction_slip": 0.003, "finished": False, "last_frame_optic_normal_z": 0.7})
-    back = read_csv(write_csv(tmp_path / "walls.csv", rows, "test"))
+    # named as the study writes them: haptic_thickness_mm, injector_twist_deg, ...
+    back = read_csv(write_csv(tmp_path / "walls.csv", with_units(rows, iol_injection.Parameters), "test"))
     history = np.array([[0.0, 0.0, 0.3], [0.5, -100.0, 1.0]])
     path = iol_flip.walls_chart(back, [history] * len(back), tmp_path / "walls.png")
     assert stamp().split(" · ", 1)[1] in Image.open(path).text["Comment"]

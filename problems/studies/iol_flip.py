@@ -60,7 +60,7 @@ from eyemech.problems import iol_fold, iol_injection
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, write_csv
+from eyemech.problems.studies._common import save_chart, with_units, write_csv
 
 BASE = {"haptic_thickness": 0.13, "friction": 0.2}
 FRICTIONS = (0.0, 0.2, 0.5, 1.0)
@@ -174,7 +174,8 @@ def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None =
 
 
 def case_row(case: dict, folder: Path) -> dict:
-    """One CSV row from a case's results.json and its frames."""
+    """One row from a case's results.json and its frames (the parameters by their names:
+    :func:`run` adds their units for the table)."""
     saved = json.loads((folder / "results.json").read_text())
     q = saved["quantities"]
     row = {**case, "damping": saved["parameters"]["damping"]}
@@ -348,7 +349,9 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
         done = [run_case(case, folded, comm, runs) for case in CASES]
         note = (f"iol-injection, resolution=coarse, from {folded.name}; flipped: mean optic normal z < 0; "
                 f"roll φ: optic middle strip about the injector axis (flip needs > {FLIP_ANGLE:g}°)")
-    rows = [row for row, _folder in done]
+    # the parameters' columns with their units (haptic_thickness_mm, damping_1/s, ...), in
+    # the table and for the charts alike: walls_chart also redraws from the table read back
+    rows = with_units([row for row, _folder in done], iol_injection.Parameters)
     csv = write_csv(out / "iol_flip.csv", rows, note)
     histories = [roll_history(folder) for _row, folder in done]
     inside = [not _on_the_walls(row) for row in rows]
@@ -363,18 +366,18 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
 def _on_the_walls(row: dict) -> bool:
     """A case with friction on the capsule or the cartridge, or a twisted injector."""
     return any(float(row.get(key) or 0.0)
-               for key in ("capsule_friction", "cartridge_friction", "injector_twist"))
+               for key in ("capsule_friction", "cartridge_friction", "injector_twist_deg"))
 
 
 def _wall_label(row: dict) -> str:
-    twisted = bool(float(row.get("injector_twist") or 0.0))
-    parts = [f"h_h = {float(row['haptic_thickness']):g}"]
+    twisted = bool(float(row.get("injector_twist_deg") or 0.0))
+    parts = [f"h_h = {float(row['haptic_thickness_mm']):g}"]
     parts += [f"{name} = {float(row.get(key) or 0.0):g}{unit}" for name, key, unit in
               (("μ_capsule", "capsule_friction", ""), ("μ_cartridge", "cartridge_friction", ""),
-               ("twist", "injector_twist", "°"))
+               ("twist", "injector_twist_deg", "°"))
               if float(row.get(key) or 0.0) or (twisted and key == "cartridge_friction")]
-    if row.get("friction_slip") not in (None, ""):
-        parts.append(f"slip {1e3 * float(row['friction_slip']):g} µm")
+    if row.get("friction_slip_mm") not in (None, ""):
+        parts.append(f"slip {1e3 * float(row['friction_slip_mm']):g} µm")
     return ", ".join(parts)
 
 
@@ -398,7 +401,7 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     fig, (ax, outcome) = plt.subplots(1, 2, figsize=(13, 6.6), gridspec_kw={"width_ratios": [1.6, 1]})
     for row, h in walls:
         if len(h):
-            twisted = float(row.get("injector_twist") or 0.0)
+            twisted = float(row.get("injector_twist_deg") or 0.0)
             ax.plot(h[:, 0], h[:, 1], lw=1.4 if twisted else 1.0, ls="-" if twisted else "--",
                     label=_wall_label(row))
     for sign in (1, -1):
@@ -410,10 +413,10 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
     ax.set_title("roll over time (μ = 0.2 lens–lens; coarse lens)", fontsize=10)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
     for twist, marker in ((180.0, "o"), (360.0, "s")):
-        group = [r for r, _h in walls if float(r.get("injector_twist") or 0.0) == twist
-                 and float(r["haptic_thickness"]) == BASE["haptic_thickness"]
-                 and float(r.get("start_ramp") or 0.0) == TWISTED["start_ramp"]
-                 and r.get("friction_slip") in (None, "")]
+        group = [r for r, _h in walls if float(r.get("injector_twist_deg") or 0.0) == twist
+                 and float(r["haptic_thickness_mm"]) == BASE["haptic_thickness"]
+                 and float(r.get("start_ramp_s") or 0.0) == TWISTED["start_ramp"]
+                 and r.get("friction_slip_mm") in (None, "")]
         group = sorted(group, key=lambda r: float(r.get("cartridge_friction") or 0.0))
         if not group:
             continue
@@ -426,9 +429,9 @@ def walls_chart(rows: list[dict], histories: list[np.ndarray], path: Path) -> Pa
             outcome.plot(*zip(*stopped), marker, ms=11, mfc="white", color=line.get_color(),
                          label=f"{twist:g}°: run stopped before the end (last frame)")
     for row, _h in walls:  # the haptic-thickness pair (another friction_slip): points of their own
-        if row.get("friction_slip") not in (None, "") and float(row.get("injector_twist") or 0.0):
+        if row.get("friction_slip_mm") not in (None, "") and float(row.get("injector_twist_deg") or 0.0):
             outcome.plot([float(row.get("cartridge_friction") or 0.0)], [_final_normal_z(row)],
-                         "^" if float(row["haptic_thickness"]) > BASE["haptic_thickness"] else "v",
+                         "^" if float(row["haptic_thickness_mm"]) > BASE["haptic_thickness"] else "v",
                          label=_wall_label(row))
     outcome.axhline(0.0, color="tab:red", ls=":", lw=1)
     outcome.set_ylim(-1.1, 1.1)
@@ -452,16 +455,16 @@ def chart(rows: list[dict], histories: list[np.ndarray], path: Path, note: str =
     fig = plt.figure(figsize=(14, 6.6))
     grid = fig.add_gridspec(2, 3)
     h0, mu0 = BASE["haptic_thickness"], BASE["friction"]
-    panels = (("friction", f"lens–lens friction μ (h_h = {h0:g} mm)", {"haptic_thickness": h0}),
-              ("haptic_thickness", f"haptic thickness h_h, mm (μ = {mu0:g}; bending stiffness ∝ h_h³)",
+    panels = (("friction", f"lens–lens friction μ (h_h = {h0:g} mm)", {"haptic_thickness_mm": h0}),
+              ("haptic_thickness_mm", f"haptic thickness h_h, mm (μ = {mu0:g}; bending stiffness ∝ h_h³)",
                {"friction": mu0}))
     for column, (key, label, fixed) in enumerate(panels):
         top = fig.add_subplot(grid[0, column])
         bottom = fig.add_subplot(grid[1, column], sharex=top)
         chosen = [r for r in rows if all(r[k] == v for k, v in fixed.items())
                   and not (r.get("capsule_friction") or r.get("cartridge_friction"))]
-        for damping in sorted({r["damping"] for r in chosen}, reverse=True):
-            group = [r for r in chosen if r["damping"] == damping]
+        for damping in sorted({r["damping_1/s"] for r in chosen}, reverse=True):
+            group = [r for r in chosen if r["damping_1/s"] == damping]
             if key == "friction" and damping != DEFAULT_DAMPING or len(group) < 1:
                 continue
             _outcome_panel(top, bottom, group, key, damping)
@@ -481,12 +484,12 @@ def chart(rows: list[dict], histories: list[np.ndarray], path: Path, note: str =
     ax = fig.add_subplot(grid[:, 2])
     for row, h in zip(rows, histories):
         if len(h):
-            fluid = "" if row["damping"] == DEFAULT_DAMPING else f", c = {row['damping']:g}/s"
+            fluid = "" if row["damping_1/s"] == DEFAULT_DAMPING else f", c = {row['damping_1/s']:g}/s"
             walls = "".join(f", μ_{name} = {row[key]:g}" for name, key in (("capsule", "capsule_friction"),
                                                                           ("cartridge", "cartridge_friction"))
                             if row.get(key))
             ax.plot(h[:, 0], h[:, 1], lw=1.2, ls="-" if not (fluid or walls) else ("--" if fluid else "-."),
-                    label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness']:g}{fluid}{walls}")
+                    label=f"μ = {row['friction']:g}, h_h = {row['haptic_thickness_mm']:g}{fluid}{walls}")
     for sign in (1, -1):
         ax.axhline(sign * FLIP_ANGLE, color="tab:red", ls=":", lw=1)
     ax.set_xlabel("time (s)")
