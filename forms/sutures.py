@@ -54,3 +54,24 @@ def suture_residual(forces, centres, bite_radius, v, measure, scales=None):
     work = sum(s * ufl.dot(F, v) * bite_weight(X, ufl.as_vector(c), bite_radius)
                for F, c, s in zip(forces, centres, scales))
     return -work * measure
+
+
+
+def tied_leg_stretch(x, x_tied, anchor, anchor_tied, shortening):
+    """⟨ℓ − (ℓ_tied − s)⟩₊: how much a tied mattress suture's leg is stretched at a point x
+    of its bite. The leg runs from x to where it leaves the buckle (``anchor``);
+    ℓ = |anchor − x| now, ℓ_tied = |anchor_tied − x_tied| when the surgeon began to tie
+    it, and the knot takes ``shortening`` s out of it. A suture pulls but cannot push."""
+    length = ufl.sqrt(ufl.dot(anchor - x, anchor - x))
+    length_tied = ufl.sqrt(ufl.dot(anchor_tied - x_tied, anchor_tied - x_tied))
+    return ufl.max_value(length - length_tied + shortening, 0.0)
+
+
+def tied_leg_energy(stretch, stiffness, weight):
+    """½ k stretch² w: the energy density of a tied leg (:func:`tied_leg_stretch`), k its
+    axial stiffness (N/mm), w its bite's weight (unit integral per leg), so that the leg's
+    tension is T = k ∫ stretch w dA. Its derivative in the displacement pulls each point of
+    the bite along the leg's own direction, (anchor − x)/ℓ, exact within a Newton solve;
+    the anchor rides on the buckle's travel δ, so ∂/∂δ is the leg's push on the buckle:
+    suture and buckle exchange equal and opposite forces."""
+    return 0.5 * stiffness * stretch**2 * weight

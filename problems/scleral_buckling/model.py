@@ -32,7 +32,7 @@ from eyemech.problems.scleral_buckling.body import Body, retina_modes
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, BuckleTie, RigidBuckle
 from eyemech.problems.scleral_buckling.measures import Optics, RetinaGaps
 from eyemech.problems.scleral_buckling.parameters import Parameters
-from eyemech.problems.scleral_buckling.suture_terms import BandRow, Sutures, TireRow
+from eyemech.problems.scleral_buckling.suture_terms import BandRow, MattressSutures, Sutures, TireRow
 from eyemech.problems.scleral_buckling.terms import (
     CavityLiquid,
     OpticNerveSpring,
@@ -77,14 +77,19 @@ class BucklingModel:
         penalty = params.penalty_factor * self.tissues.youngs_modulus("sclera") / body.element_size
         self.contact = BuckleContact(body, params, self.buckle, penalty)
         self.tie = BuckleTie(body, params, self.buckle, self.contact.tie_penalty)
-        # the loop model: the sutures' tension pushes the tire in, whose travel balances it
-        loop = params.suture_model == "loop" and self.buckle.buckle.tire is not None
-        self.sutures = Sutures(body, params, self.buckle, loop)
+        # the loop and the tied mattress sutures push the tire in, whose travel balances them
+        loop = params.suture_model in ("loop", "mattress") and self.buckle.buckle.tire is not None
+        if params.suture_model == "mattress":
+            self.sutures = MattressSutures(body, params, self.buckle, loop)
+            tied = self.sutures.energy
+        else:
+            self.sutures, tied = Sutures(body, params, self.buckle, loop), None
         if params.elastic_band():  # the elastic band's travel, the tire under it
             self.tire = BandRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire,
-                                params)
+                                params, tied)
         else:
-            self.tire = TireRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire)
+            self.tire = TireRow(body, self.buckle, self.contact, loop, self.sutures.pull_on_tire,
+                                tied)
         self.optics = Optics(body)
         self.gaps = RetinaGaps(body, params.tear_closure_tolerance)
         self.zonules = Zonules(body, params) if params.lens else None

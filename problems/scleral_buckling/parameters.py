@@ -49,6 +49,10 @@ PLACEMENT_KEYS = {"position": "buckle_position", "length": "tire_length"}
 # suturing on the coarse and default meshes of the living eye (docs/scleral_buckling.md,
 # "The defaults: a living eye, vented, a shortened band"); surgical texts advise ≈ 10 %,
 # which on this eye leaves the band 0.4 mm deep and the tear open
+# mattress sutures: the knot's share of the sclera between bite and element, and a leg's
+# stiffness (docs/scleral_buckling.md, Mattress sutures)
+MATTRESS_TIE_FRACTION = 0.5
+MATTRESS_LEG_STIFFNESS = 20.0
 BAND_MODULUS = 3.0
 BAND_SHORTENING_PERCENT = 25.0
 
@@ -185,11 +189,22 @@ class EyeParameters(SceneParameters):
         f"{SEGMENTAL_SUTURE_SPREAD:g} of the tire's half arc on a segmental tire (0 and 36 on "
         "the default 90° tire), 0 on a radial tire (Parameters.suture_meridians)", "deg",
         group=GEOMETRY)
-    suture_model: Literal["loop", "bites"] = field(
+    suture_model: Literal["loop", "bites", "mattress"] = field(
         "loop", "loop: a suture is a loop over the tire; its tension pulls the bites and pushes "
         "the tire in, whose radial travel in steps 3-4 balances the sclera's contact force "
         "(the band keeps its prescribed travel); bites: the pull acts on the bites only and "
-        "the tire keeps the band's travel", group=PHYSICS)
+        "the tire keeps the band's travel; mattress: each suture is tied to a length, its legs "
+        "shortened by suture_tie_fraction of the sclera between its bites beyond the element's "
+        "width, so that wider bites imbricate more sclera and raise the buckle; its tension "
+        "follows (suture_force unused; docs/scleral_buckling.md, Mattress sutures)", group=PHYSICS)
+    suture_tie_fraction: float = field(
+        MATTRESS_TIE_FRACTION, "suture_model=mattress: the knot shortens each leg by this "
+        "fraction of (suture_width − the element's width)/2, the sclera between a bite and "
+        "the element's edge (1: the bites drawn to the element's edges)", group=PHYSICS)
+    suture_stiffness: float = field(
+        MATTRESS_LEG_STIFFNESS, "suture_model=mattress: axial stiffness of one leg of a tied "
+        "suture (EA/ℓ: 5-0 polyester, E ≈ 5 GPa over a 0.1 mm thread, ≈ 40 N, on a ≈ 2 mm "
+        "leg; an estimate)", "N/mm", group=PHYSICS)
     drainage: Literal["none", "external"] = field(
         "none", "external (the subretinal fluid drained in step 4) is refused: the drained "
         "retina pressed on the choroid reaches no equilibrium in this model (it drifts "
@@ -277,6 +292,10 @@ class Parameters(NumericalSettings, EyeParameters):
                               "augmentation_tolerance", "max_augmentations",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
+        self.require_positive("suture_stiffness")
+        if not 0 < self.suture_tie_fraction <= 1:
+            raise ParameterError("suture_tie_fraction", f"{self.suture_tie_fraction:g}: a fraction "
+                                 "in (0, 1] of the sclera between a bite and the element's edge")
         self.require_positive("iop_limit_mmHg")
         if self.iop_limit_mmHg < self.iop_mmHg:
             raise ParameterError("iop_limit_mmHg", f"{self.iop_limit_mmHg:g} mmHg is below the "

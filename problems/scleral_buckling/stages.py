@@ -112,6 +112,11 @@ def hand_the_tire_to_the_sutures(model: BucklingModel) -> None:
     model.tire.free()
 
 
+def start_tying(model: BucklingModel) -> None:
+    """Mattress sutures: each leg's length is measured from the eye as suturing begins."""
+    model.sutures.start_tying()
+
+
 def release_the_liquid(model: BucklingModel) -> None:
     """Aqueous outflow within hours of surgery: the liquid's volume is free, its pressure
     driven back from the acute one."""
@@ -159,8 +164,10 @@ def operation(params: Parameters) -> list[Stage]:
         # tire the sutures now hold. cp by default: bt creeps at its 0.1 floor here, full
         # steps cost more at the paper's resolution (docs/scleral_buckling.md, Newton's budget)
         Stage("suturing", "suturing",
-              ramps=(Ramp("suture_force", 0.0, params.suture_force),
+              ramps=(Ramp("suture_tie", 0.0, 1.0) if params.suture_model == "mattress"
+                     else Ramp("suture_force", 0.0, params.suture_force),
                      Ramp("tire_hold", "held_force", 0.0)),
+              begin=(start_tying,) if params.suture_model == "mattress" else (),
               largest_step=largest, newton=NewtonSettings(line_search=params.suture_line_search)),
     ]
     if params.settle:

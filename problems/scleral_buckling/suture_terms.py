@@ -21,6 +21,7 @@ from eyemech.forms.buckle import (
     pinned_travel_residual,
     tire_travel_residual,
 )
+from eyemech.forms.sutures import bite_weight, tied_leg_energy, tied_leg_stretch
 from eyemech.problems.run.parameters import ParameterError
 from eyemech.problems.scleral_buckling.body import Body
 from eyemech.problems.scleral_buckling.buckle_terms import BuckleContact, RigidBuckle
@@ -97,6 +98,116 @@ class Sutures(Term):
         return {"suture_force_N": float(self.forces.magnitude)}
 
 
+class MattressSutures(Sutures):
+    """Mattress sutures tied to a length (``suture_model = mattress``): each leg runs from
+    its bite to where it leaves the buckle (the element's outer corner on its side) and is
+    a stiff elastic thread (``suture_stiffness``, tension only). Over suturing the knot
+    (control ``suture_tie``, 0 → 1) shortens each leg by ``suture_tie_fraction`` of the
+    sclera between its bite and the element's edge, (suture_width − element width)/2: the
+    surgeon draws the bites towards the element, so wider bites imbricate more sclera under
+    it. The legs' energy (:func:`~eyemech.forms.sutures.tied_leg_energy`) gives both the
+    bites' loads (∂/∂u) and, as the anchors ride on the buckle's travel δ, the sutures' push
+    on the buckle (∂/∂δ, in the tire's or the band's row): the tension follows from the
+    sclera's resistance, it is not prescribed (docs/scleral_buckling.md, Mattress sutures)."""
+
+    def __init__(self, body: Body, params: Parameters, buckle: RigidBuckle, driven: bool):
+        super().__init__(body, params, buckle, driven)
+        mesh, X = body.mesh, ufl.SpatialCoordinate(body.mesh)
+        self.stiffness = float(params.suture_stiffness)
+        self.tie = dolfinx.fem.Constant(mesh, 0.0)
+        # 0 until tying begins: the legs have no length to keep before the sutures are placed
+        self.placed = dolfinx.fem.Constant(mesh, 0.0)
+        # the displacement when tying began: each leg's length is measured from it
+        self.u_tied = dolfinx.fem.Function(body.u.function_space, name="suture_u_tied")
+        parts = [buckle.buckle.part_at(bite[0]) for bite in self.bites]
+        # what each anchor travels with: the tire's (or the elastic band's) unknown, or the
+        # rigid band's prescribed travel
+        self.travels = [body.tire_travel if (part.is_tire or buckle.elastic_band)
+                        else buckle.indentation for part in parts]
+        self.parts = parts
+        # the anchor a(t) = a₀ + t e of each leg (set when tying begins: the buckle is
+        # placed by then), and t when tying began
+        self.anchor_base = [dolfinx.fem.Constant(mesh, np.zeros(3)) for _ in self.bites]
+        self.anchor_motion = [dolfinx.fem.Constant(mesh, np.zeros(3)) for _ in self.bites]
+        self.travel_tied = [dolfinx.fem.Constant(mesh, 0.0) for _ in self.bites]
+        # what the knot takes out of each leg at the end of tying (mm)
+        self.slack = [params.suture_tie_fraction * 0.5 * (params.suture_width - part.cross_section[0])
+                      for part in parts]
+        x, x_tied = X + body.u, X + self.u_tied
+        self.stretches, self.weights = [], []
+        for k, (travel, base, motion, tied, slack) in enumerate(zip(
+                self.travels, self.anchor_base, self.anchor_motion, self.travel_tied, self.slack)):
+            self.weights.append(self.forces.scales[k] * bite_weight(X, self.forces.centres[k],
+                                                                    self.forces.bite_radius))
+            self.stretches.append(tied_leg_stretch(x, x_tied, base + travel * motion,
+                                                   base + tied * motion, self.tie * slack))
+        self.measure_ = body.ds(body.eye.tag("sclera_outer"))
+        self.energy = self.placed * sum(tied_leg_energy(stretch, self.stiffness, weight)
+                                        for stretch, weight in zip(self.stretches, self.weights)) \
+            * self.measure_
+
+    def residual(self, tests):
+        return ufl.derivative(self.energy, self.body.u, tests[0])
+
+    def start_tying(self) -> None:
+        """Suturing begins: every leg's length is measured from the eye and the buckle as
+        they are now."""
+        self.u_tied.x.array[:] = self.body.u.x.array
+        self.placed.value = 1.0
+        base_radius = float(self.buckle.base_radius.value)
+        for k, (bite, part) in enumerate(zip(self.bites, self.parts)):
+            def at(t, bite=bite, part=part):
+                return np.asarray(part.anchor(bite, base_radius, t, t if part.is_tire else None))
+            self.anchor_base[k].value[:] = at(0.0)
+            self.anchor_motion[k].value[:] = at(1.0) - at(0.0)
+            travel = self.travels[k]
+            self.travel_tied[k].value = self.body.real_value(travel) \
+                if isinstance(travel, dolfinx.fem.Function) else float(travel.value)
+
+    def pull_on_tire(self) -> float:
+        """0: the tied legs' push on the buckle is in its row through their energy."""
+        return 0.0
+
+    @functools.cached_property
+    def _tension_forms(self) -> list[dolfinx.fem.Form]:
+        return [dolfinx.fem.form(self.placed * stretch * weight * self.measure_)
+                for stretch, weight in zip(self.stretches, self.weights)]
+
+    def tensions(self) -> list[float]:
+        """Each leg's tension (N): k ∫ ⟨ℓ − ℓ_tied + s⟩₊ w dA over its share of the bite."""
+        return [self.stiffness * assemble_scalar(form, self.body.comm) / share
+                for form, share in zip(self._tension_forms, self.forces.shares)]
+
+    def controls(self) -> dict[str, Control]:
+        return super().controls() | {
+            "suture_tie": Control(lambda: float(self.tie.value),
+                                  lambda value: setattr(self.tie, "value", value))}
+
+    def register(self, checkpoints) -> None:
+        super().register(checkpoints)
+        checkpoints.function("suture_u_tied", self.u_tied)
+        checkpoints.constant("suture_tie", self.tie)
+        checkpoints.constant("sutures_placed", self.placed)
+        checkpoints.value("suture_anchors", lambda: {
+            "base": [c.value.copy() for c in self.anchor_base],
+            "motion": [c.value.copy() for c in self.anchor_motion],
+            "travel": [float(c.value) for c in self.travel_tied]}, self._restore_anchors)
+
+    def _restore_anchors(self, saved: dict) -> None:
+        for constants, key in ((self.anchor_base, "base"), (self.anchor_motion, "motion")):
+            for c, value in zip(constants, saved[key]):
+                c.value[:] = value
+        for c, value in zip(self.travel_tied, saved["travel"]):
+            c.value = value
+
+    def measure(self) -> dict:
+        # the tightest and the loosest leg (N); the knot's progress (0 → 1 over suturing)
+        tensions = self.tensions()
+        return {"suture_force_N": max(tensions, default=0.0),
+                "suture_force_min_N": min(tensions, default=0.0),
+                "suture_tie": float(self.tie.value)}
+
+
 class TireRow(Term):
     """The tire's radial travel δ (a Real unknown) and its row: pinned to the band's
     travel, k (δ − δ_band) = 0, or free (``tire_free``): the sclera's contact force on the
@@ -107,8 +218,11 @@ class TireRow(Term):
     the contact force (:meth:`release_from_band`)."""
 
     def __init__(self, body: Body, buckle: RigidBuckle, contact: BuckleContact, loop: bool,
-                 pull: Callable[[], float]):
+                 pull: Callable[[], float], suture_energy=None):
         self.body, self.buckle, self.contact, self.loop, self.pull = body, buckle, contact, loop, pull
+        # tied mattress sutures: their energy depends on the travel, and its derivative is
+        # their push on the buckle (None: the pull comes from ``pull``)
+        self.suture_energy = suture_energy
         mesh = body.mesh
         self.tire_free = dolfinx.fem.Constant(mesh, 0.0)
         self.tire_hold = dolfinx.fem.Constant(mesh, 0.0)    # the instrument's hold
@@ -127,11 +241,19 @@ class TireRow(Term):
         self.tire_stiffness = dolfinx.fem.Constant(mesh, contact.penalty * max(footprint, 1.0))
         self.band_backed = buckle.buckle.backs_tire
 
+    @property
+    def energy(self):
+        """What the travel's row differentiates: the buckle's contact energy, and the tied
+        sutures' when they ride on the buckle."""
+        if self.suture_energy is None:
+            return self.contact.energy
+        return self.contact.energy + self.suture_energy
+
     def residual(self, tests):
         delta, q, surface = self.body.tire_travel, tests[-1], self.buckle.surface
         band_travel = self.buckle.indentation
         inward = self.suture_pull + self.tire_hold + self.buckle.buckle.band_push(delta, self.tire_stiffness)
-        free = tire_travel_residual(self.contact.energy, delta, q, inward, surface, self.sclera_area)
+        free = tire_travel_residual(self.energy, delta, q, inward, surface, self.sclera_area)
         pinned = pinned_travel_residual(delta, band_travel, q, self.tire_stiffness, surface,
                                         self.sclera_area)
         return self.tire_free * free + (1 - self.tire_free) * pinned
@@ -146,6 +268,22 @@ class TireRow(Term):
         """∂Π_c/∂δ: the sclera's contact force on the tire along its inward travel (half
         model, N)."""
         return assemble_scalar(self._force_form, self.body.comm)
+
+    @functools.cached_property
+    def _suture_push_form(self) -> dolfinx.fem.Form | None:
+        if self.suture_energy is None:
+            return None
+        direction = dolfinx.fem.Function(self.body.tire_travel.function_space)
+        direction.x.array[:] = 1.0
+        return dolfinx.fem.form(-ufl.derivative(self.suture_energy, self.body.tire_travel, direction))
+
+    def suture_push(self) -> float:
+        """The sutures' inward force on the buckle (half model, N): the loop's pull, or
+        −∂Π_s/∂δ of tied sutures. Collective."""
+        pull = float(self.suture_pull.value)
+        if self._suture_push_form is not None:
+            pull += assemble_scalar(self._suture_push_form, self.body.comm)
+        return pull
 
     @property
     def free_(self) -> bool:
@@ -177,7 +315,7 @@ class TireRow(Term):
         frictionless 1 mm buckle stalled in the suturing stage on the coarse eye."""
         if not (self.loop and self.band_backed) or self.free_:
             return
-        pull = float(self.suture_pull.value)
+        pull = self.suture_push()
         if pull > 0.0 and pull > self.contact_force():
             self.tire_free.value = 1.0
 
@@ -208,7 +346,7 @@ class TireRow(Term):
         # sclera's contact force on it and the sutures' inward pull (whole eye)
         return {"tire_travel_mm": self.buckle.tire_travel(),
                 "tire_contact_force_N": 2.0 * self.contact_force(),
-                "tire_suture_pull_N": 2.0 * float(self.suture_pull.value),
+                "tire_suture_pull_N": 2.0 * self.suture_push(),
                 "tire_free": self.free_}
 
 
@@ -224,8 +362,8 @@ class BandRow(TireRow):
     band's, T = 0 at δ = ΔL/2π."""
 
     def __init__(self, body: Body, buckle: RigidBuckle, contact: BuckleContact, loop: bool,
-                 pull: Callable[[], float], params: Parameters):
-        super().__init__(body, buckle, contact, loop, pull)
+                 pull: Callable[[], float], params: Parameters, suture_energy=None):
+        super().__init__(body, buckle, contact, loop, pull, suture_energy)
         mesh = body.mesh
         self.tire_free.value = 1.0
         self.tightening = dolfinx.fem.Constant(mesh, 0.0)
@@ -257,7 +395,7 @@ class BandRow(TireRow):
         delta, q = self.body.tire_travel, tests[-1]
         length, _laid, set_length = self.lengths(delta)
         tension = band_tension(length, set_length, self.modulus_area)
-        return band_hoop_residual(self.contact.energy, delta, q, tension, 0.5, self.suture_pull,
+        return band_hoop_residual(self.energy, delta, q, tension, 0.5, self.suture_pull,
                                   self.buckle.surface, self.sclera_area)
 
     def free(self) -> None:
