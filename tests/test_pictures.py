@@ -133,3 +133,45 @@ def test_the_eyes_section_names_its_stage_gap_scale_and_directions(monkeypatch):
     assert len(arrows) == 2
     corner = np.array([-1.0, 5.0, -3.0]) + (0.0, -3.0, 0.8)  # where the arrows start
     assert named["anterior"][2] > corner[2] and named["outside"][1] > corner[1]
+
+
+def test_a_picture_records_what_it_draws(tmp_path, monkeypatch):
+    """render_png returns, and writes into the PNG, the bar's title and range, the extras'
+    names, the scale bar and the arrows; the bar is a line of its length across the view
+    (perpendicular to the direction the camera looks along), which is parallel."""
+    import pyvista as pv
+
+    from eyemech.problems.run.output import PointLabels
+
+    lines, cameras = [], []
+    add_mesh, screenshot = pv.Plotter.add_mesh, pv.Plotter.screenshot
+
+    def spy(self, mesh, **kw):
+        if kw.get("color") == "black" and isinstance(mesh, pv.PolyData) and mesh.n_lines:
+            lines.append(np.asarray(mesh.points))
+        return add_mesh(self, mesh, **kw)
+
+    def shot(self, *args, **kw):
+        cameras.append((np.subtract(self.camera.position, self.camera.focal_point),
+                        self.camera.parallel_projection))
+        return screenshot(self, *args, **kw)
+
+    monkeypatch.setattr(pv.Plotter, "add_mesh", spy)
+    monkeypatch.setattr(pv.Plotter, "screenshot", shot)
+    extras = [(pv.Sphere(radius=0.2), {"color": "grey", "opacity": 0.4, "label": "instrument"}),
+              (pv.Sphere(radius=0.1), {"color": "red"}),  # unnamed: drawn, not listed
+              PointLabels(np.zeros((1, 3)), ["here"])]
+    drawn = render_png(_grid(), tmp_path / "d.png", scalars="displacement (mm)", warp="displacement",
+                       camera=(0.6, 1.0, 0.35), extras=extras, legend=True, scale_bar_mm=0.5,
+                       directions={"anterior": (0, 0, 1)}, scene="sphere-inflation", title="t")
+    assert drawn == {"bar": {"title": "displacement (mm)", "range": [0.0, pytest.approx(0.4)]},
+                     "extras": ["instrument", "here"], "scale_bar_mm": 0.5, "directions": ["anterior"]}
+    assert picture_record(tmp_path / "d.png")["drawn"] == drawn
+    (bar,) = lines
+    (view, parallel), = cameras
+    assert np.linalg.norm(bar[1] - bar[0]) == pytest.approx(0.5)
+    assert np.dot(bar[1] - bar[0], view) == pytest.approx(0.0, abs=1e-9) and parallel
+    # a signed field's bar keeps its range, and says so
+    assert render_png(_grid(), tmp_path / "e.png", scalars="p (MPa)")["bar"]["range"] == \
+        [pytest.approx(-0.2), pytest.approx(0.4)]
+
