@@ -175,3 +175,51 @@ def test_a_picture_records_what_it_draws(tmp_path, monkeypatch):
     assert render_png(_grid(), tmp_path / "e.png", scalars="p (MPa)")["bar"]["range"] == \
         [pytest.approx(-0.2), pytest.approx(0.4)]
 
+
+@pytest.mark.parametrize("kind, orientation, arc", [
+    ("encircling+segmental", "circumferential", 90.0), ("encircling+segmental", "circumferential", 360.0),
+    ("encircling", "circumferential", 90.0), ("segmental", "circumferential", 90.0),
+    ("segmental", "radial", 90.0)])
+def test_the_buckle_is_drawn_where_the_scene_puts_it(kind, orientation, arc):
+    """The von Mises picture's buckle over the half model (x >= 0): band and tire swept from
+    their sections in the symmetry plane (the section picture's outline) at their travels
+    -- the tire's inner face at base - tire travel, the band's on the tire over its arc and
+    at base - band travel beyond it, each as wide as it is along the axis; a radial tire
+    extruded across the meridian to half its width."""
+    import math
+
+    from eyemech.forms.buckle import Buckle, BuckleShape
+    from eyemech.problems.scleral_buckling.output import buckle_surfaces
+
+    shape = BuckleShape(kind=kind, orientation=orientation, tire_arc_deg=arc)
+    base, band, tire, axial = 12.2, 0.8, 0.9, -3.0
+    buckle = Buckle(shape, axial, base, band, tire, polar_angle=math.radians(105.0))
+    surfaces = {style["label"]: body for body, style in buckle_surfaces(buckle, tire)}
+    assert set(surfaces) == {name for name, has in (("silicone tire", shape.has_tire),
+                                                    ("encircling band", shape.has_band)) if has}
+    for body in surfaces.values():
+        assert body.is_manifold and body.bounds[0] == pytest.approx(0.0, abs=1e-9)
+    if "encircling band" in surfaces:
+        points = surfaces["encircling band"].points
+        rho = np.hypot(points[:, 0], points[:, 1])
+        azimuth = np.degrees(np.arctan2(np.abs(points[:, 0]), points[:, 1]))
+        assert np.ptp(points[:, 2]) == pytest.approx(shape.band_width, rel=1e-5)
+        edge = arc / 2 if shape.has_tire else 0.0
+        over, beyond = azimuth < edge - 1e-3, azimuth > edge + 1e-3
+        if beyond.any():  # beyond the tire: at its own travel
+            assert rho[beyond].min() == pytest.approx(base - band, rel=1e-5)
+        if over.any():  # over the tire: on its top
+            assert rho[over].min() == pytest.approx(base - tire + shape.tire_height, rel=1e-5)
+        assert azimuth.max() == pytest.approx(180.0, rel=1e-5)
+    if "silicone tire" in surfaces:
+        points = surfaces["silicone tire"].points
+        if orientation == "radial":  # a ring about x, w/2 across the meridian
+            assert points[:, 0].max() == pytest.approx(shape.tire_width / 2, rel=1e-5)
+            assert np.hypot(points[:, 1], points[:, 2]).min() == pytest.approx(base - tire, rel=1e-5)
+        else:
+            rho = np.hypot(points[:, 0], points[:, 1])
+            assert rho.min() == pytest.approx(base - tire, rel=1e-5)
+            assert rho.max() == pytest.approx(base - tire + shape.tire_height, rel=1e-5)
+            assert np.ptp(points[:, 2]) == pytest.approx(shape.tire_width, rel=1e-5)
+            assert np.degrees(np.arctan2(np.abs(points[:, 0]), points[:, 1])).max() == \
+                pytest.approx(min(arc / 2, 180.0), rel=1e-5)
