@@ -35,6 +35,18 @@ def test_a_docs_picture_shows_the_scenes_defaults(path):
     assert not different, f"{path.name} ({record['caption']!r}) was made with {different}"
 
 
+def test_the_readmes_von_mises_picture_shows_the_buckle_and_sutures():
+    """The README's von Mises picture is drawn as the scene draws it now (its record lists
+    the buckle, the sutures and the scale), and its caption's bar is the picture's."""
+    record = picture_record(DOCS / "img" / "buckling-von-mises.png")
+    drawn = record["drawn"]
+    assert {"silicone tire", "encircling band", "sutures", "tear (beneath)"} <= set(drawn["extras"])
+    assert drawn["scale_bar_mm"] == 5.0 and drawn["bar"]["title"] == "von Mises stress (MPa)"
+    low, high = drawn["bar"]["range"]
+    readme = (DOCS.parent / "README.md").read_text()
+    assert low == 0.0 and f"the bar from 0 to {high:.3f} MPa" in readme
+
+
 def _grid():
     import pyvista as pv
 
