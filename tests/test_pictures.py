@@ -35,6 +35,18 @@ def test_a_docs_picture_shows_the_scenes_defaults(path):
     assert not different, f"{path.name} ({record['caption']!r}) was made with {different}"
 
 
+def test_the_readmes_von_mises_picture_shows_the_buckle_and_sutures():
+    """The README's von Mises picture is drawn as the scene draws it now (its record lists
+    the buckle, the sutures and the scale), and its caption's bar is the picture's."""
+    record = picture_record(DOCS / "img" / "buckling-von-mises.png")
+    drawn = record["drawn"]
+    assert {"silicone tire", "encircling band", "sutures", "tear (beneath)"} <= set(drawn["extras"])
+    assert drawn["scale_bar_mm"] == 5.0 and drawn["bar"]["title"] == "von Mises stress (MPa)"
+    low, high = drawn["bar"]["range"]
+    readme = (DOCS.parent / "README.md").read_text()
+    assert low == 0.0 and f"the bar from 0 to {high:.3f} MPa" in readme
+
+
 def _grid():
     import pyvista as pv
 
@@ -133,3 +145,93 @@ def test_the_eyes_section_names_its_stage_gap_scale_and_directions(monkeypatch):
     assert len(arrows) == 2
     corner = np.array([-1.0, 5.0, -3.0]) + (0.0, -3.0, 0.8)  # where the arrows start
     assert named["anterior"][2] > corner[2] and named["outside"][1] > corner[1]
+
+
+def test_a_picture_records_what_it_draws(tmp_path, monkeypatch):
+    """render_png returns, and writes into the PNG, the bar's title and range, the extras'
+    names, the scale bar and the arrows; the bar is a line of its length across the view
+    (perpendicular to the direction the camera looks along), which is parallel."""
+    import pyvista as pv
+
+    from eyemech.problems.run.output import PointLabels
+
+    lines, cameras = [], []
+    add_mesh, screenshot = pv.Plotter.add_mesh, pv.Plotter.screenshot
+
+    def spy(self, mesh, **kw):
+        if kw.get("color") == "black" and isinstance(mesh, pv.PolyData) and mesh.n_lines:
+            lines.append(np.asarray(mesh.points))
+        return add_mesh(self, mesh, **kw)
+
+    def shot(self, *args, **kw):
+        cameras.append((np.subtract(self.camera.position, self.camera.focal_point),
+                        self.camera.parallel_projection))
+        return screenshot(self, *args, **kw)
+
+    monkeypatch.setattr(pv.Plotter, "add_mesh", spy)
+    monkeypatch.setattr(pv.Plotter, "screenshot", shot)
+    extras = [(pv.Sphere(radius=0.2), {"color": "grey", "opacity": 0.4, "label": "instrument"}),
+              (pv.Sphere(radius=0.1), {"color": "red"}),  # unnamed: drawn, not listed
+              PointLabels(np.zeros((1, 3)), ["here"])]
+    drawn = render_png(_grid(), tmp_path / "d.png", scalars="displacement (mm)", warp="displacement",
+                       camera=(0.6, 1.0, 0.35), extras=extras, legend=True, scale_bar_mm=0.5,
+                       directions={"anterior": (0, 0, 1)}, scene="sphere-inflation", title="t")
+    assert drawn == {"bar": {"title": "displacement (mm)", "range": [0.0, pytest.approx(0.4)]},
+                     "extras": ["instrument", "here"], "scale_bar_mm": 0.5, "directions": ["anterior"]}
+    assert picture_record(tmp_path / "d.png")["drawn"] == drawn
+    (bar,) = lines
+    (view, parallel), = cameras
+    assert np.linalg.norm(bar[1] - bar[0]) == pytest.approx(0.5)
+    assert np.dot(bar[1] - bar[0], view) == pytest.approx(0.0, abs=1e-9) and parallel
+    # a signed field's bar keeps its range, and says so
+    assert render_png(_grid(), tmp_path / "e.png", scalars="p (MPa)")["bar"]["range"] == \
+        [pytest.approx(-0.2), pytest.approx(0.4)]
+
+
+@pytest.mark.parametrize("kind, orientation, arc", [
+    ("encircling+segmental", "circumferential", 90.0), ("encircling+segmental", "circumferential", 360.0),
+    ("encircling", "circumferential", 90.0), ("segmental", "circumferential", 90.0),
+    ("segmental", "radial", 90.0)])
+def test_the_buckle_is_drawn_where_the_scene_puts_it(kind, orientation, arc):
+    """The von Mises picture's buckle over the half model (x >= 0): band and tire swept from
+    their sections in the symmetry plane (the section picture's outline) at their travels
+    -- the tire's inner face at base - tire travel, the band's on the tire over its arc and
+    at base - band travel beyond it, each as wide as it is along the axis; a radial tire
+    extruded across the meridian to half its width."""
+    import math
+
+    from eyemech.forms.buckle import Buckle, BuckleShape
+    from eyemech.problems.scleral_buckling.output import buckle_surfaces
+
+    shape = BuckleShape(kind=kind, orientation=orientation, tire_arc_deg=arc)
+    base, band, tire, axial = 12.2, 0.8, 0.9, -3.0
+    buckle = Buckle(shape, axial, base, band, tire, polar_angle=math.radians(105.0))
+    surfaces = {style["label"]: body for body, style in buckle_surfaces(buckle, tire)}
+    assert set(surfaces) == {name for name, has in (("silicone tire", shape.has_tire),
+                                                    ("encircling band", shape.has_band)) if has}
+    for body in surfaces.values():
+        assert body.is_manifold and body.bounds[0] == pytest.approx(0.0, abs=1e-9)
+    if "encircling band" in surfaces:
+        points = surfaces["encircling band"].points
+        rho = np.hypot(points[:, 0], points[:, 1])
+        azimuth = np.degrees(np.arctan2(np.abs(points[:, 0]), points[:, 1]))
+        assert np.ptp(points[:, 2]) == pytest.approx(shape.band_width, rel=1e-5)
+        edge = arc / 2 if shape.has_tire else 0.0
+        over, beyond = azimuth < edge - 1e-3, azimuth > edge + 1e-3
+        if beyond.any():  # beyond the tire: at its own travel
+            assert rho[beyond].min() == pytest.approx(base - band, rel=1e-5)
+        if over.any():  # over the tire: on its top
+            assert rho[over].min() == pytest.approx(base - tire + shape.tire_height, rel=1e-5)
+        assert azimuth.max() == pytest.approx(180.0, rel=1e-5)
+    if "silicone tire" in surfaces:
+        points = surfaces["silicone tire"].points
+        if orientation == "radial":  # a ring about x, w/2 across the meridian
+            assert points[:, 0].max() == pytest.approx(shape.tire_width / 2, rel=1e-5)
+            assert np.hypot(points[:, 1], points[:, 2]).min() == pytest.approx(base - tire, rel=1e-5)
+        else:
+            rho = np.hypot(points[:, 0], points[:, 1])
+            assert rho.min() == pytest.approx(base - tire, rel=1e-5)
+            assert rho.max() == pytest.approx(base - tire + shape.tire_height, rel=1e-5)
+            assert np.ptp(points[:, 2]) == pytest.approx(shape.tire_width, rel=1e-5)
+            assert np.degrees(np.arctan2(np.abs(points[:, 0]), points[:, 1])).max() == \
+                pytest.approx(min(arc / 2, 180.0), rel=1e-5)

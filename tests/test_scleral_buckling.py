@@ -53,6 +53,29 @@ def test_the_coarse_eye_draws_every_stage_and_writes_its_fields(coarse, coarse_f
     assert len(frames) >= len(coarse.steps)
 
 
+def test_the_coarse_eyes_von_mises_picture_shows_the_buckle_sutures_scale_and_stage(coarse, coarse_folder):
+    """What a surgeon reads off the von Mises picture, as its record states it
+    (problems/run/output.py, render_png): each stage in its title, a bar named "von Mises
+    stress (MPa)" from 0 to the stage's largest stress, the band and the tire (placed at
+    the end of step 1), the sutures, the tear beneath them, the cornea and the optic
+    nerve named, a 5 mm scale and the anterior and outside arrows."""
+    from eyemech.problems.run.output import picture_record
+
+    for number, (name, key) in enumerate((("IOP", "after_iop"), ("buckling", "after_buckling"),
+                                          ("suturing", "after_suturing"), ("settled", "after_settling")),
+                                         start=1):
+        record = picture_record(coarse_folder / f"step{number}_{name}_von_mises.png")
+        assert record["caption"] == f"step {number} ({name}): von Mises stress (MPa)"
+        drawn = record["drawn"]
+        assert drawn["bar"]["title"] == "von Mises stress (MPa)"
+        low, high = drawn["bar"]["range"]
+        assert low == 0.0 and high == pytest.approx(coarse.quantities[key]["von_mises_max_MPa"], rel=1e-6)
+        assert drawn["extras"] == ["silicone tire", "encircling band", "sutures", "tear (beneath)",
+                                   "cornea", "optic nerve"]
+        assert drawn["scale_bar_mm"] == 5.0
+        assert drawn["directions"] == ["anterior", "outside (at the tear)"]
+
+
 def stage(result, number):
     return [s for s in result.steps if s["stage"] == number]
 

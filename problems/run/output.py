@@ -7,6 +7,7 @@ off-screen by pyvista on rank 0 from the gathered grid."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 from pathlib import Path
 from typing import Sequence
@@ -219,17 +220,37 @@ def quiet_vtk() -> None:
         vtk.vtkObject.GlobalWarningDisplayOff()
 
 
+@dataclasses.dataclass(frozen=True)
+class PointLabels:
+    """Texts at points, an extra for :func:`render_png` beside (dataset, keywords) pairs:
+    ``style`` the keywords of pyvista's ``add_point_labels`` (the default: always visible,
+    on a faint box)."""
+
+    points: np.ndarray
+    texts: Sequence[str]
+    style: dict = dataclasses.field(default_factory=dict)
+
+
 def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None = None,
                title: str = "", camera: str | Sequence = "iso", clim=None,
                show_undeformed: bool = True, cmap: str = "viridis", extras: Sequence = (),
-               scene: str = "", parameters: dict | None = None) -> None:
-    """Off-screen pyvista picture of ``grid`` (rank 0 only), coloured by ``scalars``: a
-    name with its unit in brackets ("displacement (mm)"), the colour bar's title. A field
-    that is nowhere negative (a magnitude) gets a bar from 0 to its largest value; so does
-    one whose negative values are below 1e-4 of its largest (a clamped plate's w, -3.7e-7
-    mm of ripple at its edge against 0.126 mm: a bar from -3.69e-07 reads as noise).
-    ``extras``: (pyvista dataset, add_mesh keywords) pairs drawn as well (an instrument).
-    ``scene`` and ``parameters`` are written into the PNG (:func:`tag_picture`)."""
+               scene: str = "", parameters: dict | None = None, scale_bar_mm: float | None = None,
+               directions: dict[str, Sequence[float]] | None = None, legend: bool = False) -> dict:
+    """Off-screen pyvista picture of ``grid`` (rank 0 only: no collective call), coloured
+    by ``scalars``: a name with its unit in brackets ("displacement (mm)"), the colour
+    bar's title. A field that is nowhere negative (a magnitude) gets a bar from 0 to its
+    largest value; so does one whose negative values are below 1e-4 of its largest (a
+    clamped plate's w, -3.7e-7 mm of ripple at its edge against 0.126 mm: a bar from
+    -3.69e-07 reads as noise).
+
+    ``extras``: things drawn as well (an instrument, a buckle, sutures): (pyvista dataset,
+    add_mesh keywords) pairs, whose ``label`` keyword names them, and :class:`PointLabels`;
+    ``legend`` lists the labelled ones. ``scale_bar_mm``: a bar of that length (the mesh in
+    mm) under the picture, across the view; the view is then a parallel projection, so
+    that the bar measures anything in it. ``directions``: arrows named by their keys (e.g.
+    "anterior": (0, 0, 1)) at the picture's lower right. ``scene`` and ``parameters`` are
+    written into the PNG (:func:`tag_picture`) with what was drawn, the record this
+    returns: the bar's title and range, the extras' names, the scale bar, the arrows."""
     import pyvista
 
     if scalars is not None and not scalars.rstrip().endswith(")"):
@@ -241,15 +262,11 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
     shown = grid.warp_by_vector(warp, factor=1.0) if warp else grid
     if show_undeformed and warp:
         plotter.add_mesh(grid, style="wireframe", color="grey", opacity=0.25)
-    if clim is None and scalars is not None:
-        values = np.asarray(grid[scalars], dtype=float)
-        values = np.linalg.norm(values, axis=1) if values.ndim > 1 else values
-        if values.size and np.nanmin(values) >= -1e-4 * np.nanmax(np.abs(values)):
-            clim = (0.0, float(np.nanmax(values)) or 1.0)
+    clim, bar = _bar(grid, scalars, clim)
+    drawn: dict = {"bar": bar, "extras": [], "scale_bar_mm": None, "directions": []}
     plotter.add_mesh(shown, scalars=scalars, show_edges=True, cmap=cmap, clim=clim,
                      scalar_bar_args={"title": scalars or "", "fmt": "%.3g", "n_labels": 5})
-    for dataset, keywords in extras:
-        plotter.add_mesh(dataset, **keywords)
+    drawn["extras"] = _draw_extras(plotter, extras)
     if title:
         plotter.add_text(title, font_size=12)
     if camera == "iso":
@@ -258,11 +275,100 @@ def render_png(grid, path: Path, *, scalars: str | None = None, warp: str | None
         getattr(plotter, f"view_{camera}")()
     else:  # a direction to look from
         plotter.view_vector(camera)
-    tag = (lambda tmp: tag_picture(tmp, scene, parameters or {}, title)) if scene else None
+    if scale_bar_mm or directions:
+        # across and up the screen of the camera just set
+        view = np.subtract(plotter.camera.position, plotter.camera.focal_point)
+        drawn |= _scale_and_arrows(plotter, shown, view, plotter.camera.up, scale_bar_mm,
+                                   directions or {})
+    labelled = sum(1 for e in extras if not isinstance(e, PointLabels) and e[1].get("label"))
+    if legend and labelled:
+        size = (0.26, 0.035 * labelled)
+        box = plotter.add_legend(bcolor="white", size=size, loc="upper right", face="rectangle")
+        # in the upper right corner, under the title's line (pyvista's "upper right" puts
+        # the box's corner at 0.85 whatever its size, and longer names run off the picture)
+        box.SetPosition(0.98 - size[0], 0.94 - size[1])
+    if scale_bar_mm:
+        plotter.enable_parallel_projection()
+    if scale_bar_mm or directions:
+        plotter.reset_camera()  # the view takes in the bar and the arrows
+    tag = (lambda tmp: tag_picture(tmp, scene, parameters or {}, title, drawn)) if scene else None
     try:
         save_screenshot(plotter, Path(path), tag)
     finally:
         plotter.close()
+    return drawn
+
+
+def _bar(grid, scalars: str | None, clim):
+    """The colour range (from 0 for a magnitude, see :func:`render_png`) and the bar's
+    record: its title and the range it shows (the data's, when ``clim`` stays None)."""
+    if scalars is None:
+        return clim, None
+    values = np.asarray(grid[scalars], dtype=float)
+    values = np.linalg.norm(values, axis=1) if values.ndim > 1 else values
+    if clim is None and values.size and np.nanmin(values) >= -1e-4 * np.nanmax(np.abs(values)):
+        clim = (0.0, float(np.nanmax(values)) or 1.0)
+    shown = clim if clim is not None else \
+        ((float(np.nanmin(values)), float(np.nanmax(values))) if values.size else None)
+    return clim, {"title": scalars, "range": None if shown is None else [float(shown[0]), float(shown[1])]}
+
+
+def _draw_extras(plotter, extras) -> list[str]:
+    """:func:`render_png`'s extras drawn; the names of the labelled ones and the labels."""
+    names: list[str] = []
+    for extra in extras:
+        if isinstance(extra, PointLabels):
+            plotter.add_point_labels(np.asarray(extra.points, dtype=float).reshape(-1, 3),
+                                     list(extra.texts), **({"font_size": 14, "shape_opacity": 0.5,
+                                                            "always_visible": True} | extra.style))
+            names += list(extra.texts)
+        else:
+            dataset, keywords = extra
+            plotter.add_mesh(dataset, **keywords)
+            if keywords.get("label"):
+                names.append(keywords["label"])
+    return names
+
+
+def screen_axes(view, up) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors pointing right and up on the screen of a camera looking from
+    ``view`` (towards the focal point) with ``up``."""
+    back = np.asarray(view, dtype=float) / np.linalg.norm(view)
+    upward = np.asarray(up, dtype=float) - np.dot(up, back) * back
+    upward /= np.linalg.norm(upward)
+    return np.cross(upward, back), upward
+
+
+def _scale_and_arrows(plotter, shown, view, up, length: float | None, directions: dict) -> dict:
+    """A scale bar of ``length`` (mm) across the view under ``shown``'s lower left, and
+    arrows for ``directions`` at its lower right, in the plane through its centre
+    that faces the camera."""
+    import pyvista
+
+    right, upward = screen_axes(view, up)
+    points = np.asarray(shown.points, dtype=float)
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    across, height = (points - centre) @ right, (points - centre) @ upward
+    size = max(float(np.ptp(across)), float(np.ptp(height)), 1e-12)
+    below = centre + (height.min() - 0.08 * size) * upward
+    drawn: dict = {}
+    if length:
+        start = below + across.min() * right
+        bar = np.array([start, start + length * right])
+        plotter.add_mesh(pyvista.lines_from_points(bar), color="black", line_width=6)
+        plotter.add_point_labels((bar.mean(axis=0) - 0.04 * size * upward)[None], [f"{length:g} mm"],
+                                 font_size=16, shape_opacity=0.0, always_visible=True,
+                                 show_points=False)
+        drawn["scale_bar_mm"] = float(length)
+    arrow = 0.12 * size
+    origin = below + (across.max() + arrow) * right  # right of the picture, clear of it
+    for name, direction in directions.items():
+        direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+        plotter.add_mesh(pyvista.Arrow(start=origin, direction=direction, scale=arrow), color="black")
+        plotter.add_point_labels((origin + 1.25 * arrow * direction)[None], [name], font_size=14,
+                                 shape_opacity=0.0, always_visible=True, show_points=False)
+    drawn["directions"] = list(directions)
+    return drawn
 
 
 def save_screenshot(plotter, path: Path, before_rename=None) -> None:
@@ -304,17 +410,20 @@ def vtu_bytes(grid) -> bytes:
 PICTURE_KEY = "eyemech"
 
 
-def tag_picture(path: Path, scene: str, parameters: dict, caption: str) -> None:
+def tag_picture(path: Path, scene: str, parameters: dict, caption: str, drawn: dict | None = None) -> None:
     """Write the scene, its parameters and the caption into the PNG as a text chunk
     (``eyemech``), so that a picture in the docs can be checked against the defaults
-    (:func:`picture_record`; tests/test_pictures.py)."""
+    (:func:`picture_record`; tests/test_pictures.py); and ``drawn``, what the picture
+    shows besides (:func:`render_png`'s record), when given."""
     import json
 
     from PIL import Image, PngImagePlugin
 
+    record = {"scene": scene, "parameters": parameters, "caption": caption}
+    if drawn is not None:
+        record["drawn"] = drawn
     info = PngImagePlugin.PngInfo()
-    info.add_text(PICTURE_KEY, json.dumps({"scene": scene, "parameters": parameters,
-                                           "caption": caption}, default=str))
+    info.add_text(PICTURE_KEY, json.dumps(record, default=str))
     with Image.open(path) as image:
         image.load()
         image.save(path, pnginfo=info)

@@ -126,8 +126,15 @@ class RigidBuckle(Term):
         """The buckle's cross-section in the symmetry plane at its travels, as line
         segments; None before it is placed. Collective (the tire's travel is a
         distributed unknown): every rank must call it."""
+        placed = self.at_travel()
+        return None if placed is None else placed[0].outline(placed[1])
+
+    def at_travel(self) -> tuple[Buckle, float] | None:
+        """The buckle with its travels as numbers and the tire's travel, what its pictures
+        draw (:meth:`~eyemech.forms.buckle.Buckle.outline`, ``.parts``' sections); None
+        before it is placed. Collective, as :meth:`outline`."""
         travel = self.tire_travel()
-        return self.numbers(travel).outline(travel) if self.placed else None
+        return (self.numbers(travel), travel) if self.placed else None
 
     def install(self, solver) -> None:
         solver.depth_hooks.append(self.depth_through)

@@ -1,7 +1,9 @@
 """Fields and pictures of the scleral-buckling scene: VTX for ParaView, a pyvista
-series, and at each stage's end a view of the half eye coloured by von Mises stress and
-a section through the buckle on the symmetry plane (which passes through the tear), with
-the buckle's outline (:meth:`eyemech.forms.buckle.Buckle.outline`)."""
+series, and at each stage's end a view of the half eye coloured by von Mises stress, with
+the buckle's band and tire (translucent, at their travels), the sutures, where the tear
+lies, a 5 mm scale and the anterior and outside directions; and a section through the
+buckle on the symmetry plane (which passes through the tear), with the buckle's outline
+(:meth:`eyemech.forms.buckle.Buckle.outline`)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from eyemech.forms.buckle import Buckle
 from eyemech.problems.run.output import (
+    PointLabels,
     add_legend,
     gather_grid,
     region_data,
@@ -60,10 +64,12 @@ class Writer:
             add_legend(grid, self.model.eye.names, mesh.topology.dim)
             self.series.write(load, grid)
             if picture and self.pictures:
-                # the outline reads distributed unknowns (collective): every rank computes
-                # it, only rank 0 (which holds the gathered grid) draws
-                outline = self.model.buckle.outline()
-                marks = self._marks()
+                # the buckle's travels are distributed unknowns and the sutures' anchors
+                # read them (collective): every rank computes them, only rank 0 (which
+                # holds the gathered grid) draws
+                placed = self.model.buckle.at_travel()
+                outline = None if placed is None else placed[0].outline(placed[1])
+                marks = self._marks() | {"buckle": placed}
                 whole, section = self._picture_paths(stage, name)
                 if grid is not None:
                     self._pictures(grid, stage, name, outline, marks, measured or {})
@@ -75,26 +81,29 @@ class Writer:
         return out / f"step{stage}_{name}_von_mises.png", out / f"step{stage}_{name}_section.png"
 
     def _marks(self) -> dict:
-        """What the section marks, from values every rank holds (collective): the tear
-        rim's nodes (global numbers) and, on the section's meridian, the sutures' bites
-        and where each leaves the buckle."""
+        """What the pictures mark, from values every rank holds (collective): the tear
+        rim's nodes (global numbers); every suture's bites (azimuth, side, centre) and
+        where each leaves the buckle (``sutures``); and, on the section's meridian, those
+        bites' centres and anchors."""
         sutures = self.model.sutures
-        anchors = sutures.anchors()
+        anchors = np.asarray(sutures.anchors()).reshape(-1, 3)
         in_plane = [k for k, bite in enumerate(sutures.bites) if abs(bite[0]) < 1e-9]
         gaps = self.model.gaps
         rim = gaps.rim_nodes() if gaps.pairing is not None else np.zeros(0, dtype=np.int64)
         return {"rim": rim, "bites": np.array([sutures.bites[k][2] for k in in_plane]).reshape(-1, 3),
-                "anchors": np.asarray(anchors)[in_plane].reshape(-1, 3)}
+                "anchors": anchors[in_plane], "sutures": (list(sutures.bites), anchors)}
 
     def _pictures(self, grid, stage: int, name: str, outline, marks: dict, measured: dict) -> None:
         whole, section = self._picture_paths(stage, name)
         parameters = dataclasses.asdict(self.model.params)
-        # the picture's bar names the unit; the fields keep the name notebooks read
-        grid.cell_data["von_mises (MPa)"] = grid.cell_data["von_mises"]
+        # the picture's bar names the quantity and its unit; the fields keep the name
+        # notebooks read
+        grid.cell_data[VON_MISES_BAR] = grid.cell_data["von_mises"]
         title = f"step {stage} ({name}): von Mises stress (MPa)"
-        render_png(grid, whole, scalars="von_mises (MPa)", warp="displacement", camera=(0.6, 1.0, 0.35),
+        render_png(grid, whole, scalars=VON_MISES_BAR, warp="displacement", camera=(0.6, 1.0, 0.35),
                    title=title, show_undeformed=False, cmap="inferno", scene=SCENE_NAME,
-                   parameters=parameters)
+                   parameters=parameters, extras=_eye_extras(grid, marks), legend=True,
+                   scale_bar_mm=5.0, directions=DIRECTIONS)
         self._section(grid, section, _section_title(stage, name, measured), outline, marks, parameters)
 
     def _section(self, grid, path, title: str, outline, marks: dict, parameters: dict) -> None:
@@ -160,6 +169,121 @@ class Writer:
 
 
 SCENE_NAME = "scleral-buckling"
+VON_MISES_BAR = "von Mises stress (MPa)"
+# the von Mises picture's arrows: the optic axis towards the cornea, and the way the tear's
+# meridian leaves it (the section's "outside")
+DIRECTIONS = {"anterior": (0.0, 0.0, 1.0), "outside (at the tear)": (0.0, 1.0, 0.0)}
+BAND_STYLE = {"color": "gray", "opacity": 0.45, "label": "encircling band"}
+TIRE_STYLE = {"color": "lightslategray", "opacity": 0.55, "label": "silicone tire"}
+SUTURE_COLOR = "limegreen"
+
+
+def buckle_surfaces(buckle: Buckle, tire_travel: float, resolution: int = 72) -> list:
+    """The buckle's elements over the half model (x >= 0) as closed pyvista surfaces,
+    (surface, add_mesh keywords) pairs, at their travels: each element's cross-section
+    in the symmetry plane (``section``, the section picture's outline) swept as the
+    element is -- band and circumferential tire revolved about the optic axis over their
+    azimuths (the band over the tire's arc at the tire's top, beyond it at its own
+    travel), a radial tire (a ring about x) extruded across the meridian to x = w/2."""
+    import pyvista
+
+    def polygon(segments) -> pyvista.PolyData:
+        points = np.array(segments[::2], dtype=float)  # each segment's start: the vertices
+        points[:, 0] = 0.0  # on the symmetry plane itself
+        return pyvista.PolyData(points, faces=np.r_[len(points), np.arange(len(points))])
+
+    def revolved(section, start: float, stop: float) -> pyvista.PolyData:
+        """``section`` (at azimuth 0, +y) swept from ``start`` to ``stop`` (rad, towards +x)."""
+        swept = polygon(section).extrude_rotate(resolution=max(int(resolution * (stop - start) / math.pi), 2),
+                                                angle=math.degrees(stop - start), capping=True,
+                                                rotation_axis=(0.0, 0.0, -1.0))
+        return swept.rotate_z(-math.degrees(start), inplace=False) if start else swept
+
+    surfaces, tire_arc, tire_top = [], 0.0, -math.inf
+    for part in buckle.parts:  # the tire first
+        if part.is_tire:
+            section, tire_top = part.section(tire_travel, -math.inf)
+            if part.axis == 0:  # radial: a ring about x
+                body = polygon(section).extrude((0.5 * part.width, 0.0, 0.0), capping=True)
+            else:
+                tire_arc = min(part.shape.half_arc, math.pi)
+                body = revolved(section, 0.0, tire_arc)
+            surfaces.append((body, TIRE_STYLE))
+        else:  # the band, over the tire where it lies
+            pieces = []
+            if tire_arc > 0.0:
+                pieces.append(revolved(part.section(tire_travel, tire_top)[0], 0.0, tire_arc))
+            if tire_arc < math.pi:
+                pieces.append(revolved(part.section(tire_travel, -math.inf)[0], tire_arc, math.pi))
+            surfaces.append((pieces[0].append_polydata(*pieces[1:]), BAND_STYLE))
+    return surfaces
+
+
+def _eye_extras(grid, marks: dict) -> list:
+    """What the von Mises picture draws on the deformed half eye besides the stress
+    (:func:`render_png`'s extras): the buckle (:func:`buckle_surfaces`; none before it is
+    placed), each suture's bites as green beads on the sclera joined over the buckle
+    through where they leave it, a label where the tear lies (under the buckle), and the
+    cornea and the optic nerve named."""
+    import pyvista
+
+    moved = grid.points + grid.point_data["displacement"]
+    placed = marks.get("buckle")
+    buckle = buckle_surfaces(*placed) if placed is not None else []
+    extras: list = list(buckle)
+    bites, anchors = marks["sutures"]
+    if placed is not None and len(bites):
+        centres = np.array([bite[2] for bite in bites], dtype=float)
+        # the bites on the deformed sclera: their nearest nodes, moved
+        nearest = np.argmin(np.linalg.norm(grid.points[None] - centres[:, None], axis=2), axis=1)
+        beads = moved[nearest]
+        lines = []
+        k = 0
+        while k < len(bites):  # a suture's two bites (sides -1, +1) at one azimuth: one loop
+            if k + 1 < len(bites) and bites[k][0] == bites[k + 1][0] and bites[k][1] == -bites[k + 1][1]:
+                lines.append([beads[k], anchors[k], anchors[k + 1], beads[k + 1]])
+                k += 2
+            else:
+                lines.append([beads[k], anchors[k]])
+                k += 1
+        starts = np.cumsum([0] + [len(line) for line in lines])
+        threads = pyvista.PolyData(np.concatenate(lines), lines=np.concatenate(
+            [np.r_[len(line), start + np.arange(len(line))] for line, start in zip(lines, starts)]))
+        extras.append((pyvista.PolyData(beads), {"color": SUTURE_COLOR, "point_size": 14,
+                                                 "render_points_as_spheres": True, "label": "sutures"}))
+        extras.append((threads, {"color": SUTURE_COLOR, "line_width": 4}))
+    rim = marks["rim"]
+    if len(rim):
+        # the tear lies inside, under the buckle: its label outside the eye, over the rim
+        centre = moved[rim].mean(axis=0)
+        outer = max([float(np.linalg.norm(moved, axis=1).max())]
+                    + [float(np.linalg.norm(surface.points, axis=1).max()) for surface, _ in buckle])
+        over = centre / np.linalg.norm(centre) * (outer + 0.5)
+        extras.append((pyvista.lines_from_points(np.array([centre, over])), {"color": "yellow",
+                                                                              "line_width": 4}))
+        extras.append(PointLabels(over[None], ["tear (beneath)"], {"point_color": "yellow",
+                                                                    "point_size": 12}))
+    extras += _tissue_labels(grid, moved)
+    return extras
+
+
+def _tissue_labels(grid, moved) -> list:
+    """The cornea named at its apex and the optic nerve at its end (the most anterior and
+    the most posterior points of their cells), when the grid has them."""
+    if "tissue_names" not in grid.field_data:
+        return []
+    names = dict(zip(grid.field_data["tissue_names"].tolist(), grid.field_data["tissue_tags"].tolist()))
+    points, texts = [], []
+    for name, text, pick in (("cornea", "cornea", np.argmax), ("optic_nerve", "optic nerve", np.argmin)):
+        if name not in names:
+            continue
+        cells = np.flatnonzero(np.asarray(grid.cell_data["tissue"]) == names[name])
+        if not len(cells):
+            continue
+        nodes = grid.extract_cells(cells).point_data["vtkOriginalPointIds"]
+        points.append(moved[nodes[pick(moved[nodes, 2])]])
+        texts.append(text)
+    return [PointLabels(np.array(points), texts)] if texts else []
 
 
 def _section_title(stage: int, name: str, measured: dict) -> str:
