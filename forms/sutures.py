@@ -58,20 +58,24 @@ def suture_residual(forces, centres, bite_radius, v, measure, scales=None):
 
 
 def tied_leg_stretch(x, x_tied, anchor, anchor_tied, shortening):
-    """⟨ℓ − (ℓ_tied − s)⟩₊: how much a tied mattress suture's leg is stretched at a point x
-    of its bite. The leg runs from x to where it leaves the buckle (``anchor``);
-    ℓ = |anchor − x| now, ℓ_tied = |anchor_tied − x_tied| when the surgeon began to tie
-    it, and the knot takes ``shortening`` s out of it. A suture pulls but cannot push."""
+    """ℓ − (ℓ_tied − s): how much a tied mattress suture's leg is stretched at a point x of
+    its bite. The leg runs from x to where it leaves the buckle (``anchor``); ℓ =
+    |anchor − x| now, ℓ_tied = |anchor_tied − x_tied| when the surgeon began to tie it,
+    and the knot takes ``shortening`` s out of it. Signed and smooth: the points of a bite
+    turn with the sclera, so a taut leg's stretch varies across its bite, and a pointwise
+    ⟨·⟩₊ put a kink under Newton wherever it crossed zero (the default eye's settling
+    stalled at a residual of 5e-5); that a suture cannot push is the leg's, as a whole
+    (:class:`~eyemech.problems.scleral_buckling.suture_terms.MattressSutures`)."""
     length = ufl.sqrt(ufl.dot(anchor - x, anchor - x))
     length_tied = ufl.sqrt(ufl.dot(anchor_tied - x_tied, anchor_tied - x_tied))
-    return ufl.max_value(length - length_tied + shortening, 0.0)
+    return length - length_tied + shortening
 
 
 def tied_leg_energy(stretch, stiffness, weight):
-    """½ k stretch² w: the energy density of a tied leg (:func:`tied_leg_stretch`), k its
-    axial stiffness (N/mm), w its bite's weight (unit integral per leg), so that the leg's
-    tension is T = k ∫ stretch w dA. Its derivative in the displacement pulls each point of
-    the bite along the leg's own direction, (anchor − x)/ℓ, exact within a Newton solve;
-    the anchor rides on the buckle's travel δ, so ∂/∂δ is the leg's push on the buckle:
-    suture and buckle exchange equal and opposite forces."""
+    """½ k stretch² w: the energy density of a taut tied leg (:func:`tied_leg_stretch`), k
+    its axial stiffness (N/mm), w its bite's weight (unit integral per leg), so that the
+    leg's tension is T = k ∫ stretch w dA. Its derivative in the displacement pulls each
+    point of the bite along the leg's own direction, (anchor − x)/ℓ, exact within a Newton
+    solve; the anchor rides on the buckle's travel δ, so ∂/∂δ is the leg's push on the
+    buckle: suture and buckle exchange equal and opposite forces."""
     return 0.5 * stiffness * stretch**2 * weight

@@ -142,9 +142,12 @@ class MattressSutures(Sutures):
             self.stretches.append(tied_leg_stretch(x, x_tied, base + travel * motion,
                                                    base + tied * motion, self.tie * slack))
         self.measure_ = body.ds(body.eye.tag("sclera_outer"))
-        self.energy = self.placed * sum(tied_leg_energy(stretch, self.stiffness, weight)
-                                        for stretch, weight in zip(self.stretches, self.weights)) \
-            * self.measure_
+        # a leg is taut while its tension is positive at the last converged step (lagged, as
+        # the loop's directions): a suture pulls but cannot push
+        self.taut = [dolfinx.fem.Constant(mesh, 1.0) for _ in self.bites]
+        self.energy = self.placed * sum(
+            taut * tied_leg_energy(stretch, self.stiffness, weight)
+            for taut, stretch, weight in zip(self.taut, self.stretches, self.weights)) * self.measure_
 
     def residual(self, tests):
         return ufl.derivative(self.energy, self.body.u, tests[0])
@@ -174,9 +177,18 @@ class MattressSutures(Sutures):
                 for stretch, weight in zip(self.stretches, self.weights)]
 
     def tensions(self) -> list[float]:
-        """Each leg's tension (N): k ∫ ⟨ℓ − ℓ_tied + s⟩₊ w dA over its share of the bite."""
+        """Each leg's tension (N): k ∫ (ℓ − ℓ_tied + s) w dA over its share of the bite, 0
+        for a slack leg. Collective."""
+        return [max(stretch, 0.0) for stretch in self._stretch_forces()]
+
+    def _stretch_forces(self) -> list[float]:
         return [self.stiffness * assemble_scalar(form, self.body.comm) / share
                 for form, share in zip(self._tension_forms, self.forces.shares)]
+
+    def converged(self) -> None:
+        super().converged()
+        for taut, force in zip(self.taut, self._stretch_forces()):
+            taut.value = 1.0 if force > 0.0 else 0.0
 
     def controls(self) -> dict[str, Control]:
         return super().controls() | {
@@ -188,6 +200,8 @@ class MattressSutures(Sutures):
         checkpoints.function("suture_u_tied", self.u_tied)
         checkpoints.constant("suture_tie", self.tie)
         checkpoints.constant("sutures_placed", self.placed)
+        for k, taut in enumerate(self.taut):
+            checkpoints.constant(f"suture_leg_{k}_taut", taut)
         checkpoints.value("suture_anchors", lambda: {
             "base": [c.value.copy() for c in self.anchor_base],
             "motion": [c.value.copy() for c in self.anchor_motion],
