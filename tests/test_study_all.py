@@ -79,3 +79,83 @@ def test_a_failed_case_exits_4_and_is_named(tmp_path, monkeypatch, capsys):
     assert "study fails-once: 1 of 2 cases failed: t case=1" in err
     assert "t.csv case 2/2 (case=1): failed (NaN)" in err
     assert any(t.startswith("✗ 1 of 2 cases failed") for t in texts)
+
+
+def _planted_failure(*args, **kwargs):
+    from eyemech.problems.solve.driver import SolveFailure
+
+    raise SolveFailure(1, 0.5, 0.25, [1.0, 0.9], "DIVERGED_PLANTED")
+
+
+def _planted_process_failure(command, env):
+    import subprocess
+
+    raise subprocess.CalledProcessError(3, command, output="", stderr=(
+        "eyemech: solve failed: Newton did not converge at step 1 (SNES reason: DIVERGED_PLANTED)\n"))
+
+
+# a study's case runner, replaced by one whose first case fails (the others run, on the quick
+# settings) or, where the quick cases cost a minute (keratotomy-salz), every case
+FAILING_RUNNER = {
+    "eye-calibration": ("eyemech.problems.studies.eye_calibration.inflation_curve", _planted_failure, True),
+    "keratotomy-magnitude": ("eyemech.problems.keratotomy.run", _planted_failure, True),
+    "keratotomy-salz": ("eyemech.problems.keratotomy.run", _planted_failure, False),
+    "peer-comparison": ("eyemech.problems.studies.peer_comparison._timed", _planted_process_failure, True),
+    "shell-penalty": ("eyemech.problems.plate_clamped.run", _planted_failure, True),
+    "shell-plate-nonlinear": ("eyemech.problems.plate_clamped.run", _planted_failure, True),
+    "shell-thickness": ("eyemech.problems.hemisphere.run", _planted_failure, True),
+}
+
+
+@pytest.mark.parametrize("name", list(FAILING_RUNNER))
+def test_a_case_that_fails_is_a_failed_row_marked_on_the_chart_and_the_study_exits_4(
+        name, tmp_path, monkeypatch, capsys):
+    """Issue 39: these studies wrote no status, so that a case whose solve failed stopped
+    the study (no table) instead of being a row with status failed that ``eyemech study``
+    names, marks on the chart and exits 4 for. The failure is planted in the case runner."""
+    import importlib
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from eyemech.problems.studies import FAILED
+    from eyemech.problems.studies._common import read_csv
+    from eyemech.scripts import cli
+
+    target, failure, first_only = FAILING_RUNNER[name]
+    module, attribute = target.rsplit(".", 1)
+    real = getattr(importlib.import_module(module), attribute)
+    calls = []
+
+    def runner(*args, **kwargs):
+        calls.append(1)
+        return failure(*args, **kwargs) if len(calls) == 1 or not first_only else real(*args, **kwargs)
+
+    monkeypatch.setattr(target, runner)
+    charts: list[dict] = []
+    save = Figure.savefig
+
+    def savefig(fig, *args, **kwargs):  # what the chart shows of the failed case
+        crosses = [line for ax in fig.axes for line in ax.lines
+                   if line.get_marker() == "x" and line.get_color() == "tab:red"]
+        words = [t.get_text() for ax in fig.axes for t in ax.texts] + \
+            [label for ax in fig.axes for label in ax.get_legend_handles_labels()[1]]
+        charts.append({"marked": bool(crosses) or any("failed" in w for w in words),
+                       "footer": any(t.get_text().startswith("✗") for t in fig.texts)})
+        return save(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    assert cli.main(["study", name, "--quick", "--out", str(tmp_path)]) == cli.EXIT_CASES_FAILED
+    err = capsys.readouterr().err
+    rows = [r for table in sorted(tmp_path.glob("*.csv")) for r in read_csv(table)]
+    failed = [r for r in rows if r["status"] in FAILED]
+    assert failed and all("DIVERGED_PLANTED" in r["error"] for r in failed), failed
+    if first_only:  # the one failed case is a row beside the others, which ran
+        assert len(failed) == 1 and all(r["status"] == "ok" for r in rows if r is not failed[0])
+    else:
+        assert len(failed) == len(rows)
+    assert f"eyemech: study {name}: {len(failed)} of {len(rows)} cases failed" in err, err[-2000:]
+    assert "case 1/" in err and ": failed (" in err
+    assert charts and all(c["footer"] for c in charts) and any(c["marked"] for c in charts), charts

@@ -25,11 +25,13 @@ def sidecar(path: Path) -> Path:
     return Path(path).with_name(Path(path).stem + ".meta.json")
 
 
-def write_csv(path: Path, rows: list[dict], *notes: str) -> Path:
+def write_csv(path: Path, rows: list[dict], *notes: str, partial: bool = False) -> Path:
     """``rows`` as a plain CSV (a header line, then the rows; columns are the union of the
     rows' keys in first-seen order: a failed case may lack some), and its sidecar
     (:func:`settings`, the notes, the stamp). Within ``eyemech study`` each row with a
-    ``status`` is a case: one line per case on stderr, failed ones counted."""
+    ``status`` is a case: one line per case on stderr, failed ones counted; not in a
+    ``partial`` table, which the study writes again, whole, later (so that its cases are
+    counted once)."""
     from eyemech.problems.studies import running
 
     keys: list[str] = []
@@ -46,7 +48,8 @@ def write_csv(path: Path, rows: list[dict], *notes: str) -> Path:
             "made": stamp(), "notes": list(notes)}
     if study is not None:
         meta.update(settings(study.module))
-        _count_cases(study, path, rows)
+        if not partial:
+            _count_cases(study, path, rows)
     sidecar(path).write_text(json.dumps(meta, indent=1, default=str) + "\n")
     return path
 
@@ -73,6 +76,21 @@ def _count_cases(study, path: Path, rows: list[dict]) -> None:
         why = f" ({str(row['error'])[:160]})" if row.get("error") else ""
         print(f"{study.name}: {path.name} case {number}/{len(cases)} ({label}): {row['status']}{why}",
               file=sys.stderr, flush=True)
+
+
+def failed_row(case: dict, failure: BaseException) -> dict:
+    """The row of a case that did not run: its inputs (``case``), status ``failed`` (what a
+    sweep records for a :class:`SolveFailure`) and the message as ``error``. The row is
+    kept, not dropped: ``eyemech study`` names it and exits 4, :func:`mark_failed` marks it."""
+    return {**case, "status": "failed", "error": str(failure)[:300]}
+
+
+def mark_failed(ax, xs, label: str = "case failed") -> None:
+    """A red ✗ at the foot of ``ax`` at each ``x`` (data) of a failed case, on any y scale
+    (a log axis has no 0), with one legend entry."""
+    for k, x in enumerate(xs):
+        ax.plot([x], [0.0], "x", color="tab:red", ms=10, mew=2, clip_on=False,
+                transform=ax.get_xaxis_transform(), label=label if k == 0 else None)
 
 
 def settings(module_name: str) -> dict[str, Any]:

@@ -27,9 +27,9 @@ from mpi4py import MPI
 
 from eyemech.problems import scleral_buckling
 from eyemech.problems.run.context import RunContext
-from eyemech.problems.solve.driver import Stepping, follow_path
+from eyemech.problems.solve.driver import SolveFailure, Stepping, follow_path
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, failed_row, save_chart, write_csv
 
 # Pallikaris et al. 2005 (IOVS 46:409): mean in vivo ocular rigidity, natural logarithm
 PALLIKARIS_K = 0.0126  # µL⁻¹
@@ -134,16 +134,22 @@ def equibiaxial_tangent_modulus(c10: float, c20: float, stress: float) -> tuple[
 
 def run(out: Path, quick: bool, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
     """P–V curves of the coarse (quick) or default eye, table-1 and calibrated, against
-    Pallikaris' mean and range of K."""
+    Pallikaris' mean and range of K: a row per pressure (status ok), or one row with status
+    failed for a material whose inflation did not reach 40 mmHg (``eyemech study`` exits 4).
+    NaN where a column is not defined: Pallikaris' ΔV at 0 mmHg, the deviation up to 10 mmHg."""
     resolution = "coarse" if quick else "default"
     rows = []
     for material in ("table-1", "calibrated"):
-        curve = inflation_curve(healthy_eye(resolution=resolution, material=material), comm=comm)
+        try:
+            curve = inflation_curve(healthy_eye(resolution=resolution, material=material), comm=comm)
+        except SolveFailure as failure:
+            rows.append(failed_row({"material": material, "resolution": resolution}, failure))
+            continue
         dev = deviations(curve["volumes"])
         base = curve["volumes"][REFERENCE_PRESSURE]
         for p, v in curve["volumes"].items():
             rows.append({"material": material, "resolution": resolution, "pressure_mmHg": p,
-                         "volume_mm3": v, "volume_change_from_10_mmHg": v - base,
+                         "status": "ok", "volume_mm3": v, "volume_change_from_10_mmHg": v - base,
                          "pallikaris_volume_change": pallikaris_volume_change(p) if p > 0 else math.nan,
                          "deviation": dev.get(p, math.nan),
                          "newton_iterations": curve["newton_iterations"]})
@@ -172,6 +178,11 @@ def _chart(rows: list[dict], path: Path) -> None:
         ax.plot([math.log(p / REFERENCE_PRESSURE) / k for p in pressures], pressures, style,
                 label=f"Pallikaris 2005, K = {k} µL⁻¹" + (" (mean)" if k == PALLIKARIS_K else ""))
     for material, marker in (("table-1", "s"), ("calibrated", "o")):
+        if any(r["material"] == material and r["status"] != "ok" for r in rows):
+            # its inflation failed: a cross where its curve would start
+            ax.plot([0.0], [REFERENCE_PRESSURE], "x", color="tab:red", ms=10, mew=2, clip_on=False,
+                    label=f"model, {material}: solve failed")
+            continue
         mine = [r for r in rows if r["material"] == material and r["pressure_mmHg"] >= REFERENCE_PRESSURE]
         ax.plot([r["volume_change_from_10_mmHg"] for r in mine], [r["pressure_mmHg"] for r in mine],
                 marker + "-", label=f"model, {material}")

@@ -22,8 +22,9 @@ from pathlib import Path
 from mpi4py import MPI
 
 from eyemech.problems import keratotomy
+from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, failed_row, mark_failed, save_chart, write_csv
 
 SALZ_3MM = 9.06  # D, 8 incisions, 3 mm zone (Salz et al. 1985)
 BASE = dict(incisions=8, optical_zone=3.0, incision_depth=0.9, t_end=3600.0, first_dt=3600.0)
@@ -48,22 +49,28 @@ MAGNITUDE = [
 ]
 
 
-def _case(comm, **changes) -> dict:
+def _case(label: str, comm, **changes) -> dict:
+    """The case's row: its label and mesh, then status ok and its quantities, or status
+    failed (``eyemech study`` exits 4) with the solver's message."""
     # the time grid fixed: the cases differ in mesh and geometry (docs/studies/keratotomy_magnitude.csv)
     params = keratotomy.Parameters(**{**BASE, **changes, "time_stepping": "fixed"})
-    result = keratotomy.run(params, comm=comm, options=QUIET)
+    row = {"case": label, "mesh_size_mm": params.mesh_size, "azimuthal_divisions": params.azimuthal_divisions,
+           "geometry_degree": params.geometry_degree, "optical_zone_mm": params.optical_zone}
+    try:
+        result = keratotomy.run(params, comm=comm, options=QUIET)
+    except SolveFailure as failure:
+        return failed_row(row, failure)
     q = result.quantities
-    return {"mesh_size_mm": params.mesh_size, "azimuthal_divisions": params.azimuthal_divisions,
-            "geometry_degree": params.geometry_degree, "optical_zone_mm": params.optical_zone,
-            "cells": q["cells"], "hours": q["times"][-1] / 3600,
-            "flattening_t0_D": -q["power_change_initial_D"], "flattening_end_D": -q["power_change_final_D"],
-            "creep_D": -q["creep_power_change_D"],
-            "intact_power_t0_D": q["intact_power_D"][0], "intact_power_end_D": q["intact_power_D"][-1],
-            "incised_power_t0_D": q["power_D"][0], "incised_power_end_D": q["power_D"][-1],
-            "apex_displacement_t0_mm": q["apex_displacement_mm"][0],
-            "wound_gape_t0_mm": q["wound_gape_mm"][0], "wound_gape_end_mm": q["wound_gape_mm"][-1],
-            "newton_iterations": sum(s.get("newton_iterations", 0) for s in result.steps),
-            "wall_time_s": result.timings["total"]}
+    return row | {
+        "status": "ok", "cells": q["cells"], "hours": q["times"][-1] / 3600,
+        "flattening_t0_D": -q["power_change_initial_D"], "flattening_end_D": -q["power_change_final_D"],
+        "creep_D": -q["creep_power_change_D"],
+        "intact_power_t0_D": q["intact_power_D"][0], "intact_power_end_D": q["intact_power_D"][-1],
+        "incised_power_t0_D": q["power_D"][0], "incised_power_end_D": q["power_D"][-1],
+        "apex_displacement_t0_mm": q["apex_displacement_mm"][0],
+        "wound_gape_t0_mm": q["wound_gape_mm"][0], "wound_gape_end_mm": q["wound_gape_mm"][-1],
+        "newton_iterations": sum(s.get("newton_iterations", 0) for s in result.steps),
+        "wall_time_s": result.timings["total"]}
 
 
 def _chart(path: Path, convergence: list[dict], magnitude: list[dict], creep: list[dict]) -> Path:
@@ -72,7 +79,11 @@ def _chart(path: Path, convergence: list[dict], magnitude: list[dict], creep: li
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = 3 if creep else 2
+    failed = [r["case"] for r in convergence if r["status"] != "ok"]
+    convergence = [r for r in convergence if r["status"] == "ok"]
+    creep_failed = [r["optical_zone_mm"] for r in creep if r["status"] != "ok"]
+    creep = [r for r in creep if r["status"] == "ok"]
+    panels = 3 if creep or creep_failed else 2
     fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels, 4))
     ax = axes[0]
     for degree, marker in ((1, "o-"), (2, "s-")):
@@ -87,18 +98,26 @@ def _chart(path: Path, convergence: list[dict], magnitude: list[dict], creep: li
     ax.set_xlabel("cells")
     ax.set_ylabel("flattening (D)")
     ax.set_title("8 incisions, OZ 3 mm: mesh convergence", fontsize=9)
+    if failed:  # a failed case has no cells to be placed at: named
+        ax.text(0.02, 0.02, "✗ solve failed: " + "; ".join(failed), transform=ax.transAxes,
+                fontsize=7, color="tab:red")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     ax = axes[1]
     labels = [r["case"] for r in magnitude]
     if magnitude:
-        ax.barh(labels, [r["flattening_t0_D"] for r in magnitude], color="C0", label="t = 0")
+        ax.barh(labels, [r["flattening_t0_D"] if r["status"] == "ok" else 0.0 for r in magnitude],
+                color="C0", label="t = 0")
+        for label, r in zip(labels, magnitude):
+            if r["status"] != "ok":  # a failed case: a cross on its bar's line
+                ax.plot([0.0], [label], "x", color="tab:red", ms=10, mew=2, clip_on=False)
+                ax.annotate(" solve failed", (0.0, label), color="tab:red", fontsize=7, va="center")
     ax.axvline(SALZ_3MM, color="k", ls="--", label="Salz et al. 1985")
     ax.set_xlabel("flattening (D)")
     ax.set_title("what drives the magnitude (one change at a time)", fontsize=9)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3, axis="x")
-    if creep:
+    if panels == 3:
         ax = axes[2]
         zones = [r["optical_zone_mm"] for r in creep]
         ax.plot(zones, [r["intact_power_end_D"] - r["intact_power_t0_D"] for r in creep], "o-",
@@ -106,9 +125,10 @@ def _chart(path: Path, convergence: list[dict], magnitude: list[dict], creep: li
         ax.plot(zones, [r["incised_power_end_D"] - r["incised_power_t0_D"] for r in creep], "s-",
                 label="incised: creep steepening")
         ax.plot(zones, [-r["creep_D"] for r in creep], "k^-", label="difference = creep of power change")
+        mark_failed(ax, creep_failed, "solve failed")
         ax.axhline(0, color="grey", lw=0.8)
         ax.set_xlabel("optical zone (mm)")
-        ax.set_ylabel(f"power change over {creep[0]['hours']:g} h (D)")
+        ax.set_ylabel(f"power change over {creep[0]['hours']:g} h (D)" if creep else "power change (D)")
         ax.set_title("creep: two steepenings that nearly cancel", fontsize=9)
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
@@ -121,22 +141,24 @@ def run(out: Path, quick: bool = False, comm=None) -> list[Path]:
     out = Path(out)
     if quick:
         coarse = dict(mesh_size=2.0, azimuthal_divisions=8, t_end=1800.0, first_dt=1800.0)
-        convergence = [{"case": "2.0 mm, 8 around", **_case(comm, **coarse)}]
+        convergence = [_case("2.0 mm, 8 around", comm, **coarse)]
         magnitude: list[dict] = []
         creep: list[dict] = []
     else:  # the CSV is rewritten after each part: a partial study keeps what it measured
-        convergence = [{"case": label, **_case(comm, **changes)} for label, changes in CONVERGENCE]
-        _write(out, comm, convergence, [], [])
-        magnitude = [{"case": label, **_case(comm, **{**SWEEP_MESH, **changes})}
-                     for label, changes in MAGNITUDE]
-        _write(out, comm, convergence, magnitude, [])
-        creep = [{"case": f"OZ {zone:g} mm, 4 h", **_case(comm, optical_zone=zone, t_end=4 * 3600.0,
-                                                          first_dt=1800.0, dt_growth=2.0, **CREEP_MESH)}
+        convergence = [_case(label, comm, **changes) for label, changes in CONVERGENCE]
+        _write(out, comm, convergence, [], [], partial=True)
+        magnitude = [_case(label, comm, **{**SWEEP_MESH, **changes}) for label, changes in MAGNITUDE]
+        _write(out, comm, convergence, magnitude, [], partial=True)
+        creep = [_case(f"OZ {zone:g} mm, 4 h", comm, optical_zone=zone, t_end=4 * 3600.0,
+                          first_dt=1800.0, dt_growth=2.0, **CREEP_MESH)
                  for zone in (3.0, 4.0, 5.0)]
     return _write(out, comm, convergence, magnitude, creep)
 
 
-def _write(out: Path, comm, convergence: list[dict], magnitude: list[dict], creep: list[dict]) -> list[Path]:
+def _write(out: Path, comm, convergence: list[dict], magnitude: list[dict], creep: list[dict],
+           partial: bool = False) -> list[Path]:
+    """The table and the chart of the parts measured so far (``partial``: the study goes on
+    and writes them again; its cases are counted in the last, whole table)."""
     if comm.rank != 0:
         return []
     rows = ([{"part": "convergence", **r} for r in convergence]
@@ -144,7 +166,7 @@ def _write(out: Path, comm, convergence: list[dict], magnitude: list[dict], cree
             + [{"part": "creep", **r} for r in creep])
     csv = write_csv(out / "keratotomy_magnitude.csv", rows,
                     "keratotomy: flattening (= -power_change_D) of 8 incisions, 90 % depth, 15 mmHg; "
-                    "Salz et al. 1985: 9.06 D at OZ 3 mm")
+                    "Salz et al. 1985: 9.06 D at OZ 3 mm", partial=partial)
     return [csv, _chart(out / "keratotomy_magnitude.png", convergence, magnitude, creep)]
 
 

@@ -34,7 +34,7 @@ from mpi4py import MPI
 
 from eyemech.problems import scenes
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, with_units, write_csv
+from eyemech.problems.studies._common import mark_failed, save_chart, with_units, write_csv
 
 CASES = [("P2P1", 1.0), ("Q2P1", 1.0)]
 QUICK_CASES = [("P2P1", 3.0)]
@@ -85,30 +85,48 @@ def _jit_cache_files() -> int:
     return sum(1 for _ in folder.iterdir()) if folder.is_dir() else 0
 
 
+def _failed(case: dict, failure: subprocess.CalledProcessError) -> dict:
+    """The row of a case whose process stopped with an error: status ``failed`` where its
+    Newton gave up (eyemech: "solve failed", exit 3; the plain script: "SNES did not
+    converge"), ``error`` otherwise, with the process's last line of stderr."""
+    stderr = failure.stderr or ""
+    solve = (failure.returncode == 3 and "solve failed" in stderr) or "SNES did not converge" in stderr
+    last = next((line for line in reversed(stderr.splitlines()) if line.strip()), str(failure))
+    who = "plain script" if "eyemech.problems.reference.plain_dolfinx_sphere" in failure.cmd \
+        else "eyemech run"
+    return {**case, "status": "failed" if solve else "error", "error": f"{who}: {last.strip()}"[:300]}
+
+
 def compare(element: str, mesh_size: float, repeats: int) -> dict:
+    """One case's row: status ok with the two processes' medians, or the row of
+    :func:`_failed` (``eyemech study`` exits 4)."""
     load_before = os.getloadavg()[0]
+    case = {"element": element, "mesh_size": mesh_size}
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder)
         env = _environment(out / "bytecode")
-        _eyemech(element, mesh_size, out / "warm", env)
-        _plain(element, mesh_size, env)
-        ours, theirs = [], []
-        for k in range(repeats):
-            ours.append(_eyemech(element, mesh_size, out / f"run{k}", env))
-            theirs.append(_plain(element, mesh_size, env))
+        try:
+            _eyemech(element, mesh_size, out / "warm", env)
+            _plain(element, mesh_size, env)
+            ours, theirs = [], []
+            for k in range(repeats):
+                ours.append(_eyemech(element, mesh_size, out / f"run{k}", env))
+                theirs.append(_plain(element, mesh_size, env))
+        except subprocess.CalledProcessError as failure:
+            return _failed(case, failure)
     wall_ours = statistics.median(w for w, _, _ in ours)
     wall_theirs = statistics.median(w for w, _, _ in theirs)
     cpu_ours = statistics.median(c for _, c, _ in ours)
     cpu_theirs = statistics.median(c for _, c, _ in theirs)
-    return {"element": element, "mesh_size": mesh_size, "unknowns": theirs[0][2]["unknowns"],
-            "error_eyemech": ours[0][2]["error"], "error_plain": theirs[0][2]["error"],
-            "newton_eyemech": ours[0][2]["newton"], "newton_plain": theirs[0][2]["newton"],
-            "wall_eyemech_s": round(wall_ours, 3), "wall_plain_s": round(wall_theirs, 3),
-            "ratio": round(wall_ours / wall_theirs, 3),
-            "cpu_eyemech_s": round(cpu_ours, 3), "cpu_plain_s": round(cpu_theirs, 3),
-            "cpu_ratio": round(cpu_ours / cpu_theirs, 3), "repeats": repeats,
-            "load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2),
-            "jit_cache_files": _jit_cache_files()}
+    return case | {"status": "ok", "unknowns": theirs[0][2]["unknowns"],
+                   "error_eyemech": ours[0][2]["error"], "error_plain": theirs[0][2]["error"],
+                   "newton_eyemech": ours[0][2]["newton"], "newton_plain": theirs[0][2]["newton"],
+                   "wall_eyemech_s": round(wall_ours, 3), "wall_plain_s": round(wall_theirs, 3),
+                   "ratio": round(wall_ours / wall_theirs, 3),
+                   "cpu_eyemech_s": round(cpu_ours, 3), "cpu_plain_s": round(cpu_theirs, 3),
+                   "cpu_ratio": round(cpu_ours / cpu_theirs, 3), "repeats": repeats,
+                   "load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2),
+                   "jit_cache_files": _jit_cache_files()}
 
 
 def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
@@ -131,8 +149,10 @@ def run(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> list[Path]:
     fig, ax = plt.subplots(figsize=(5.5, 3.2))
     labels = [f"{r['element']} h={r['mesh_size']:g}" for r in rows]
     x = range(len(rows))
-    ax.bar([i - 0.2 for i in x], [r["wall_eyemech_s"] for r in rows], 0.4, label="eyemech run")
-    ax.bar([i + 0.2 for i in x], [r["wall_plain_s"] for r in rows], 0.4, label="plain DOLFINx script")
+    ok = [i for i in x if rows[i]["status"] == "ok"]
+    ax.bar([i - 0.2 for i in ok], [rows[i]["wall_eyemech_s"] for i in ok], 0.4, label="eyemech run")
+    ax.bar([i + 0.2 for i in ok], [rows[i]["wall_plain_s"] for i in ok], 0.4, label="plain DOLFINx script")
+    mark_failed(ax, [i for i in x if i not in ok], "case failed")
     ax.set_xticks(list(x), labels)
     ax.set_ylabel("process wall time (s)")
     ax.set_title("sphere-inflation, same mesh and error")

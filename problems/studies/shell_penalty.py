@@ -27,8 +27,9 @@ from eyemech.meshes.surface import mapped_surface, tag_boundary
 from eyemech.problems import plate_clamped
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.shell.model import Shell
+from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import save_chart, write_csv
+from eyemech.problems.studies._common import failed_row, mark_failed, save_chart, write_csv
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -67,10 +68,6 @@ def _condition_number(divisions: int, penalty_factor: float) -> float:
     return float(scipy.sparse.linalg.onenormest(K) * scipy.sparse.linalg.onenormest(inverse))
 
 
-def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
-    write_csv(path, [dict(zip(header, row)) for row in rows])
-
-
 def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[Path]:
     out = Path(out)
     if comm.rank != 0:  # serial studies: rank 0 does the work
@@ -78,55 +75,81 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     out.mkdir(parents=True, exist_ok=True)
     divisions = 8 if quick else 16
     factors = [0.1, 1.0, 10.0] if quick else list(np.logspace(-1.5, 3.0, 19))
+    # a case whose solve fails is a row with status failed (``eyemech study`` exits 4)
     penalty_rows = []
     for alpha in factors:
-        error, dofs, _ = _deflection_error(divisions=divisions, penalty_factor=float(alpha))
-        penalty_rows.append([float(alpha), error, _condition_number(divisions, float(alpha)), dofs])
+        case = {"penalty_factor": float(alpha)}
+        try:
+            error, dofs, _ = _deflection_error(divisions=divisions, penalty_factor=float(alpha))
+        except SolveFailure as failure:
+            penalty_rows.append(failed_row(case, failure))
+            continue
+        penalty_rows.append(case | {"status": "ok", "center_deflection_error": error,
+                                    "condition_number": _condition_number(divisions, float(alpha)),
+                                    "dofs": dofs})
     degree_runs = {2: [8] if quick else [8, 16, 24, 32, 48], 3: [4] if quick else [4, 8, 12, 16]}
     degree_rows = []
     for degree, sequence in degree_runs.items():
         for n in sequence:
-            error, dofs, seconds = _deflection_error(divisions=n, degree=degree)
-            degree_rows.append([degree, n, dofs, error, seconds])
-    files = [out / "shell_penalty.csv", out / "shell_degree.csv"]
-    _write_csv(files[0], ["penalty_factor", "center_deflection_error", "condition_number", "dofs"],
-               penalty_rows)
-    _write_csv(files[1], ["degree", "divisions", "dofs", "center_deflection_error", "seconds"],
-               degree_rows)
-    files += _charts(out, divisions, np.array(penalty_rows), degree_rows)
+            case = {"degree": degree, "divisions": n}
+            try:
+                error, dofs, seconds = _deflection_error(divisions=n, degree=degree)
+            except SolveFailure as failure:
+                degree_rows.append(failed_row(case, failure))
+                continue
+            degree_rows.append(case | {"status": "ok", "dofs": dofs, "center_deflection_error": error,
+                                       "seconds": seconds})
+    files = [write_csv(out / "shell_penalty.csv", penalty_rows),
+             write_csv(out / "shell_degree.csv", degree_rows)]
+    files += _charts(out, divisions, penalty_rows, degree_rows)
     return files
 
 
-def _charts(out: Path, divisions: int, penalty: np.ndarray, degree_rows: list) -> list[Path]:
+def _charts(out: Path, divisions: int, penalty_rows: list[dict], degree_rows: list[dict]) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
+    columns = ("penalty_factor", "center_deflection_error", "condition_number")
+    penalty = np.array([[r[k] for k in columns] for r in penalty_rows if r["status"] == "ok"],
+                       dtype=float).reshape(-1, len(columns))
+    failed_factors = [r["penalty_factor"] for r in penalty_rows if r["status"] != "ok"]
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
     left.loglog(penalty[:, 0], np.abs(penalty[:, 1]) * 100, "o-")
     for alpha, error in penalty[:, :2]:
         if error > 0:  # too soft: mark the sign, which the log axis hides
             left.annotate("+", (alpha, abs(error) * 100), textcoords="offset points", xytext=(4, 4))
+    left.set_xscale("log")
+    mark_failed(left, failed_factors, "solve failed")
     left.axhline(0.3, color="grey", ls=":", label="0.3 % target")
     left.set(xlabel="penalty factor α", ylabel="|centre deflection error| (%)",
              title=f"clamped plate, P2, crossed {divisions}×{divisions} (+: too soft)")
     left.legend()
     right.loglog(penalty[:, 0], penalty[:, 2], "s-", color="C3")
+    right.set_xscale("log")
+    mark_failed(right, failed_factors, "solve failed")
     right.set(xlabel="penalty factor α", ylabel="condition number (1-norm estimate)",
               title="bending stiffness conditioning (free w dofs)")
     penalty_png = out / "shell_penalty.png"
     save_chart(fig, penalty_png, dpi=110, rect=(0, 0.04, 1, 1))
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
+    columns = ("divisions", "dofs", "center_deflection_error", "seconds")
     for degree, marker in ((2, "o-"), (3, "s-")):
-        rows = np.array([r for r in degree_rows if r[0] == degree], dtype=float)
-        left.loglog(rows[:, 2], np.abs(rows[:, 3]) * 100, marker, label=f"P{degree}")
-        right.loglog(rows[:, 4], np.abs(rows[:, 3]) * 100, marker, label=f"P{degree}")
-        for n, dofs, error, seconds in rows[:, 1:5]:
+        rows = np.array([[r[k] for k in columns] for r in degree_rows
+                         if r["degree"] == degree and r["status"] == "ok"], dtype=float).reshape(-1, 4)
+        left.loglog(rows[:, 1], np.abs(rows[:, 2]) * 100, marker, label=f"P{degree}")
+        right.loglog(rows[:, 3], np.abs(rows[:, 2]) * 100, marker, label=f"P{degree}")
+        for n, dofs, error, seconds in rows:
             right.annotate(f"{int(n)}", (seconds, abs(error) * 100), fontsize=7,
                            textcoords="offset points", xytext=(3, 3))
+    failed = [r for r in degree_rows if r["status"] != "ok"]
+    if failed:  # no unknowns or time to place them at: named on the chart
+        left.text(0.02, 0.02, "✗ solve failed: " + "; ".join(f"P{r['degree']}, {r['divisions']} div."
+                                                           for r in failed),
+                  transform=left.transAxes, fontsize=7, color="tab:red")
     for axis, label in ((left, "unknowns"), (right, "assembly + solve (s)")):
         axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # no crowded labels
         axis.axhline(0.3, color="grey", ls=":")

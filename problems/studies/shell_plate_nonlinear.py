@@ -23,18 +23,30 @@ from eyemech.problems.shell.model import (
     LEVY_LOAD_PARAMETER,
     LEVY_POISSON_RATIO,
 )
+from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
+from eyemech.problems.studies._common import (
+    QUIET,
+    failed_row,
+    save_chart,
+    with_units,
+    write_csv,
+)
 
 
 def _curve(case: str, **overrides) -> list[dict]:
+    """The load steps of one case (a row each, status ok), or one row with status failed
+    when its path did not reach the last load."""
     params = plate_clamped.Parameters(kinematics="nonlinear", **overrides)
-    result = plate_clamped.run(params, comm=MPI.COMM_SELF, options=QUIET)
+    try:
+        result = plate_clamped.run(params, comm=MPI.COMM_SELF, options=QUIET)
+    except SolveFailure as failure:
+        return [failed_row(dict(case=case, divisions=params.divisions), failure)]
     h = params.thickness
     linear_slope = 0.00126532 * params.length ** 4 * 12 * (1 - params.poisson_ratio ** 2) / (
         params.youngs_modulus * params.thickness ** 3)
-    return [dict(case=case, divisions=params.divisions, dofs=result.quantities["dofs"],
-                 load_parameter=s["load_parameter"], q=s["q"], w_over_h=s["center_deflection"] / h,
+    return [dict(case=case, divisions=params.divisions, load_parameter=s["load_parameter"], q=s["q"],
+                 status="ok", dofs=result.quantities["dofs"], w_over_h=s["center_deflection"] / h,
                  w_over_h_levy=s.get("center_deflection_levy", float("nan")) / h,
                  w_over_h_linear=linear_slope * s["q"] / h, newton_iterations=s["newton_iterations"])
             for s in result.steps]
@@ -65,15 +77,22 @@ def _chart(out: Path, rows: list[dict]) -> Path:
     import matplotlib.pyplot as plt
 
     fig, axis = plt.subplots(figsize=(6.2, 4.5))
-    top = max(r["load_parameter"] for r in rows)
-    axis.plot([0, top], [0, rows[0]["w_over_h_linear"] / rows[0]["load_parameter"] * top], "k:",
-              label="linear plate (Timoshenko 0.00126 qL⁴/D)")
+    ok = [r for r in rows if r["status"] == "ok"]
+    if ok:
+        top = max(r["load_parameter"] for r in ok)
+        axis.plot([0, top], [0, ok[0]["w_over_h_linear"] / ok[0]["load_parameter"] * top], "k:",
+                  label="linear plate (Timoshenko 0.00126 qL⁴/D)")
     axis.plot([0, *LEVY_LOAD_PARAMETER], [0, *LEVY_CENTER_DEFLECTION], "ks", mfc="none",
               label="Levy 1942, sliding edges, ν = 0.316")
     for case, style in (("sliding, nu 0.316 (Levy)", "o-"), ("immovable, nu 0.3", "^-")):
         mine = [r for r in rows if r["case"] == case]
+        name = f"shell, {case.replace('nu', 'ν')}, {mine[0]['divisions']}² crossed P2"
+        if mine[0]["status"] != "ok":  # its path did not reach the last load: a cross at the origin
+            axis.plot([0], [0], "x", color="tab:red", ms=10, mew=2, clip_on=False,
+                      label=f"{name}: solve failed")
+            continue
         axis.plot([0] + [r["load_parameter"] for r in mine], [0] + [r["w_over_h"] for r in mine], style,
-                  ms=4, label=f"shell, {case.replace('nu', 'ν')}, {mine[0]['divisions']}² crossed P2")
+                  ms=4, label=name)
     axis.set(xlabel="Q = q L⁴ / (E h⁴)", ylabel="centre deflection / thickness",
              title="clamped square plate, large deflection", ylim=(0, 2.6))
     axis.legend(fontsize=7, loc="upper left")

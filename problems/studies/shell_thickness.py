@@ -20,8 +20,16 @@ from pathlib import Path
 from mpi4py import MPI
 
 from eyemech.problems import hemisphere
+from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
+from eyemech.problems.studies._common import (
+    QUIET,
+    failed_row,
+    mark_failed,
+    save_chart,
+    with_units,
+    write_csv,
+)
 
 SLENDERNESS = (25, 50, 100, 250, 500, 1000, 2500)  # R / h
 # (degree, divisions): P2 and P3 on the fixed mesh of 16 divisions (80 around), and P2
@@ -44,12 +52,17 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
             h = R / ratio
             force = base.force * (h / base.thickness) ** 3
             params = hemisphere.Parameters(divisions=divisions, degree=degree, thickness=h, force=force)
-            result = hemisphere.run(params, comm=MPI.COMM_SELF, options=QUIET)
+            case = dict(degree=degree, divisions=divisions, slenderness=ratio, thickness=h, force=force)
+            try:
+                result = hemisphere.run(params, comm=MPI.COMM_SELF, options=QUIET)
+            except SolveFailure as failure:  # a case that did not run: a row that says so (exit 4)
+                rows.append(failed_row(case, failure))
+                continue
             u = result.quantities["radial_displacement_x"]
-            rows.append(dict(degree=degree, divisions=divisions, dofs=result.quantities["dofs"],
-                             slenderness=ratio, thickness=h, force=force, radial_displacement_x=u,
-                             scaled_displacement=u * E * h ** 3 / (force * R ** 2),
-                             assembly_solve_seconds=result.timings["assembly"] + result.timings["solve"]))
+            rows.append(case | dict(status="ok", dofs=result.quantities["dofs"], radial_displacement_x=u,
+                                    scaled_displacement=u * E * h ** 3 / (force * R ** 2),
+                                    assembly_solve_seconds=result.timings["assembly"]
+                                    + result.timings["solve"]))
     csv_path = write_csv(out / "shell_thickness.csv", with_units(rows, hemisphere.Parameters),
                          "linear pinched hemisphere R 10, 18 deg hole, E 6.825e7, nu 0.3, crossed; "
                          "F = 2 (h/0.04)^3; scaled = u E h^3 / (F R^2)",
@@ -67,11 +80,14 @@ def _chart(out: Path, rows: list[dict]) -> Path:
     reference = (hemisphere.REFERENCE * base.youngs_modulus * base.thickness ** 3
                  / (base.force * base.radius ** 2))
     fig, axis = plt.subplots(figsize=(6.2, 4.4))
-    for case in dict.fromkeys((r["degree"], r["divisions"]) for r in rows):
-        mine = [r for r in rows if (r["degree"], r["divisions"]) == case]
+    ok = [r for r in rows if r["status"] == "ok"]
+    for case in dict.fromkeys((r["degree"], r["divisions"]) for r in ok):
+        mine = [r for r in ok if (r["degree"], r["divisions"]) == case]
         axis.semilogx([r["slenderness"] for r in mine], [r["scaled_displacement"] for r in mine],
                       "s--" if case == (2, 24) else "o-",
                       label=f"P{case[0]}, {case[1]} div. ({mine[0]['dofs']} dofs)")
+    axis.set_xscale("log")
+    mark_failed(axis, [r["slenderness"] for r in rows if r["status"] != "ok"], "solve failed")
     axis.plot([250], [reference], "k*", ms=10, label="reference 0.093 at R/h = 250")
     axis.set_ylim(bottom=0)
     axis.set(xlabel="R / h (fixed mesh)", ylabel="u E h³ / (F R²)  (outward load point)",
