@@ -101,6 +101,7 @@ FAILING_RUNNER = {
     "keratotomy-magnitude": ("eyemech.problems.keratotomy.run", _planted_failure, True),
     "keratotomy-salz": ("eyemech.problems.keratotomy.run", _planted_failure, False),
     "peer-comparison": ("eyemech.problems.studies.peer_comparison._timed", _planted_process_failure, True),
+    "shell-hemisphere": ("eyemech.problems.hemisphere_nonlinear.run", _planted_failure, True),
     "shell-penalty": ("eyemech.problems.plate_clamped.run", _planted_failure, True),
     "shell-plate-nonlinear": ("eyemech.problems.plate_clamped.run", _planted_failure, True),
     "shell-thickness": ("eyemech.problems.hemisphere.run", _planted_failure, True),

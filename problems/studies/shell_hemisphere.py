@@ -13,6 +13,11 @@ A second thickness, h = 0.2 (R/h = 50; Sze's table is for h = 0.04 alone), at
 P = 12,500 (Sze's P = 100 × (0.2/0.04)³: the bending-scaled load of a quarter of the
 path), on a sequence of cells per bending length (× 1.5), against the Richardson value
 of the three (observed order): the same model's mesh-converged answer.
+
+A path that reaches its last load gives its steps as rows with status ok; one whose solve
+fails gives one row (its divisions, the load it was to reach as ``force_N``) with status
+failed and the message as ``error``, crossed at the chart's origin, and ``eyemech study``
+exits 4; a thick case that fails is a failed row of the second table.
 """
 
 from __future__ import annotations
@@ -26,7 +31,13 @@ from eyemech.problems import hemisphere_nonlinear as scene
 from eyemech.problems.run.error_estimate import extrapolate
 from eyemech.problems.solve.driver import SolveFailure
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, with_units, write_csv
+from eyemech.problems.studies._common import (
+    QUIET,
+    failed_row,
+    save_chart,
+    with_units,
+    write_csv,
+)
 
 SZE_DIVISIONS = (8, 16)
 THICK = 0.2
@@ -46,9 +57,14 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
     for divisions in meshes:
         params = scene.Parameters(divisions=divisions, force=force,
                                   load_steps=round(20 * force / scene.SZE_MAX_FORCE))
-        result = scene.run(params, comm=MPI.COMM_SELF, options=QUIET)
-        for step in result.steps:
-            rows.append(dict(divisions=divisions, dofs=result.quantities["dofs"], force=step["force"],
+        try:
+            result = scene.run(params, comm=MPI.COMM_SELF, options=QUIET)
+        except SolveFailure as failure:  # a path that did not reach P: one row that says so (exit 4)
+            rows.append(failed_row(dict(divisions=divisions, force=force), failure))
+            continue
+        for step in result.steps:  # a path that reached P: its load steps, a row each
+            rows.append(dict(divisions=divisions, force=step["force"], status="ok",
+                             dofs=result.quantities["dofs"],
                              outward=step["radial_displacement_x"], inward=step["radial_displacement_y"],
                              outward_sze=step["radial_displacement_x_sze"],
                              inward_sze=step["radial_displacement_y_sze"],
@@ -74,7 +90,7 @@ def thick_rows(resolutions) -> list[dict]:
         try:
             result = scene.run(params, comm=MPI.COMM_SELF, options=QUIET)
         except SolveFailure as failure:
-            rows.append(dict(cells_per_bending_length=resolution, status="failed", error=str(failure)[:200]))
+            rows.append(failed_row(dict(cells_per_bending_length=resolution), failure))
             continue
         q = result.quantities
         rows.append(dict(cells_per_bending_length=resolution, status="ok", divisions=q["divisions"],
@@ -113,6 +129,10 @@ def _chart(out: Path, rows: list[dict]) -> Path:
               label="Sze et al. 2004, pushed point (inward)")
     for divisions in sorted({r["divisions"] for r in rows}):
         mine = [r for r in rows if r["divisions"] == divisions]
+        if mine[0]["status"] != "ok":  # its path did not reach P: a cross at the origin
+            axis.plot([0], [0], "x", color="tab:red", ms=10, mew=2, clip_on=False,
+                      label=f"P2, {divisions} div.: solve failed")
+            continue
         force = [0.0] + [r["force"] for r in mine]
         dofs = mine[0]["dofs"]
         line, = axis.plot([0.0] + [r["outward"] for r in mine], force, "-",
