@@ -36,7 +36,6 @@ NO_UNITS: set[str] = set()
 NO_STATUS = {
     # finished False, stopped "Newton failed" or "by hand (time budget)": not a status
     "iol_flip.csv": "iol-flip records a stopped case as finished=False",
-    "pressure_checkerboard.csv": "locking-checkerboard's checkerboard cases have no status",
 }
 # the tables of studies that measure where a method fails: what happened is their finding
 # (an ``outcome`` column, studies/__init__.py), not a case that did not run

@@ -12,6 +12,12 @@
   at the cell centres), with the "alternation": minus the correlation of that high-pass
   between neighbouring cells (1 for a perfect checkerboard, ≤ 0 for smooth fields); and
   the pressures of the cells along the clamped edge, where the gradient is steepest.
+
+Every case is a row with a ``status``. P1's cases that stop converging at large K/μ are the
+locking finding: their status names it ("Newton failed (load factor … reached)"), not a
+lost case. A checkerboard case (Q1P0, Q2P1) whose solve fails is a lost case: a row with
+status failed and the message as ``error``, crossed on the chart, and ``eyemech study``
+exits 4.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from eyemech.problems.solve.driver import (
     follow_path,
 )
 from eyemech.problems.studies import Study
-from eyemech.problems.studies._common import QUIET, save_chart, write_csv
+from eyemech.problems.studies._common import QUIET, failed_row, mark_failed, save_chart, write_csv
 
 COOK_REFERENCE_TIP = 6.93287  # mm, Q2P1 Richardson limit (docs/studies/cook_membrane_convergence.csv)
 BULK_RATIOS = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)
@@ -104,12 +110,17 @@ def checker_rows(sides, comm) -> tuple[list[dict], dict]:
     rows, edge_profiles = [], {}
     for element in ("Q1P0", "Q2P1"):
         for n in sides:
-            pressure, midpoints, neighbours = cook_pressures(element, n, comm)
+            case = {"element": element, "elements_per_side": n}
+            try:
+                pressure, midpoints, neighbours = cook_pressures(element, n, comm)
+            except SolveFailure as failure:  # a case that did not run: a row that says so (exit 4)
+                rows.append(failed_row(case, failure))
+                continue
             high_pass = pressure - np.array([pressure[nb].mean() for nb in neighbours])
             # a checkerboard's high-pass flips sign from each cell to its neighbours
             pairs = sum(float(high_pass[c] * high_pass[nb].sum()) for c, nb in enumerate(neighbours))
             degree = sum(len(nb) * high_pass[c] ** 2 for c, nb in enumerate(neighbours))
-            rows.append({"element": element, "elements_per_side": n,
+            rows.append({**case, "status": "ok",
                          "checkerboard_index": float(np.sqrt(np.mean(high_pass**2))
                                                      / np.sqrt(np.mean(pressure**2))),
                          "alternation": -pairs / degree,
@@ -171,12 +182,15 @@ def _chart(path: Path, locking, checker, profiles, n_profile: int) -> Path:
     ax.grid(alpha=0.3)
     ax = axes[1]
     for k, element in enumerate(("Q1P0", "Q2P1")):
-        mine = [r for r in checker if r["element"] == element]
+        mine = [r for r in checker if r["element"] == element and r["status"] == "ok"]
         n = [r["elements_per_side"] for r in mine]
         ax.semilogx(n, [r["checkerboard_index"] for r in mine], "o-", color=f"C{k}",
                     label=f"{element}: RMS(p − neighbour mean) / RMS(p)")
         ax.semilogx(n, [r["alternation"] for r in mine], "s--", color=f"C{k}",
                     label=f"{element}: sign alternation of that high-pass")
+    ax.set_xscale("log")
+    mark_failed(ax, [r["elements_per_side"] for r in checker if r["status"] != "ok"],
+                "checkerboard case failed (solve)")
     ax.axhline(0, color="k", lw=0.6)
     ax.set(xlabel="elements per side", ylabel="index (0 = smooth, alternation 1 = checkerboard)",
            title="pressure checkerboard")
