@@ -7,6 +7,8 @@ that matters)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -57,3 +59,23 @@ def test_walls_chart_takes_rows_read_back_from_the_csv(tmp_path):
     assert iol_flip._wall_label(back[-1]) == "h_h = 0.35, μ_cartridge = 0.3, twist = 180°, slip 3 µm"
     # a run that stopped is charted by its last frame
     assert iol_flip._final_normal_z(back[-1]) == pytest.approx(0.7)
+
+
+@pytest.mark.parametrize("saved, status, stopped", [
+    (("error", "KeyboardInterrupt"), "stopped", "by hand (time budget)"),
+    (("failed", "Newton did not converge at step 9"), "failed", "Newton failed")])
+def test_a_case_that_did_not_finish_has_a_status_that_counts_as_failed(tmp_path, saved, status, stopped):
+    """Issue 39: a case whose Newton gave up, or that was stopped by hand for a time budget
+    (kept, not rerun), was only ``finished`` false, which eyemech study does not read. Its
+    row's status is failed or stopped now: neither gave the case's result, and eyemech study
+    counts both as failed (exit 4)."""
+    from eyemech.problems.studies import FAILED
+
+    params = iol_injection.Parameters(resolution="coarse")
+    (tmp_path / "results.json").write_text(json.dumps(
+        {"status": saved[0], "message": saved[1], "parameters": params.as_dict(), "quantities": {},
+         "steps": [{"time": 0.125}], "timings": {"total": 60.0}}, default=str))
+    assert iol_flip._same_run(tmp_path / "results.json", params)  # kept: read, not rerun
+    row = iol_flip.case_row({"haptic_thickness": 0.13, "friction": 0.2}, tmp_path)
+    assert (row["status"], row["finished"], row["stopped"]) == (status, False, stopped)
+    assert row["reached_time_s"] == 0.125 and status in FAILED

@@ -94,6 +94,30 @@ def _planted_process_failure(command, env):
         "eyemech: solve failed: Newton did not converge at step 1 (SNES reason: DIVERGED_PLANTED)\n"))
 
 
+def _watch_charts(monkeypatch) -> list[dict]:
+    """What each chart saved from now on shows of a failed case: ``marked`` (a red ✗ or
+    "failed" in a text or legend label of its axes), ``footer`` (the failed-cases line)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    charts: list[dict] = []
+    save = Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        crosses = [line for ax in fig.axes for line in ax.lines
+                   if line.get_marker() == "x" and line.get_color() == "tab:red"]
+        words = [t.get_text() for ax in fig.axes for t in ax.texts] + \
+            [label for ax in fig.axes for label in ax.get_legend_handles_labels()[1]]
+        charts.append({"marked": bool(crosses) or any("failed" in w for w in words),
+                       "footer": any(t.get_text().startswith("✗") for t in fig.texts)})
+        return save(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return charts
+
+
 # a study's case runner, replaced by one whose first case fails (the others run, on the quick
 # settings) or, where the quick cases cost a minute (keratotomy-salz), every case.
 # locking-checkerboard: its checkerboard cases' runner (P1's non-converging locking cases are
@@ -120,11 +144,6 @@ def test_a_case_that_fails_is_a_failed_row_marked_on_the_chart_and_the_study_exi
     names, marks on the chart and exits 4 for. The failure is planted in the case runner."""
     import importlib
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-
     from eyemech.problems.studies import FAILED
     from eyemech.problems.studies._common import read_csv
     from eyemech.scripts import cli
@@ -139,19 +158,7 @@ def test_a_case_that_fails_is_a_failed_row_marked_on_the_chart_and_the_study_exi
         return failure(*args, **kwargs) if len(calls) == 1 or not first_only else real(*args, **kwargs)
 
     monkeypatch.setattr(target, runner)
-    charts: list[dict] = []
-    save = Figure.savefig
-
-    def savefig(fig, *args, **kwargs):  # what the chart shows of the failed case
-        crosses = [line for ax in fig.axes for line in ax.lines
-                   if line.get_marker() == "x" and line.get_color() == "tab:red"]
-        words = [t.get_text() for ax in fig.axes for t in ax.texts] + \
-            [label for ax in fig.axes for label in ax.get_legend_handles_labels()[1]]
-        charts.append({"marked": bool(crosses) or any("failed" in w for w in words),
-                       "footer": any(t.get_text().startswith("✗") for t in fig.texts)})
-        return save(fig, *args, **kwargs)
-
-    monkeypatch.setattr(Figure, "savefig", savefig)
+    charts = _watch_charts(monkeypatch)
     assert cli.main(["study", name, "--quick", "--out", str(tmp_path)]) == cli.EXIT_CASES_FAILED
     err = capsys.readouterr().err
     rows = [r for table in sorted(tmp_path.glob("*.csv")) for r in read_csv(table)]
@@ -163,4 +170,34 @@ def test_a_case_that_fails_is_a_failed_row_marked_on_the_chart_and_the_study_exi
         assert len(failed) == len(rows)
     assert f"eyemech: study {name}: {len(failed)} of {len(rows)} cases failed" in err, err[-2000:]
     assert "case 1/" in err and ": failed (" in err
+    assert charts and all(c["footer"] for c in charts) and any(c["marked"] for c in charts), charts
+
+
+def test_iol_flip_a_case_whose_newton_gives_up_is_a_failed_row_and_the_study_exits_4(
+        tmp_path, monkeypatch, capsys):
+    """Issue 39: iol-flip recorded a case whose Newton gave up as ``finished`` false, which
+    ``eyemech study`` does not read, and exited 0. The first quick case's path fails here
+    (planted in the injection's follow_path, inside the run contract, which writes that
+    run's results.json as failed, as a real failure does): its row stays, with status
+    failed beside the other case's ok, is named and marked, and the study exits 4."""
+    from eyemech.problems import iol_injection
+    from eyemech.problems.studies._common import read_csv
+    from eyemech.scripts import cli
+
+    real, calls = iol_injection.follow_path, []
+
+    def follow_path(*args, **kwargs):
+        calls.append(1)
+        return _planted_failure() if len(calls) == 1 else real(*args, **kwargs)
+
+    monkeypatch.setattr("eyemech.problems.iol_injection.follow_path", follow_path)
+    charts = _watch_charts(monkeypatch)
+    assert cli.main(["study", "iol-flip", "--quick", "--out", str(tmp_path)]) == cli.EXIT_CASES_FAILED
+    err = capsys.readouterr().err
+    rows = read_csv(tmp_path / "iol_flip.csv")
+    assert [(r["status"], r["finished"], r["stopped"]) for r in rows] == \
+        [("failed", "False", "Newton failed"), ("ok", "True", "")]
+    case = "haptic_thickness_mm=0.09, friction=0.2, damping_1/s=20000.0"
+    assert f"eyemech: study iol-flip: 1 of 2 cases failed: iol_flip {case}" in err, err[-2000:]
+    assert f"iol_flip.csv case 1/2 ({case}): failed" in err
     assert charts and all(c["footer"] for c in charts) and any(c["marked"] for c in charts), charts

@@ -33,10 +33,7 @@ NO_UNITS: set[str] = set()
 # study tables without a status per case: a case that failed there cannot be told from one
 # that finished, and the study cannot exit 4 for it (issue 39). Each fails here once its
 # study writes a status and the table carries it, so that it leaves this list
-NO_STATUS = {
-    # finished False, stopped "Newton failed" or "by hand (time budget)": not a status
-    "iol_flip.csv": "iol-flip records a stopped case as finished=False",
-}
+NO_STATUS: dict[str, str] = {}
 # the tables of studies that measure where a method fails: what happened is their finding
 # (an ``outcome`` column, studies/__init__.py), not a case that did not run
 FINDINGS = {"newton_failure.csv"}

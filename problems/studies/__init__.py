@@ -8,10 +8,11 @@ that a committed table made with other settings than the code's is found:
 tests/test_study_atlas.py). ``quick=True`` runs coarse settings for the tests.
 
 A row whose ``status`` is ``failed`` or ``error`` (what a sweep case records when its run
-failed) is a case that should have run and did not: ``eyemech study`` names it, marks it
-on the charts and exits 4. A study that measures where a method fails writes what
-happened in other words ("blew up", "diverged (NaN)", "failed at load 0.5"): a finding,
-not a failure.
+failed), or ``stopped`` (a case stopped before its end, by hand for lack of time: iol-flip
+keeps such a run and does not rerun it), is a case that should have run and did not give
+its result: ``eyemech study`` names it, marks it on the charts and exits 4. A study that
+measures where a method fails writes what happened in other words ("blew up", "diverged
+(NaN)", "failed at load 0.5"): a finding, not a failure.
 """
 
 from __future__ import annotations
@@ -44,8 +45,9 @@ def studies() -> dict[str, Study]:
     return found
 
 
-# a case's row with one of these statuses failed (the run contract's words)
-FAILED = ("failed", "error")
+# a case's row with one of these statuses did not give its result: failed, error (the run
+# contract's words) or stopped before its end (by hand, for a time budget)
+FAILED = ("failed", "error", "stopped")
 
 
 @dataclasses.dataclass

@@ -37,7 +37,10 @@ time, from the normal of the optic's middle strip (|y| < 0.6 mm in the flat lens
 Runs are kept in ``$EYEMECH_IOL_FLIP_RUNS`` (default ``results/iol-flip-runs``), one folder per
 case; a folder whose ``results.json`` holds the same parameters is read, not rerun — a case
 costs ≈ 8 min here. A case whose Newton gives up is recorded as failed, with the time it
-reached — not dropped.
+reached — not dropped. Every row has a ``status``: ``ok`` for a finished case, ``failed``
+for one whose Newton gave up, ``stopped`` for one stopped by hand for lack of time (kept,
+not rerun); ``stopped`` names which (``Newton failed`` / ``by hand (time budget)``). Neither
+gave the case's result, so ``eyemech study`` counts both as failed and exits 4.
 
 ``--quick`` does not answer the question: it checks the pipeline on two short
 deformation-only runs (``contact=false``: no injector, no capsule, no self-contact) of the
@@ -178,7 +181,9 @@ def case_row(case: dict, folder: Path) -> dict:
     :func:`run` adds their units for the table)."""
     saved = json.loads((folder / "results.json").read_text())
     q = saved["quantities"]
-    row = {**case, "damping": saved["parameters"]["damping"]}
+    by_hand = _stopped_by_hand(saved)
+    row = {**case, "damping": saved["parameters"]["damping"],
+           "status": "ok" if saved["status"] == "ok" else "stopped" if by_hand else "failed"}
     roll = roll_history(folder)
     rolled = roll[:, 2] < UNROLLED
     if rolled.any():  # while rolled (≈ 2 mm across) the optic may turn freely in the capsule
@@ -193,8 +198,7 @@ def case_row(case: dict, folder: Path) -> dict:
         row.update(angular_balance(folder, params, torque))
     if saved["status"] != "ok":
         steps = saved.get("steps", [])
-        row.update(finished=False,
-                   stopped="by hand (time budget)" if _stopped_by_hand(saved) else "Newton failed",
+        row.update(finished=False, stopped="by hand (time budget)" if by_hand else "Newton failed",
                    reached_time_s=steps[-1]["time"] if steps else 0.0,
                    steps=len(steps), wall_seconds=saved["timings"]["total"],
                    last_frame_optic_normal_z=last_optic_normal_z(folder))
