@@ -517,12 +517,12 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
     for row in rows:
         if not row.get("finished"):
             z = row.get("last_frame_optic_normal_z")
+            last = "no frame" if z is None else f"last frame n_z {z:.3f}"
             z = 0.0 if z is None else z
             top.scatter(row[key], z, marker="x", color="grey", s=80, zorder=3)
             reached = row.get("reached_time_s", float("nan"))
-            top.annotate(f"{row.get('stopped', 'stopped')} at\nt = {reached:.3g} s;\n"
-                         f"last frame n_z {z:.3f}", (row[key], z), textcoords="offset points",
-                         xytext=(-30, -36), fontsize=7)
+            top.annotate(f"{row.get('stopped', 'stopped')} at\nt = {reached:.3g} s;\n{last}",
+                         (row[key], z), textcoords="offset points", xytext=(-30, -36), fontsize=7)
             continue
         flipped = row["optic_flipped"]
         top.scatter(row[key], row["optic_normal_z"], s=110, marker="v" if flipped else "^",
