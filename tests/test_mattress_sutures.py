@@ -15,7 +15,7 @@ from mpi4py import MPI
 from eyemech.forms.sutures import bite_weight, tied_leg_energy, tied_leg_stretch
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
-from eyemech.problems.run.parameters import build
+from eyemech.problems.run.parameters import ParameterError, build
 
 QUIET = RunOptions(fields=False, pictures=False)
 
@@ -106,3 +106,20 @@ def test_the_default_operation_settles_with_tied_sutures():
     assert 1.3 < sutured["band_travel_mm"] < 2.0
     assert settled["iop_mmHg"] == pytest.approx(15.0)
     assert settled["suture_force_min_N"] > 0.0
+
+
+@pytest.mark.parametrize("settings, key", [
+    ({"suture_model": "mattress", "suture_tie_fraction": "0"}, "suture_tie_fraction"),
+    ({"suture_model": "mattress", "suture_tie_fraction": "1.5"}, "suture_tie_fraction"),
+    ({"suture_model": "mattress", "suture_stiffness": "-1"}, "suture_stiffness"),
+    ({"suture_model": "mattress", "suture_force": "0.3"}, "suture_force"),
+    ({"suture_tie_fraction": "0.8"}, "suture_tie_fraction"),
+    ({"suture_model": "bites", "suture_stiffness": "10"}, "suture_stiffness"),
+])
+def test_bad_tied_sutures_are_refused_before_any_solve(settings, key):
+    """A knot that takes nothing or more than the sclera between bite and element, a thread
+    without stiffness, a prescribed pull on tied sutures, or the knot's settings without
+    tied sutures: one error naming the key."""
+    with pytest.raises(ParameterError) as error:
+        build(sb.Parameters, {"resolution": "coarse", **settings})
+    assert error.value.key == key

@@ -292,16 +292,32 @@ class Parameters(NumericalSettings, EyeParameters):
                               "augmentation_tolerance", "max_augmentations",
                               "tear_closure_tolerance", "retina_thickness", "max_cells")
         self.require_nonnegative("cells_per_bending_length", "mesh_size")
-        self.require_positive("suture_stiffness")
-        if not 0 < self.suture_tie_fraction <= 1:
-            raise ParameterError("suture_tie_fraction", f"{self.suture_tie_fraction:g}: a fraction "
-                                 "in (0, 1] of the sclera between a bite and the element's edge")
+        self._validate_sutures()
         self.require_positive("iop_limit_mmHg")
         if self.iop_limit_mmHg < self.iop_mmHg:
             raise ParameterError("iop_limit_mmHg", f"{self.iop_limit_mmHg:g} mmHg is below the "
                                  f"pre-operative IOP (iop_mmHg = {self.iop_mmHg:g} mmHg): the "
                                  "artery would be closed before surgery; the limit must be at "
                                  "least iop_mmHg")
+
+    def _validate_sutures(self) -> None:
+        """The tied (mattress) sutures' knot and thread only with them; their pull is not
+        prescribed."""
+        self.require_positive("suture_stiffness")
+        if not 0 < self.suture_tie_fraction <= 1:
+            raise ParameterError("suture_tie_fraction", f"{self.suture_tie_fraction:g}: a fraction "
+                                 "in (0, 1] of the sclera between a bite and the element's edge")
+        if self.suture_model == "mattress":
+            if self.suture_force != EyeParameters.suture_force:
+                raise ParameterError("suture_force", "is the loop's and the bites' prescribed pull; "
+                                     "tied mattress sutures pull as the sclera resists "
+                                     "(set suture_tie_fraction or suture_width)")
+            return
+        for key, default in (("suture_tie_fraction", MATTRESS_TIE_FRACTION),
+                             ("suture_stiffness", MATTRESS_LEG_STIFFNESS)):
+            if getattr(self, key) != default:
+                raise ParameterError(key, f"is used only with suture_model=mattress (the sutures "
+                                     f"are {self.suture_model}: their pull is suture_force)")
 
     def _validate_retina_modes(self) -> None:
         if self.retina_incompatible_modes and (self.element, self.dg0_pressure, self.solver) \
