@@ -196,7 +196,7 @@ class EyeParameters(SceneParameters):
         "the tire keeps the band's travel; mattress: each suture is tied to a length, its legs "
         "shortened by suture_tie_fraction of the sclera between its bites beyond the element's "
         "width, so that wider bites imbricate more sclera and raise the buckle; its tension "
-        "follows (suture_force unused; docs/scleral_buckling.md, Mattress sutures)", group=PHYSICS)
+        "follows (suture_force is refused: docs/scleral_buckling.md, Mattress sutures)", group=PHYSICS)
     suture_tie_fraction: float = field(
         MATTRESS_TIE_FRACTION, "suture_model=mattress: the knot shortens each leg by this "
         "fraction of (suture_width − the element's width)/2, the sclera between a bite and "
