@@ -140,8 +140,7 @@ class RigidBuckle(Term):
         solver.depth_hooks.append(self.depth_through)
 
     def controls(self) -> dict[str, Control]:
-        return {"band_travel": Control(lambda: float(self.indentation.value),
-                                       lambda value: setattr(self.indentation, "value", value))}
+        return {"band_travel": Control.of(self.indentation)}
 
     def register(self, checkpoints) -> None:
         checkpoints.constant("base_radius", self.base_radius)

@@ -192,8 +192,7 @@ class MattressSutures(Sutures):
 
     def controls(self) -> dict[str, Control]:
         return super().controls() | {
-            "suture_tie": Control(lambda: float(self.tie.value),
-                                  lambda value: setattr(self.tie, "value", value))}
+            "suture_tie": Control.of(self.tie)}
 
     def register(self, checkpoints) -> None:
         super().register(checkpoints)
@@ -343,8 +342,7 @@ class TireRow(Term):
         self.release_from_band()
 
     def controls(self) -> dict[str, Control]:
-        return {"tire_hold": Control(lambda: float(self.tire_hold.value),
-                                     lambda value: setattr(self.tire_hold, "value", value)),
+        return {"tire_hold": Control.of(self.tire_hold),
                 "held_force": Control(lambda: self.held_force,
                                       lambda value: setattr(self, "held_force", value))}
 
@@ -426,8 +424,7 @@ class BandRow(TireRow):
 
     def controls(self) -> dict[str, Control]:
         return super().controls() | {
-            "band_tightening": Control(lambda: float(self.tightening.value),
-                                       lambda value: setattr(self.tightening, "value", value))}
+            "band_tightening": Control.of(self.tightening)}
 
     def register(self, checkpoints) -> None:
         super().register(checkpoints)

@@ -218,13 +218,8 @@ class CavityLiquid(Term):
             self.body.P.x.scatter_forward()
 
     def controls(self) -> dict[str, Control]:
-        def setter(constant):
-            return lambda value: setattr(constant, "value", value)
-
-        return {"pressure_target": Control(lambda: float(self.pressure_target.value),
-                                           setter(self.pressure_target), self._start_at_target),
-                "acute_pressure": Control(lambda: float(self.acute_pressure.value),
-                                          setter(self.acute_pressure))}
+        return {"pressure_target": Control.of(self.pressure_target, self._start_at_target),
+                "acute_pressure": Control.of(self.acute_pressure)}
 
     def register(self, checkpoints) -> None:
         checkpoints.function("P", self.body.P)

@@ -33,6 +33,12 @@ class Control:
     set: Callable[[float], None]
     start_unknown: Callable[[], None] | None = None
 
+    @classmethod
+    def of(cls, constant, start_unknown: Callable[[], None] | None = None) -> Control:
+        """The control that reads and sets a scalar dolfinx Constant."""
+        return cls(lambda: float(constant.value), lambda value: setattr(constant, "value", value),
+                   start_unknown)
+
 
 class Term:
     """One physical contribution to a model (see the module docstring)."""
