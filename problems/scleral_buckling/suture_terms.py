@@ -130,9 +130,13 @@ class MattressSutures(Sutures):
         self.anchor_base = [dolfinx.fem.Constant(mesh, np.zeros(3)) for _ in self.bites]
         self.anchor_motion = [dolfinx.fem.Constant(mesh, np.zeros(3)) for _ in self.bites]
         self.travel_tied = [dolfinx.fem.Constant(mesh, 0.0) for _ in self.bites]
-        # what the knot takes out of each leg at the end of tying (mm)
-        self.slack = [params.suture_tie_fraction * 0.5 * (params.suture_width - part.cross_section[0])
+        # what the knot takes out of each leg at the end of tying (mm); Constants, not
+        # literals, as the thread's stiffness: a sweep over suture width, knot or thread
+        # would otherwise compile the eye's residual anew for each value
+        self.slack = [dolfinx.fem.Constant(mesh, params.suture_tie_fraction * 0.5
+                                           * (params.suture_width - part.cross_section[0]))
                       for part in parts]
+        stiffness = dolfinx.fem.Constant(mesh, self.stiffness)
         x, x_tied = X + body.u, X + self.u_tied
         self.stretches, self.weights = [], []
         for k, (travel, base, motion, tied, slack) in enumerate(zip(
@@ -146,7 +150,7 @@ class MattressSutures(Sutures):
         # the loop's directions): a suture pulls but cannot push
         self.taut = [dolfinx.fem.Constant(mesh, 1.0) for _ in self.bites]
         self.energy = self.placed * sum(
-            taut * tied_leg_energy(stretch, self.stiffness, weight)
+            taut * tied_leg_energy(stretch, stiffness, weight)
             for taut, stretch, weight in zip(self.taut, self.stretches, self.weights)) * self.measure_
 
     def residual(self, tests):
