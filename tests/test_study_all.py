@@ -62,13 +62,20 @@ def test_a_failed_case_exits_4_and_is_named(tmp_path, monkeypatch, capsys):
     from eyemech.scripts import cli
 
     texts: list[str] = []
+    boxes: list = []
 
     def run(out, quick=False, comm=None):
         table = write_csv(Path(out) / "t.csv", [{"case": 0, "status": "ok", "x_mm": 1.0},
                                                 {"case": 1, "status": "failed", "error": "NaN"}])
-        fig = plt.figure()
+        fig = plt.figure(figsize=(4, 2))  # narrow: the footer is as long as the stamp
         save = fig.savefig
-        fig.savefig = lambda *a, **k: (texts.extend(t.get_text() for t in fig.texts), save(*a, **k))
+
+        def savefig(*a, **k):
+            texts.extend(t.get_text() for t in fig.texts)
+            fig.canvas.draw()
+            boxes.extend(t.get_window_extent() for t in fig.texts)
+            save(*a, **k)
+        fig.savefig = savefig
         save_chart(fig, Path(out) / "t.png")
         return [table, Path(out) / "t.png"]
 
@@ -79,6 +86,8 @@ def test_a_failed_case_exits_4_and_is_named(tmp_path, monkeypatch, capsys):
     assert "study fails-once: 1 of 2 cases failed: t case=1" in err
     assert "t.csv case 2/2 (case=1): failed (NaN)" in err
     assert any(t.startswith("✗ 1 of 2 cases failed") for t in texts)
+    stamp_box, failed_box = boxes  # the failed cases on a line of their own above the stamp
+    assert failed_box.y0 >= stamp_box.y1 and not failed_box.overlaps(stamp_box)
 
 
 def _planted_failure(*args, **kwargs):
@@ -201,3 +210,29 @@ def test_iol_flip_a_case_whose_newton_gives_up_is_a_failed_row_and_the_study_exi
     assert f"eyemech: study iol-flip: 1 of 2 cases failed: iol_flip {case}" in err, err[-2000:]
     assert f"iol_flip.csv case 1/2 ({case}): failed" in err
     assert charts and all(c["footer"] for c in charts) and any(c["marked"] for c in charts), charts
+
+
+def test_a_case_is_named_by_all_its_inputs_not_its_first_three_columns():
+    """iol-flip's wall and twist cases differ from the plain ones only in later inputs:
+    their per-case lines name those inputs, so that they read apart."""
+    from eyemech.problems.studies._common import case_label
+
+    plain = {"haptic_thickness_mm": 0.13, "friction": 0.2, "damping_1/s": 2e4, "status": "ok",
+             "steps": 197}
+    twisted = {**plain, "capsule_friction": 0.3, "injector_twist_deg": 180.0}
+    twisted["status"] = twisted.pop("status")  # the inputs before the status, as studies write
+    twisted["steps"] = twisted.pop("steps")
+    assert case_label(plain) == "haptic_thickness_mm=0.13, friction=0.2, damping_1/s=20000.0"
+    assert case_label(twisted).endswith("capsule_friction=0.3, injector_twist_deg=180.0")
+    assert case_label({"status": "ok", "a": 1, "b": 2, "c": 3, "d": 4}) == "a=1, b=2, c=3"
+
+
+def test_iol_flip_keeps_a_case_stopped_by_hand_in_either_record():
+    """A case stopped by SIGINT/SIGTERM (``interrupted``, or the older ``error`` with a
+    KeyboardInterrupt) is kept as stopped, not rerun; a crash is not."""
+    from eyemech.problems.studies.iol_flip import _stopped_by_hand
+
+    assert _stopped_by_hand({"status": "interrupted", "message": "stopped by SIGINT after step 40"})
+    assert _stopped_by_hand({"status": "error", "message": "KeyboardInterrupt"})
+    assert not _stopped_by_hand({"status": "error", "message": "MemoryError"})
+    assert not _stopped_by_hand({"status": "failed", "message": "DIVERGED_MAX_IT"})

@@ -64,13 +64,24 @@ def with_units(rows: list[dict], parameters: type) -> list[dict]:
     return [{named.get(k, k): v for k, v in row.items()} for row in rows]
 
 
+def case_label(row: dict) -> str:
+    """A case named by its inputs: a row's columns before ``status`` (a study writes
+    ``{**case, "status": ...}``), those set, so that cases differing in a late input (a
+    wall's friction, an injector's twist) read apart; the first three columns when
+    ``status`` comes first."""
+    keys = list(row)
+    inputs = keys[:keys.index("status")] if "status" in keys[1:] else \
+        [k for k in keys if k not in ("status", "error")][:3]
+    return ", ".join(f"{k}={row[k]}" for k in inputs if row[k] not in (None, ""))
+
+
 def _count_cases(study, path: Path, rows: list[dict]) -> None:
     from eyemech.problems.studies import FAILED
 
     cases = [r for r in rows if "status" in r]
     study.cases += len(cases)
     for number, row in enumerate(cases, start=1):
-        label = ", ".join(f"{k}={row[k]}" for k in [k for k in row if k not in ("status", "error")][:3])
+        label = case_label(row)
         if row["status"] in FAILED:
             study.failed.append(f"{path.stem} {label}")
         why = f" ({str(row['error'])[:160]})" if row.get("error") else ""
@@ -130,8 +141,10 @@ def read_csv(path: Path) -> list[dict]:
 
 def save_chart(fig, path, *, dpi: int = 110, rect=(0, 0.03, 1, 1)) -> None:
     """Stamp the chart (machine, versions, date; within ``eyemech study`` the failed cases
-    in red), lay it out, save it, free it."""
+    in red, on a line of their own above the stamp so that neither overprints the other on
+    a narrow chart), lay it out, save it, free it."""
     import matplotlib.pyplot as plt
+    from matplotlib.transforms import offset_copy
 
     from eyemech.problems.studies import running
 
@@ -139,8 +152,12 @@ def save_chart(fig, path, *, dpi: int = 110, rect=(0, 0.03, 1, 1)) -> None:
     fig.text(0.01, 0.01, line, fontsize=7, color="grey")
     study = running()
     if study is not None and study.failed:
-        fig.text(0.99, 0.01, f"✗ {len(study.failed)} of {study.cases} cases failed: "
-                 + "; ".join(study.failed)[:160], fontsize=7, color="tab:red", ha="right")
+        above_stamp = offset_copy(fig.transFigure, fig=fig, y=10, units="points")
+        fig.text(0.01, 0.01, f"✗ {len(study.failed)} of {study.cases} cases failed: "
+                 + "; ".join(study.failed)[:160], fontsize=7, color="tab:red",
+                 transform=above_stamp)
+        footer = 22 / (72 * fig.get_figheight())  # two 7-point lines, in figure fractions
+        rect = (rect[0], max(rect[1], footer), rect[2], rect[3])
     fig.tight_layout(rect=rect)
     # the stamp also as PNG text, so that tests (and readers) can check it without OCR
     fig.savefig(path, dpi=dpi, metadata={"Comment": line})

@@ -157,8 +157,11 @@ def _same_run(results: Path, params: iol_injection.Parameters) -> bool:
 
 
 def _stopped_by_hand(saved: dict) -> bool:
-    """A run interrupted (Ctrl-C / SIGINT) for lack of time: kept as a partial case, not rerun."""
-    return saved.get("status") == "error" and "KeyboardInterrupt" in saved.get("message", "")
+    """A run stopped by hand (SIGINT / SIGTERM) for lack of time: kept as a partial case,
+    not rerun. Its record says ``interrupted``; a record written before runs were stopped at
+    the end of a step says ``error`` with a KeyboardInterrupt."""
+    status, message = saved.get("status"), saved.get("message", "")
+    return status == "interrupted" or (status == "error" and "KeyboardInterrupt" in message)
 
 
 def run_case(case: dict, folded: Path, comm, runs: Path, settings: dict | None = None) -> tuple[dict, Path]:
