@@ -556,6 +556,30 @@ class NodeToSurfaceContact:
             raise ParameterError(key, f"the slave surface starts {-gap:.4g} mm inside the master "
                                       "surface (the bodies interpenetrate before any load)")
 
+    def depth_through(self) -> float:
+        """Collective: the deepest slave node under the master surface (the plane of its
+        nearest triangle), as a fraction of ``search_depth``; −inf without slave nodes.
+        Beyond ``search_depth`` a node is unpaired (on the wrong side) and feels no
+        contact: a load step that carries one through that far must be cut, not kept
+        (:attr:`NonlinearSolver.depth_hooks`). Leaves the search's state as it was."""
+        depth = -np.inf
+        if not np.isfinite(self.search_depth):  # every pair counts: none is unpaired
+            return depth
+        corners = self._master_positions()[self.triangle_nodes]  # collective: on every rank
+        slaves = self._positions(self.slave_blocks)
+        if len(slaves):
+            k = min(self.candidates, len(corners))
+            _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
+            nearest = nearest.reshape(len(slaves), k)
+            points, _ = closest_points(slaves[:, None, :], corners[nearest])
+            distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
+            tri = nearest[np.arange(len(slaves)), self._nearest_of_ties(distance, nearest)]
+            a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
+            normal = np.cross(b - a, c - a)
+            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            depth = float(np.max(-np.einsum("ij,ij->i", slaves - a, normal))) / self.search_depth
+        return self.comm.allreduce(depth, op=MPI.MAX)
+
     def min_gap(self) -> float:
         """Smallest gap of any paired slave node (collective; negative = penetration)."""
         return self.comm.allreduce(self.search().min_gap, op=MPI.MIN)

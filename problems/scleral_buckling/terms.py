@@ -356,6 +356,9 @@ class RetinaContact(Term):
         contact = self.contact
         solver.residual_hooks.append(contact.residual_hook)
         solver.jacobian_hooks.append(contact.jacobian_hook)
+        # a retina node carried through the choroid (beyond its thickness it is unpaired and
+        # feels no contact) is a spurious equilibrium: the load step is cut
+        solver.depth_hooks.append(contact.depth_through)
         if self.params.restore_contact_memory:
             solver.memory_hooks.append((contact.memory, contact.restore_memory))
         contact.allow_new_nonzeros(solver.problem.A)
@@ -381,8 +384,10 @@ class RetinaContact(Term):
             contact.state = contact.search()
             summary = contact.summary()
             rim = contact.gaps_of(gaps.rim_nodes())
-            closed = bool(len(rim) and np.all(rim[np.isfinite(rim)] < tolerance)
-                          and np.isfinite(rim).any())
+            # nan: not a contact node (shared with the choroid); inf: unpaired, carried
+            # through the choroid (the depth hook cuts such a step): not closed
+            ours = rim[~np.isnan(rim)]
+            closed = bool(len(ours) and np.all(ours < tolerance))
             widest = gaps.widest_rim_node(rim)
             gap_min = contact.min_gap()
             # nodes the penalty presses (g < ε: with the round-off a very soft retina can
