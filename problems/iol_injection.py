@@ -373,10 +373,14 @@ class FluidDrag:
 
     def begin_step(self, speed: float) -> None:
         axial = self.fluid_velocity(speed)
-        with self.v_fluid.localForm() as local:
-            values = local.array.reshape(-1, 3)
-            values[:] = 0.0
-            values[: len(axial), 0] = axial[: len(values)]
+        # v_fluid is M's unghosted right vector: its ``array`` is the owned rows, which are the
+        # first owned nodes of u's local array. Not its localForm(): PETSc gives that only for
+        # ghosted vectors (a sequential one is its own), on N > 1 ranks a null Vec whose empty
+        # array swallowed the values, so the drag was silently zero and the 2-rank path left
+        # the serial one at the first step (tests/test_parallel.py::test_fluid_drag_equals_serial)
+        values = np.zeros((self.v_fluid.getLocalSize() // 3, 3))
+        values[:, 0] = axial[: len(values)]
+        self.v_fluid.setArray(values.ravel())
         self.dynamics.M.mult(self.v_fluid, self.drag)
         self.drag.scale(-self.dynamics.damping)
 

@@ -389,3 +389,16 @@ def test_default_eye_on_two_ranks_equals_serial(tmp_path):
     assert parallel["pictures"] == serial["pictures"] and len(serial["pictures"]) >= 8
     for name in parallel["pictures"] + parallel["fields"]:
         assert (tmp_path / "ranks2" / name).exists(), name
+
+
+@pytest.mark.mpi
+def test_fluid_drag_equals_serial():
+    """iol-injection's fluid drag −c M v_f on 2 ranks equals its serial self row by row
+    (tests/mpi_fluid_drag.py: a displaced P2 strip through the bore's taper and past the
+    nozzle tip). FluidDrag wrote v_f into the unghosted vector's localForm(), a null Vec on
+    N > 1 ranks: the drag was zero there, and the 2-rank injection left the serial path at
+    its first step (coarse: 15 Newton iterations against 20)."""
+    report = _mpi_script("mpi_fluid_drag.py", 2, timeout=120)
+    assert report["resultant_serial"] < 0.0  # the residual's −c M v_f: the fluid pulls the lens along +x
+    assert report["resultant"] == pytest.approx(report["resultant_serial"], rel=1e-12)
+    assert report["max_row_difference"] < 1e-12
