@@ -357,8 +357,10 @@ class RetinaContact(Term):
         solver.residual_hooks.append(contact.residual_hook)
         solver.jacobian_hooks.append(contact.jacobian_hook)
         # a retina node carried through the choroid (beyond its thickness it is unpaired and
-        # feels no contact) is a spurious equilibrium: the load step is cut
-        solver.depth_hooks.append(contact.depth_through)
+        # feels no contact) is a spurious equilibrium: the load step is cut. Converged states
+        # only: refusing predicted starts too made a band alone with 4 mm bites crawl
+        # (hundreds of settling steps of 4e-4, 13-18 Newton iterations each)
+        solver.converged_depth_hooks.append(contact.depth_through)
         if self.params.restore_contact_memory:
             solver.memory_hooks.append((contact.memory, contact.restore_memory))
         contact.allow_new_nonzeros(solver.problem.A)

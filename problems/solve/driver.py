@@ -177,6 +177,10 @@ class NonlinearSolver:
         # forms/buckle.py's Buckle.depth_through): :func:`follow_path` refuses a predicted
         # start and a converged state that went through an obstacle (``Stepping.depth_limit``)
         self.depth_hooks: list[Callable[[], float]] = []
+        # the same question asked of converged states only, not of predicted starts (e.g. a
+        # deformable obstacle's, the retina through the choroid: a refused start there left
+        # Newton 13-18 iterations a step and the load steps at 4e-4)
+        self.converged_depth_hooks: list[Callable[[], float]] = []
         # each inserts (as zeros) the matrix entries the next solve may need beyond the
         # finite-element pattern, at the solve's start (collective; e.g. contact pairs
         # that may form in it): the pattern, and so MUMPS's symbolic analysis, then stays
@@ -448,9 +452,11 @@ class NonlinearSolver:
         self.snes.computeFunction(x, b)
         return float(b.norm())
 
-    def depth_through_obstacles(self) -> float:
-        """The largest of ``depth_hooks``' depths at the current unknowns (−inf: none)."""
-        return max((float(hook()) for hook in self.depth_hooks), default=-np.inf)
+    def depth_through_obstacles(self, converged: bool = False) -> float:
+        """The largest of ``depth_hooks``' depths at the current unknowns (−inf: none), and
+        of ``converged_depth_hooks``' for a ``converged`` state."""
+        hooks = self.depth_hooks + (self.converged_depth_hooks if converged else [])
+        return max((float(hook()) for hook in hooks), default=-np.inf)
 
     def reject_last_solve(self) -> None:
         """Counts the last solve, which converged, as failed (its state went through an
@@ -1043,8 +1049,8 @@ class _Walk:
         augmented = 0
         if converged and self.augmentation is not None and self.augmentation.due(target):
             converged, iterations, augmented = self.augmentation.run(solver, iterations)
-        if converged and solver.depth_hooks:
-            depth = solver.depth_through_obstacles()
+        if converged and (solver.depth_hooks or solver.converged_depth_hooks):
+            depth = solver.depth_through_obstacles(converged=True)
             if depth > stepping.depth_limit:
                 log.info("step %d: converged at %.6g with a point %.2f of an obstacle's "
                          "thickness through it, cutting", self.step, target, depth)
