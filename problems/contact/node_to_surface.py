@@ -561,7 +561,8 @@ class NodeToSurfaceContact:
         nearest triangle), as a fraction of ``search_depth``; −inf without slave nodes.
         Beyond ``search_depth`` a node is unpaired (on the wrong side) and feels no
         contact: a load step that carries one through that far must be cut, not kept
-        (:attr:`NonlinearSolver.depth_hooks`). Leaves the search's state as it was."""
+        (:attr:`NonlinearSolver.converged_depth_hooks`). Leaves the search's state as it
+        was (its nearest-triangle choice is :meth:`search`'s without the sticky memory)."""
         depth = -np.inf
         if not np.isfinite(self.search_depth):  # every pair counts: none is unpaired
             return depth
