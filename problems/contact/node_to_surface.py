@@ -339,18 +339,12 @@ class NodeToSurfaceContact:
                 self.slave_gaps = np.zeros(0)
                 return ContactState(np.zeros(0, dtype=int), np.zeros(0), np.zeros((0, 3)),
                                     np.zeros(0, dtype=int), np.zeros((0, 3)), np.inf)
-            _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
-            nearest = nearest.reshape(len(slaves), k)
-            points, _ = closest_points(slaves[:, None, :], corners[nearest])
-            distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
-            best = self._nearest_of_ties(distance, nearest)
+            nearest, best = self._nearest_triangles(slaves, corners, k)
             rows = np.arange(len(slaves))
             tri = self._sticky(slaves, corners, nearest, best, rows)
             self._previous = tri.copy()
-            a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
             shape = closest_points(slaves, corners[tri])[1]
-            normal = np.cross(b - a, c - a)
-            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            a, normal = _planes(corners[tri])
             # the paper's gap G = (x_h − x_t1)·n to the triangle's plane: its Hessian
             # in x_s vanishes, whereas the distance to a nearest edge or vertex
             # would add a tangential stiffness α w (I − n nᵀ) that a frozen-normal
@@ -366,6 +360,16 @@ class NodeToSurfaceContact:
                                 shape[active], min_gap, shifts[active])
 
     TIE = 1e-9  # distances this close (relative) are one distance: a tie, not a choice
+
+    def _nearest_triangles(self, slaves: np.ndarray, corners: np.ndarray,
+                           k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Each slave node's ``k`` candidate triangles (k-d tree on the centroids), (n, k),
+        and the column of the closest one, ties broken by :meth:`_nearest_of_ties`."""
+        _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
+        nearest = nearest.reshape(len(slaves), k)
+        points, _ = closest_points(slaves[:, None, :], corners[nearest])
+        distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
+        return nearest, self._nearest_of_ties(distance, nearest)
 
     def _nearest_of_ties(self, distance: np.ndarray, nearest: np.ndarray) -> np.ndarray:
         """Each slave node's closest candidate, ties broken by the triangles' geometric rank.
@@ -569,15 +573,8 @@ class NodeToSurfaceContact:
         corners = self._master_positions()[self.triangle_nodes]  # collective: on every rank
         slaves = self._positions(self.slave_blocks)
         if len(slaves):
-            k = min(self.candidates, len(corners))
-            _, nearest = cKDTree(corners.mean(axis=1)).query(slaves, k=k)
-            nearest = nearest.reshape(len(slaves), k)
-            points, _ = closest_points(slaves[:, None, :], corners[nearest])
-            distance = np.linalg.norm(slaves[:, None, :] - points, axis=2)
-            tri = nearest[np.arange(len(slaves)), self._nearest_of_ties(distance, nearest)]
-            a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
-            normal = np.cross(b - a, c - a)
-            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            nearest, best = self._nearest_triangles(slaves, corners, min(self.candidates, len(corners)))
+            a, normal = _planes(corners[nearest[np.arange(len(slaves)), best]])
             depth = float(np.max(-np.einsum("ij,ij->i", slaves - a, normal))) / self.search_depth
         return self.comm.allreduce(depth, op=MPI.MAX)
 
@@ -602,6 +599,14 @@ def penalty_pressure(gaps: np.ndarray, penalty: float, smoothing: float) -> tupl
     """Contact pressure p(g) ≥ 0 and its slope dp/dg: the smoothed penalty law of
     :func:`eyemech.forms.contact.smoothed_penalty_pressure` (ε = ``smoothing``)."""
     return smoothed_penalty_pressure(gaps, penalty, smoothing)
+
+
+def _planes(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each triangle's (n, 3, 3) first corner and unit normal, (n, 3) each."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    return a, normal
 
 
 def plane_barycentric(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
