@@ -322,10 +322,13 @@ def _scale_and_directions(plotter, corner) -> None:
     corner = np.asarray(corner, dtype=float)
     bar = np.array([corner, corner + (0.0, -2.0, 0.0)])
     plotter.add_lines(bar, color="black", width=5)
-    plotter.add_point_labels(bar.mean(axis=0, keepdims=True), ["2 mm"], font_size=14,
-                             shape_opacity=0.0, always_visible=True)
+    # a label's text starts at its point and runs to the right of the picture (−y here): the
+    # bar's under its middle, the outside arrow's ending at its tip, so no text crosses a line
+    plotter.add_point_labels((bar.mean(axis=0) + (0.0, 0.45, -0.55))[None], ["2 mm"], font_size=14,
+                             shape_opacity=0.0, show_points=False, always_visible=True)
     origin = corner + (0.0, -3.0, 0.8)
-    for direction, label in (((0.0, 0.0, 1.5), "anterior"), ((0.0, 1.5, 0.0), "outside")):
+    for direction, label, shift in (((0.0, 0.0, 1.5), "anterior", (0.0, 0.0, 0.3)),
+                                    ((0.0, 1.5, 0.0), "outside", (0.0, 1.4, 0.25))):
         plotter.add_mesh(pyvista.Arrow(start=origin, direction=direction, scale=1.5), color="black")
-        plotter.add_point_labels((origin + np.array(direction) * 1.2)[None], [label], font_size=13,
-                                 shape_opacity=0.0, always_visible=True)
+        plotter.add_point_labels((origin + np.array(direction) + shift)[None], [label], font_size=13,
+                                 shape_opacity=0.0, show_points=False, always_visible=True)
