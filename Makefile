@@ -9,6 +9,8 @@ STAMP  := $(VENV)/.installed
 # Extras: the DOLFINx wheel and the lens scenes' ipctk unless told otherwise
 # (EXTRAS=test,iol for a conda DOLFINx).
 EXTRAS ?= dolfinx,test,iol
+# Without the wheel the venv must see the DOLFINx its interpreter already has (conda, Docker)
+VENV_FLAGS ?= $(if $(findstring dolfinx,$(EXTRAS)),,--system-site-packages)
 OUT    ?= results
 # The main job: the scleral-buckling operation (issue #5).
 MAIN   ?= scleral-buckling
@@ -22,7 +24,7 @@ $(STAMP): pyproject.toml
 	if [ ! -x $(PY) ]; then \
 	  py=$$(sh scripts/find_python.sh) || exit 1; \
 	  echo "creating $(VENV) with $$py"; \
-	  "$$py" -m venv $(VENV); \
+	  "$$py" -m venv $(VENV_FLAGS) $(VENV); \
 	fi; \
 	$(PY) -m pip install --quiet --upgrade pip; \
 	$(PY) -m pip install --quiet -e ".[$(EXTRAS)]"; \
