@@ -203,3 +203,47 @@ def test_a_cached_form_is_found_without_listing_the_cache_folder(tmp_path, compi
     c.value = 5.0
     assert area_times_c() == pytest.approx(5.0)
     assert len(compilations) == 1
+
+
+def test_a_compilation_left_by_a_killed_process_is_taken_over(tmp_path, compilations):
+    """problems/run/jit_cache.py: a process killed while compiling a form leaves its C file
+    without the ready marker; FFCx then makes every later process wait and time out. With
+    the owner record naming a process that has ended, the next process moves the C file
+    aside and compiles the form itself; a live owner, or no record, is waited for."""
+    import socket
+
+    import dolfinx
+    import ufl
+
+    from eyemech.problems.run import jit_cache
+
+    jit_cache.install()
+    mesh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    cache = tmp_path / "jit"
+    options = {"cache_dir": str(cache), "timeout": 2}
+    integrand = dolfinx.fem.Constant(mesh, 7.0) * ufl.dx(domain=mesh)
+    assert dolfinx.fem.assemble_scalar(dolfinx.fem.form(integrand, jit_options=options)) == pytest.approx(7.0)
+    (c_file,) = cache.glob("*.c")
+    for path in cache.iterdir():  # the cache as a killed compilation leaves it
+        path.unlink()
+    c_file.write_text("")
+    ended = subprocess.Popen(["true"])
+    ended.wait()
+    c_file.with_suffix(".c.owner").write_text(f"{socket.gethostname()} {ended.pid}\n")
+
+    assert dolfinx.fem.assemble_scalar(dolfinx.fem.form(integrand, jit_options=options)) == pytest.approx(7.0)
+    assert len(compilations) == 2
+    assert c_file.with_suffix(".c.abandoned").exists() and c_file.with_suffix(".c.cached").exists()
+    assert c_file.with_suffix(".c.owner").read_text().split() == [socket.gethostname(), str(os.getpid())]
+
+    # an owner that still runs (this process), or a C file without a record: FFCx's wait
+    module = c_file.stem
+    for owner in (f"{socket.gethostname()} {os.getpid()}", None):
+        for path in cache.iterdir():
+            path.unlink()
+        c_file.write_text("")
+        if owner:
+            c_file.with_suffix(".c.owner").write_text(owner)
+        with pytest.raises(TimeoutError, match="timed out"):
+            jit_cache.cached_module(module, [], cache, timeout=1)
+        assert c_file.exists() and not c_file.with_suffix(".c.abandoned").exists()

@@ -11,6 +11,15 @@ FFCx's protocol (the C file created exclusively by the one process that compiles
 trying the interpreter's extension suffixes in the order ``FileFinder`` tries them.
 Installed by the run contract (``problems/run/context.py``) for FFCx 0.11 only; another
 version keeps its own lookup.
+
+**An abandoned compilation.** FFCx moves the C file aside when a compilation raises, but a
+process killed while compiling (Ctrl-C, SIGTERM, SIGKILL, a job's time limit) leaves it
+behind without the ``.c.cached`` marker, and every later process that needs the form waits
+``timeout`` seconds and fails until someone deletes the file by hand. The process that
+creates the C file therefore writes ``host pid`` beside it (``.c.owner``); a waiter that
+finds that process gone from this host moves the C file aside (``.c.abandoned``, an atomic
+rename, so only one waiter wins it) and compiles the form itself. A C file with no owner
+record (made by plain FFCx) or an owner on another host keeps FFCx's wait and timeout.
 """
 
 from __future__ import annotations
@@ -19,6 +28,7 @@ import importlib.machinery
 import importlib.util
 import logging
 import os
+import socket
 import time
 from pathlib import Path
 
@@ -46,13 +56,13 @@ def cached_module(module_name: str, object_names: list[str], cache_dir, timeout:
     c_filename = cache_dir.joinpath(module_name).with_suffix(".c")
     ready_name = c_filename.with_suffix(".c.cached")
     cache_dir.mkdir(exist_ok=True, parents=True)
-    try:
-        with open(c_filename, "x"):
-            pass
+    if _claim(c_filename):
         return None, None
-    except FileExistsError:
-        pass
     for _ in range(timeout):
+        if not os.path.exists(ready_name) and _abandoned(c_filename) and _claim(c_filename):
+            logger.warning("compiling %s again: the process compiling it before ended "
+                           "without finishing (moved aside as .c.abandoned)", module_name)
+            return None, None
         if os.path.exists(ready_name):
             path = _extension(cache_dir, module_name)
             if path is None:
@@ -66,6 +76,60 @@ def cached_module(module_name: str, object_names: list[str], cache_dir, timeout:
         time.sleep(1)
     raise TimeoutError(f"JIT compilation timed out, probably due to a failed previous compile: "
                        f"remove {c_filename} or raise the timeout")
+
+
+def _claim(c_filename: Path) -> bool:
+    """Create the C file exclusively (FFCx's lock: this process compiles) and record its
+    owner; False when it exists already."""
+    try:
+        with open(c_filename, "x"):
+            pass
+    except FileExistsError:
+        return False
+    c_filename.with_suffix(".c.owner").write_text(f"{socket.gethostname()} {os.getpid()}\n")
+    return True
+
+
+def _abandoned(c_filename: Path) -> bool:
+    """True when the C file's owner record names a process of this host that has ended;
+    the C file is then moved aside. Only one waiter does so: it first takes the record
+    (an atomic rename) and checks that what it took is still the dead owner's."""
+    owner = c_filename.with_suffix(".c.owner")
+    if not _ended_here(owner):
+        return False
+    taken = owner.with_name(f"{owner.name}.{socket.gethostname()}.{os.getpid()}")
+    try:
+        os.rename(owner, taken)
+    except FileNotFoundError:  # another waiter took it first
+        return False
+    if not _ended_here(taken):  # a new owner wrote its record meanwhile: give it back
+        os.replace(taken, owner)
+        return False
+    taken.unlink()
+    try:
+        os.replace(c_filename, c_filename.with_suffix(".c.abandoned"))
+    except FileNotFoundError:
+        return False
+    return True
+
+
+def _ended_here(owner: Path) -> bool:
+    """The owner record ``host pid`` names this host and a process that no longer runs."""
+    try:
+        host, pid = owner.read_text().split()
+        return host == socket.gethostname() and not _alive(int(pid))
+    except (OSError, ValueError):
+        return False
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: alive
+        return True
+    return True
 
 
 def install() -> None:
