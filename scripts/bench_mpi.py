@@ -32,8 +32,18 @@ from pathlib import Path
 
 BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
+# Scenes whose serial path is itself sensitive at round-off: self-contact with friction,
+# Newton updates cut by a collision-free fraction, adaptive time steps (docs/parallel.md,
+# "Lens scenes"). A partition changes the last bits of the assembled sums, and that may be
+# enough to take another path to nearly the same end. For these the serial run is repeated
+# with the named parameter scaled by 1 + PERTURBATION, a change of the size of round-off;
+# that run's distance from the serial end state is the reach of round-off on this path, and
+# the N-rank runs are compared with the serial one by their end states too.
+PATH_SENSITIVE = {"iol-fold": "youngs_modulus", "iol-injection": "youngs_modulus"}
+PERTURBATION = 1e-12
 COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "load", "max_rel_diff", "worst_quantity",
-           "effort_rel_diff", "effort_quantity", "lockstep_wait_max_s", "note", "date")
+           "effort_rel_diff", "effort_quantity", "lockstep_wait_max_s", "note", "date",
+           "perturbed_rel_diff", "perturbed_quantity")
 
 
 def flat(quantities: dict, prefix: str = "") -> dict[str, object]:
@@ -101,12 +111,15 @@ def scale_of(key: str, quantities: dict[str, object]) -> float:
     return max(floats, default=0.0)
 
 
-def largest_difference(serial: dict, parallel: dict, effort: bool = False) -> tuple[float, str]:
+def largest_difference(serial: dict, parallel: dict, effort: bool = False,
+                       end_state: bool = False) -> tuple[float, str]:
     """The largest relative difference over the numeric quantities (wall-clock ones
     left out; the solver's effort only, or only the results, as ``effort`` says):
     |a − b| / max(|a|, |b|), or for a difference-quantity (a spread, an error)
     |a − b| / the scale of the quantity it comes from (``scale_of``); 0 where the scale is
-    below 1e-14. Returns it and its key."""
+    below 1e-14. Returns it and its key. Histories of different lengths (another number of
+    adaptive steps) are an infinite difference, unless ``end_state``: then their last
+    entries are compared (a path-sensitive scene's end, ``PATH_SENSITIVE``)."""
     worst, where = 0.0, ""
     ours, theirs = flat(serial), flat(parallel)
     for key, value in ours.items():
@@ -114,7 +127,9 @@ def largest_difference(serial: dict, parallel: dict, effort: bool = False) -> tu
                 or describes_the_partition(key) or is_effort(key) != effort:
             continue
         a, b = numbers(value), numbers(theirs[key])
-        if len(a) != len(b):
+        if len(a) != len(b) and end_state and a and b:
+            a, b = a[-1:], b[-1:]
+        elif len(a) != len(b):
             return math.inf, f"{key} (length {len(a)} vs {len(b)})"
         floor = scale_of(key, ours) if is_difference(key) else 0.0
         for x, y in zip(a, b):
@@ -127,8 +142,10 @@ def largest_difference(serial: dict, parallel: dict, effort: bool = False) -> tu
     return worst, where
 
 
-def run(name: str, ranks: int, folder: Path) -> tuple[int, float, dict | None, str]:
-    command = [str(BIN / "eyemech"), "run", name, "--out", str(folder), "--json", "--quiet"]
+def run(name: str, ranks: int, folder: Path,
+        settings: tuple[str, ...] = ()) -> tuple[int, float, dict | None, str]:
+    command = [str(BIN / "eyemech"), "run", name, "--out", str(folder), "--json", "--quiet",
+               *[part for setting in settings for part in ("--set", setting)]]
     if ranks > 1:
         command = [str(BIN / "mpiexec"), "-n", str(ranks), *command]
     start = time.perf_counter()
@@ -181,11 +198,16 @@ def main() -> int:
                        "wall_s": round(seconds, 1), "load": load, "max_rel_diff": "", "worst_quantity": "",
                        "effort_rel_diff": "", "effort_quantity": "",
                        "lockstep_wait_max_s": waited, "note": said[:160],
-                       "date": time.strftime("%Y-%m-%d")}
+                       "date": time.strftime("%Y-%m-%d"), "perturbed_rel_diff": "",
+                       "perturbed_quantity": ""}
+                end_state = name in PATH_SENSITIVE
                 if ranks == 1:
                     serial = result
+                    if end_state and result is not None:
+                        row.update(perturbed(name, result, Path(scratch)))
                 elif result is not None and serial is not None:
-                    worst, where = largest_difference(serial["quantities"], result["quantities"])
+                    worst, where = largest_difference(serial["quantities"], result["quantities"],
+                                                      end_state=end_state)
                     row.update(max_rel_diff=f"{worst:.1e}", worst_quantity=where)
                     worst, where = largest_difference(serial["quantities"], result["quantities"],
                                                       effort=True)
@@ -203,6 +225,19 @@ def main() -> int:
     shown = sorted({int(r["ranks"]) for r in table})
     (out / "mpi-scenes.md").write_text(markdown(table, shown))
     return 0 if all(r["exit_code"] == 0 or "measures one core" in r["note"] for r in rows) else 1
+
+
+def perturbed(name: str, serial: dict, scratch: Path) -> dict[str, str]:
+    """The serial run again with ``PATH_SENSITIVE[name]`` scaled by 1 + PERTURBATION: its
+    largest relative difference from ``serial``'s end state (the reach of round-off on the
+    serial path), as the 1-rank row's ``perturbed_*`` columns."""
+    key = PATH_SENSITIVE[name]
+    value = float(serial["parameters"][key]) * (1.0 + PERTURBATION)
+    code, _, result, said = run(name, 1, scratch / f"{name}-1-perturbed", (f"{key}={value!r}",))
+    if result is None:
+        return {"perturbed_rel_diff": "", "perturbed_quantity": f"exit {code}: {said[:120]}"}
+    worst, where = largest_difference(serial["quantities"], result["quantities"], end_state=True)
+    return {"perturbed_rel_diff": f"{worst:.1e}", "perturbed_quantity": where}
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -233,6 +268,7 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
         by_scene.setdefault(row["scene"], {})[row["ranks"]] = row
     head = ["scene", *[f"{r} rank{'s' * (r > 1)} (s)" for r in counts],
             *[f"max rel. diff. {r} ranks" for r in counts if r > 1],
+            f"1 rank, E × (1 + {PERTURBATION:.0e})",
             *[f"effort {r} ranks" for r in counts if r > 1]]
     dates = sorted({str(r.get("date") or "") for r in rows} - {""}) or [time.strftime("%Y-%m-%d")]
     when = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
@@ -244,7 +280,12 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
              "largest relative difference in the solver's effort (Newton iterations, "
              "factorisations: round-off near the stopping test may cost an iteration); in brackets "
              "the machine's 1-minute load average "
-             "during the run (other jobs included).", "",
+             "during the run (other jobs included). The lens scenes' serial path is itself "
+             "sensitive at round-off (self-contact with friction, collision-limited Newton "
+             "updates, adaptive time steps): they are compared by their end states, and their "
+             "serial run is repeated with the Young's modulus changed by a part in 10¹² — its "
+             "distance from the serial run is how far round-off alone moves the result "
+             "(docs/parallel.md, \"Lens scenes\").", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, runs in by_scene.items():
         cells = [f"`{name}`"]
@@ -257,6 +298,10 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
                 row = runs.get(r, {})
                 diff = row.get("max_rel_diff", "")
                 cells.append(f"{diff} ({row['worst_quantity']})" if diff else "")
+        serial = runs.get(1, {})
+        diff = serial.get("perturbed_rel_diff", "")
+        cells.append(f"{diff} ({serial['perturbed_quantity']})" if diff else
+                     serial.get("perturbed_quantity", ""))
         for r in counts:
             if r > 1:
                 row = runs.get(r, {})

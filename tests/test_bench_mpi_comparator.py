@@ -86,3 +86,25 @@ def test_a_count_of_ccd_limited_updates_is_effort():
     assert bench_mpi.largest_difference(serial, parallel) == (0.0, "")
     worst, where = bench_mpi.largest_difference(serial, parallel, effort=True)
     assert where == "ccd_limited_updates" and worst > 0.8
+
+
+def test_a_path_sensitive_scene_is_compared_by_its_end_state():
+    """The lens scenes take another number of adaptive steps on another partition: their
+    histories are compared by the last entry, anything else as always."""
+    serial = {"time": [0.0, 0.5, 0.68], "haptic_strain": 0.14013}
+    parallel = {"time": [0.0, 0.3, 0.5, 0.68], "haptic_strain": 0.14055}
+    assert bench_mpi.largest_difference(serial, parallel)[0] == float("inf")
+    worst, where = bench_mpi.largest_difference(serial, parallel, end_state=True)
+    assert where == "haptic_strain" and abs(worst - 0.00042 / 0.14055) < 1e-9
+    parallel["time"][-1] = 0.60  # an end at another time is still a difference
+    assert bench_mpi.largest_difference(serial, parallel, end_state=True)[1] == "time"
+
+
+def test_the_table_shows_the_serial_paths_own_reach(tmp_path):
+    row = {**dict.fromkeys(bench_mpi.COLUMNS, ""), "scene": "iol-fold", "ranks": 1,
+           "exit_code": 0, "wall_s": 249.4, "load": 3.3, "date": "2026-12-07",
+           "perturbed_rel_diff": "1.2e-03", "perturbed_quantity": "min_self_distance_mm"}
+    text = bench_mpi.markdown([row], [1, 2, 3])
+    assert "E × (1 + 1e-12)" in text
+    assert "| `iol-fold` | 249.4 (3.3) |  |  |  |  | 1.2e-03 (min_self_distance_mm) |" in text
+    assert set(bench_mpi.PATH_SENSITIVE) == {"iol-fold", "iol-injection"}
