@@ -75,15 +75,17 @@ DIFFERENCE_WORDS = ("spread", "error", "deviation", "residual", "inward")
 # the solver's effort (Newton iterations, factorisations, the Jacobian's stored nonzeros,
 # ...) is not a result: near the stopping test, round-off that differs between partitions
 # can cost one iteration more, and a partition stores the couplings across its cut twice;
-# the lens' ccd_limited_updates counts Newton updates whose collision-free fraction came out
-# below 1 (0.9999... on one partition, 1.0 on another: 8.5e-1 apart on 3 ranks for the
-# fold); it is reported in its own column
+# an adaptive run's number of time steps and cuts follows from those iterations, and the
+# lens' ccd_limited_updates counts the Newton updates its collision check shortened (on
+# another path, other updates: 2 against 12 in the fold's last steps on 3 ranks). They are
+# reported in their own column.
 EFFORT_WORDS = ("iterations", "factorisations", "jacobians", "attempts", "load_steps",
                 "solves", "krylov", "augmentations", "nonzeros", "mallocs", "limited_updates")
+EFFORT_KEYS = ("steps", "time_steps", "fold_steps", "rejected_steps", "step_cuts", "cuts")
 
 
 def is_effort(key: str) -> bool:
-    return any(word in key for word in EFFORT_WORDS)
+    return any(word in key for word in EFFORT_WORDS) or key.rsplit(".", 1)[-1] in EFFORT_KEYS
 
 
 def describes_the_partition(key: str) -> bool:

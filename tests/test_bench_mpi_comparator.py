@@ -108,3 +108,14 @@ def test_the_table_shows_the_serial_paths_own_reach(tmp_path):
     assert "E × (1 + 1e-12)" in text
     assert "| `iol-fold` | 249.4 (3.3) |  |  |  |  | 1.2e-03 (min_self_distance_mm) |" in text
     assert set(bench_mpi.PATH_SENSITIVE) == {"iol-fold", "iol-injection"}
+
+
+def test_an_adaptive_runs_step_count_is_effort():
+    """iol-fold on 3 ranks: 79 time steps against 77 (Newton's stopping test fell otherwise
+    at two steps), the end within 1.2e-3: the count is the solver's effort, not a result."""
+    serial = {"steps": 77, "min_self_distance_mm": 0.045851, "intersecting_steps": 0}
+    parallel = {"steps": 79, "min_self_distance_mm": 0.045794, "intersecting_steps": 0}
+    worst, where = bench_mpi.largest_difference(serial, parallel, end_state=True)
+    assert where == "min_self_distance_mm" and worst < 2e-3
+    assert bench_mpi.largest_difference(serial, parallel, effort=True)[1] == "steps"
+    assert not bench_mpi.is_effort("intersecting_steps")
