@@ -91,9 +91,14 @@ def test_a_failed_case_exits_4_and_is_named(tmp_path, monkeypatch, capsys):
 
 
 def _planted_failure(*args, **kwargs):
+    """A path that fails at its first step, with the failed step's record the driver
+    makes (``follow_path`` keeps it; the run contract adds it to results.json's steps)."""
     from eyemech.problems.solve.driver import SolveFailure
 
-    raise SolveFailure(1, 0.5, 0.25, [1.0, 0.9], "DIVERGED_PLANTED")
+    failed_step = {"step": 1, "load": 0.5, "status": "failed", "newton_iterations": 0,
+                   "cuts": 1, "attempts": 1, "newton_iterations_all": 2, "jacobians": 2,
+                   "factorisations": 2, "residuals": [1.0, 0.9]}
+    raise SolveFailure(1, 0.5, 0.25, [1.0, 0.9], "DIVERGED_PLANTED", failed_step=failed_step)
 
 
 def _planted_process_failure(command, env):

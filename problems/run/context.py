@@ -177,7 +177,8 @@ class RunContext:
         elif isinstance(error, SolveFailure):
             self.result.status = "failed"
             if error.failed_step is not None:  # its work is in the totals: the steps sum to them
-                self.result.steps.append(error.failed_step)
+                self.result.steps.append(named_like(error.failed_step, self.result.steps,
+                                                     error.quantity))
             kept = f" Converged steps are in {self.out}: {', '.join(self.result.fields)}." \
                 if self.out is not None and self.result.fields else ""
             self.result.message = str(error) + kept
@@ -281,3 +282,18 @@ class RunContext:
         run.json as it was before this run."""
         if self.out is not None and self.rank0:
             identity.restore_run_file(self.out, self._previous_run_file)
+
+
+# what a scene calls the position along its path in its step records (the driver's "load")
+PATH_POSITION_KEYS = ("load", "load_factor", "time", "depth_mm")
+
+
+def named_like(failed_step: dict, steps: list[dict], quantity: str = "") -> dict:
+    """The driver's record of a failed step (its position as ``load``) with the position
+    under the name the scene's own records give it (``time`` for a time-stepped scene,
+    ``load_factor``, ...), so that every step of ``results.json`` reads alike; before any
+    record, the name of the path's ``quantity`` (the failure's)."""
+    first = {"time": "time", "load factor": "load_factor"}.get(quantity, "load")
+    name = next((key for key in PATH_POSITION_KEYS if steps and key in steps[-1]), first)
+    return {name if key == "load" else key: value for key, value in failed_step.items()}
+

@@ -200,7 +200,8 @@ def case_row(case: dict, folder: Path) -> dict:
         row.update(max_capsule_torque_Nmm=float(np.max(np.abs(torque[:, 1]))))
         row.update(angular_balance(folder, params, torque))
     if saved["status"] != "ok":
-        steps = saved.get("steps", [])
+        # the steps it converged (a failed run's record ends with the step that failed)
+        steps = [s for s in saved.get("steps", []) if s.get("status") != "failed"]
         row.update(finished=False, stopped="by hand (time budget)" if by_hand else "Newton failed",
                    reached_time_s=steps[-1]["time"] if steps else 0.0,
                    steps=len(steps), wall_seconds=saved["timings"]["total"],
