@@ -518,7 +518,7 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
     rows = sorted(rows, key=lambda r: r[key])
     thin = damping != DEFAULT_DAMPING
     fluid = f"c = {damping:g}/s" + (" (thinner fluid)" if thin else "")
-    for row in rows:
+    for index, row in enumerate(rows):
         if not row.get("finished"):
             z = row.get("last_frame_optic_normal_z")
             last = "no frame" if z is None else f"last frame n_z {z:.3f}"
@@ -535,7 +535,10 @@ def _outcome_panel(top, bottom, rows: list[dict], key: str, damping: float) -> N
         top.annotate(f"n_z {row['optic_normal_z']:.3f}" + (f" (c = {damping:g}/s)" if thin else
                                                            f"\ndec. {row['final_decentration_mm']:.2f} mm"),
                      (row[key], row["optic_normal_z"]), textcoords="offset points",
-                     xytext=(6, -48) if thin else (4, -26), fontsize=7)
+                     # on the friction axis neighbours' labels alternate in height: 0.2
+                     # apart they would overprint each other
+                     xytext=(6, -48) if thin else (4, -26 - 24 * (index % 2 if key == "friction" else 0)),
+                     fontsize=7)
     style = "--" if thin else "-"
     rolled = [r for r in rows if "max_roll_rolled_deg" in r]
     bottom.plot([r[key] for r in rolled], [r["max_roll_rolled_deg"] for r in rolled], "D" + style,
