@@ -75,13 +75,14 @@ DIFFERENCE_WORDS = ("spread", "error", "deviation", "residual", "inward")
 # the solver's effort (Newton iterations, factorisations, the Jacobian's stored nonzeros,
 # ...) is not a result: near the stopping test, round-off that differs between partitions
 # can cost one iteration more, and a partition stores the couplings across its cut twice;
-# an adaptive run's number of time steps and cuts follows from those iterations, and the
-# lens' ccd_limited_updates counts the Newton updates its collision check shortened (on
-# another path, other updates: 2 against 12 in the fold's last steps on 3 ranks). They are
-# reported in their own column.
+# an adaptive run's number of time steps, its cuts and step sizes follow from those
+# iterations, and the lens' ccd_limited_updates counts the Newton updates its collision
+# check shortened (on another path, other updates: 2 against 12 in the fold's last steps
+# on 3 ranks). They are reported in their own column.
 EFFORT_WORDS = ("iterations", "factorisations", "jacobians", "attempts", "load_steps",
                 "solves", "krylov", "augmentations", "nonzeros", "mallocs", "limited_updates")
-EFFORT_KEYS = ("steps", "time_steps", "fold_steps", "rejected_steps", "step_cuts", "cuts")
+EFFORT_KEYS = ("steps", "time_steps", "fold_steps", "rejected_steps", "step_cuts", "cuts",
+               "time_steps_s", "min_time_step_s", "max_time_step_s")
 
 
 def is_effort(key: str) -> bool:
