@@ -34,7 +34,7 @@ BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
 # Scenes whose serial path is itself sensitive at round-off: self-contact with friction,
 # Newton updates cut by a collision-free fraction, adaptive time steps (docs/parallel.md,
-# "Lens scenes"). A partition changes the last bits of the assembled sums, and that may be
+# "Every scene on 1, 2 and 3 ranks"). A partition changes the last bits of the assembled sums, and that may be
 # enough to take another path to nearly the same end. For these the serial run is repeated
 # with the named parameter scaled by 1 + PERTURBATION, a change of the size of round-off;
 # that run's distance from the serial end state is the reach of round-off on this path, and
@@ -77,8 +77,8 @@ DIFFERENCE_WORDS = ("spread", "error", "deviation", "residual", "inward")
 # can cost one iteration more, and a partition stores the couplings across its cut twice;
 # an adaptive run's number of time steps, its cuts and step sizes follow from those
 # iterations, and the lens' ccd_limited_updates counts the Newton updates its collision
-# check shortened (on another path, other updates: 2 against 12 in the fold's last steps
-# on 3 ranks). They are reported in their own column.
+# check shortened (on another path, other updates: 2 against 12-13 in the fold's last
+# steps on 3 ranks). They are reported in their own column.
 EFFORT_WORDS = ("iterations", "factorisations", "jacobians", "attempts", "load_steps",
                 "solves", "krylov", "augmentations", "nonzeros", "mallocs", "limited_updates")
 EFFORT_KEYS = ("steps", "time_steps", "fold_steps", "rejected_steps", "step_cuts", "cuts",
@@ -288,7 +288,7 @@ def markdown(rows: list[dict], counts: list[int]) -> str:
              "updates, adaptive time steps): they are compared by their end states, and their "
              "serial run is repeated with the Young's modulus changed by a part in 10¹² — its "
              "distance from the serial run is how far round-off alone moves the result "
-             "(docs/parallel.md, \"Lens scenes\").", "",
+             "(docs/parallel.md, \"Every scene on 1, 2 and 3 ranks\").", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, runs in by_scene.items():
         cells = [f"`{name}`"]

@@ -100,7 +100,7 @@ def test_a_path_sensitive_scene_is_compared_by_its_end_state():
     assert bench_mpi.largest_difference(serial, parallel, end_state=True)[1] == "time"
 
 
-def test_the_table_shows_the_serial_paths_own_reach(tmp_path):
+def test_the_table_shows_the_serial_paths_own_reach():
     row = {**dict.fromkeys(bench_mpi.COLUMNS, ""), "scene": "iol-fold", "ranks": 1,
            "exit_code": 0, "wall_s": 249.4, "load": 3.3, "date": "2026-12-07",
            "perturbed_rel_diff": "1.2e-03", "perturbed_quantity": "min_self_distance_mm"}

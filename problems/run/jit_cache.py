@@ -123,12 +123,13 @@ def _ended_here(owner: Path) -> bool:
 
 
 def _alive(pid: int) -> bool:
+    """Signal 0 checks that the process exists (PermissionError: another user's, alive)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:  # another user's process: alive
-        return True
+    except PermissionError:
+        pass
     return True
 
 
