@@ -417,21 +417,102 @@ class NodeToSurfaceContact:
     def residual_hook(self, _x: PETSc.Vec, b: PETSc.Vec) -> None:
         """F += −w p(g) D for the active pairs (u already holds the iterate)."""
         self.state = state = self.search()
-        dofs = self._pair_dofs(state)
         pressure, _ = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
-        scale = -self.slave_weights[state.active] * pressure
-        values = scale[:, None] * self._pair_vectors(state)
+        self._add_force(state, b, pressure)
+
+    def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
+        """K += −w p'(g) D Dᵀ (frozen normal) for the active pairs."""
+        state = self.search()
+        _, slope = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
+        self._add_stiffness(state, A, slope)
+
+    # -- the active set predicted by Newton's direction ------------------------------------
+    def predict_active_set(self, solver, below: float, rounds: int = 3) -> None:
+        """Install, as ``solver``'s line-search pre-check, the active set predicted by its
+        Newton direction (a primal–dual active-set step), at iterates whose residual norm is
+        at most ``below``: a pair open at the iterate x that the full step x − y would carry
+        through its master triangle gets the penalty's stiffness in the Jacobian, and the
+        direction is solved again (at most ``rounds`` times; each a factorisation, counted by
+        PETSc's events). A pair that the unforced direction moves away is left open, so a
+        pair held at the surface by a forced step is released at the next iterate.
+
+        Why: the Jacobian of an open pair is zero. A retina node a hair above the choroid
+        (g ≈ 1e-8 mm) on a soft detached flap, pulled towards it by 1e-9–1e-6 N, gets a
+        direction that carries it micrometres through the choroid, where its penalty force is
+        10⁴ times the residual; backtracking then creeps at λ ≈ 1e-7, the residual flat to 7
+        digits (docs/scleral_buckling.md, "Where the settling's Newton stops at a flat
+        residual"). The residual is untouched: the solution is the same, the direction and
+        the Newton correction of :meth:`NonlinearSolver._accept_flat_residual` are the
+        semismooth Newton's. Off above ``below``: while contact switches far from
+        convergence, the prediction was measured to make the suturing steps creep."""
+        self._solver, self._prediction_rounds = solver, rounds
+        self._prediction_below = float(below)
+        self.predicted_pairs = 0  # pairs made active by a prediction, all solves (this rank)
+        solver.line_search_precheck = self._predict
+
+    def _predict(self, x_vec: PETSc.Vec, y_vec: PETSc.Vec) -> None:
+        """SNES line-search pre-check (the update is x − λ y). Collective."""
+        solver = self._solver
+        snes = solver.snes
+        residual, matrix, ksp = snes.getFunction()[0], snes.getJacobian()[0], snes.getKSP()
+        norm = residual.norm()
+        if norm > self._prediction_below:
+            return
+        unknowns = solver.unknowns if len(solver.unknowns) > 1 else solver.unknowns[0]
+        open_at_x = np.ones(len(self.slave_blocks), dtype=bool)
+        if self.state is not None:
+            open_at_x[self.state.active] = False
+        memory = (None if getattr(self, "_previous", None) is None else self._previous.copy(),
+                  getattr(self, "slave_gaps", None), self.state)
+        gaps_at_x = memory[1]
+        trial, rhs = x_vec.duplicate(), residual.copy()
+        try:
+            for _ in range(self._prediction_rounds):
+                trial.waxpy(-1.0, y_vec, x_vec)
+                trial.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+                dolfinx.fem.petsc.assign(trial, unknowns)
+                for u in solver.unknowns:
+                    u.x.scatter_forward()
+                predicted = self.search()
+                self._previous = None if memory[0] is None else memory[0].copy()
+                new = predicted.active[(predicted.gaps < 0) & open_at_x[predicted.active]]
+                if self.comm.allreduce(len(new), op=MPI.SUM) == 0:
+                    break
+                open_at_x[new] = False
+                self.predicted_pairs += len(new)
+                keep = np.isin(predicted.active, new)
+                pairs = ContactState(predicted.active[keep], predicted.gaps[keep],
+                                     predicted.normals[keep], predicted.triangles[keep],
+                                     predicted.shape[keep], 0.0)
+                self._add_stiffness(pairs, matrix, slope=-self.penalty)
+                # the pressure's branch in contact continued to the gap at x (> 0 there, so a
+                # pull): the direction then takes the node to the penetration its force needs
+                # (unpaired at x, or no gaps known: no continuation)
+                at_x = np.zeros(len(new)) if gaps_at_x is None else gaps_at_x[pairs.active]
+                self._add_force(pairs, rhs, -self.penalty * np.where(np.isfinite(at_x), at_x, 0.0))
+                ksp.solve(rhs, y_vec)
+        finally:
+            x_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            dolfinx.fem.petsc.assign(x_vec, unknowns)
+            for u in solver.unknowns:
+                u.x.scatter_forward()
+            self._previous, self.slave_gaps, self.state = memory
+            trial.destroy()
+            rhs.destroy()
+
+    def _add_force(self, state: ContactState, b: PETSc.Vec, pressure: np.ndarray) -> None:
+        """F += −w p D for the pairs of ``state`` with the pressures ``pressure``. Collective."""
+        dofs = self._pair_dofs(state)
+        values = (-self.slave_weights[state.active] * pressure)[:, None] * self._pair_vectors(state)
         keep = ~np.isin(dofs, list(self._constrained)) if self._constrained else np.ones_like(dofs, bool)
         b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
         b.assemblyBegin()
         b.assemblyEnd()
 
-    def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
-        """K += −w p'(g) D Dᵀ (frozen normal) for the active pairs."""
-        state = self.search()
-        dofs = self._pair_dofs(state)
-        D = self._pair_vectors(state)
-        _, slope = penalty_pressure(state.law_gaps, self.penalty, self.smoothing)
+    def _add_stiffness(self, state: ContactState, A: PETSc.Mat, slope) -> None:
+        """K += −w p'(g) D Dᵀ for the pairs of ``state``, p' = ``slope`` (per pair, or one
+        number: −α in contact), then a final assembly. Collective."""
+        dofs, D = self._pair_dofs(state), self._pair_vectors(state)
         stiffness = -self.slave_weights[state.active] * slope
         constrained = self._constrained
         # timed apart (inside "assembly"): includes PETSc's mallocs for new nonzeros
@@ -439,8 +520,8 @@ class NodeToSurfaceContact:
             for i in range(len(dofs)):
                 keep = np.array([d not in constrained for d in dofs[i]])
                 index = dofs[i][keep].astype(PETSc.IntType)
-                block = stiffness[i] * np.outer(D[i][keep], D[i][keep])
-                A.setValues(index, index, block, addv=PETSc.InsertMode.ADD)
+                A.setValues(index, index, stiffness[i] * np.outer(D[i][keep], D[i][keep]),
+                            addv=PETSc.InsertMode.ADD)
             A.assemble()
 
     # -- diagnostics ----------------------------------------------------------------------

@@ -98,6 +98,16 @@ class NewtonOptions:
     # does not apply to them (docs/scleral_buckling.md, "Newton's budget")
     stagnation_window: int = 0
     stagnation_factor: float = 0.9
+    # a solve that stops unconverged at a small finite residual (backtracking finds no
+    # descent, or the iteration limit) is accepted as converged when ‖F‖ ≤
+    # ``flat_residual_limit`` and the full Newton correction at its last iterate, from a fresh
+    # Jacobian, moves no component of the first unknown (the displacement) by more than
+    # ``increment_tolerance``: the displacement criterion of nonlinear finite-element codes,
+    # for states whose residual cannot fall further along a soft mode (a detached flap of
+    # retina at its contact's kink: docs/scleral_buckling.md, "A flat residual accepted by
+    # its Newton correction"). 0: off, only ‖F‖ decides.
+    increment_tolerance: float = 0.0
+    flat_residual_limit: float = 1e-6
     # "krylov": every Newton direction from the current Jacobian by FGMRES preconditioned
     # with the last LU factorisation, refactorised only when FGMRES needs more than
     # ``krylov_max_it`` iterations or the Jacobian's pattern grew
@@ -126,6 +136,10 @@ class NewtonOptions:
                                  + ", ".join(FACTORISATIONS))
         if self.stagnation_window < 0:
             raise ParameterError("stagnation_window", f"{self.stagnation_window}: must be >= 0")
+        if not self.increment_tolerance >= 0:
+            raise ParameterError("increment_tolerance", f"{self.increment_tolerance}: must be >= 0")
+        if not self.flat_residual_limit > 0:
+            raise ParameterError("flat_residual_limit", f"{self.flat_residual_limit}: must be > 0")
         if not 0 < self.stagnation_factor < 1:
             raise ParameterError("stagnation_factor", f"{self.stagnation_factor}: a reduction "
                                  "factor in (0, 1)")

@@ -102,6 +102,10 @@ class SolverCounts:
     # PETSc's reallocations of the Jacobian's storage (MatGetInfo "mallocs", summed over
     # ranks): one per insertion outside the preallocated pattern, e.g. a new contact pair
     matrix_mallocs: int = 0
+    # solves stopped at a flat residual and accepted by their Newton correction
+    # (NewtonOptions.increment_tolerance); each cost one more Jacobian and factorisation,
+    # counted above
+    flat_residual_acceptances: int = 0
 
     def copy(self) -> "SolverCounts":
         return dataclasses.replace(self)

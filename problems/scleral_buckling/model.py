@@ -139,6 +139,8 @@ class BucklingModel:
                                      krylov_predict_after=params.krylov_predict_after,
                                      reuse_step_relative=params.jacobian_reuse_test == "step",
                                      cut_on_nan=params.full_step_nan == "cut",
+                                     increment_tolerance=params.increment_tolerance,
+                                     flat_residual_limit=params.flat_residual_limit,
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,
                                          params.settle_line_search} != {"bt"}

@@ -181,6 +181,20 @@ class NumericalSettings(SolverChoice):
         "limit or a failed line search stops it; with 3, settling steps of 1/8 that creep "
         "for 3 iterations and then converge were cut until the run failed: "
         "docs/scleral_buckling.md, Stalled backtracking, The settling step)", group=SOLVER)
+    retina_contact_prediction: bool = field(
+        False, "at Newton iterates with a residual of at most flat_residual_limit, a retina "
+        "node open there that Newton's full step would carry into the choroid gets the "
+        "penalty's stiffness and the step is solved again (a primal-dual active-set step; "
+        "docs/scleral_buckling.md, A flat residual accepted by its Newton correction)",
+        group=SOLVER)
+    increment_tolerance: float = field(
+        0.0, "a Newton solve stopped at a flat residual (at most flat_residual_limit) is "
+        "accepted when the Newton correction there, from a fresh Jacobian, moves no node by "
+        "more than this (0: off, the residual alone decides; docs/scleral_buckling.md, A flat "
+        "residual accepted by its Newton correction)", "mm", group=SOLVER)
+    flat_residual_limit: float = field(
+        1e-5, "the largest residual norm a flat-residual solve may be accepted at "
+        "(increment_tolerance; the IOP's load on the half eye is about 1.5 N)", "N", group=SOLVER)
 
     error_estimate: bool = error_estimate_field(
         "also solve the operation on the neighbouring mesh of the ladder coarse, default, "
@@ -219,6 +233,13 @@ class NumericalSettings(SolverChoice):
             raise ParameterError("hard_step_effort", f"{self.hard_step_effort}: must be >= 0")
         if self.stagnation_window < 0:
             raise ParameterError("stagnation_window", f"{self.stagnation_window}: must be >= 0")
+        if self.retina_contact_prediction and self.retina_contact_method != "node-to-surface":
+            raise ParameterError("retina_contact_prediction", "predicts node-to-surface pairs: "
+                                 "with retina_contact_method=node-to-surface only")
+        if not self.increment_tolerance >= 0:
+            raise ParameterError("increment_tolerance", f"{self.increment_tolerance} mm: must be >= 0")
+        if not self.flat_residual_limit > 0:
+            raise ParameterError("flat_residual_limit", f"{self.flat_residual_limit} N: must be > 0")
         if not 0 <= self.settle_step <= 0.75:
             raise ParameterError("settle_step", f"{self.settle_step}: a fraction in [0, 0.75] "
                                  "of step 4 (0: the other steps' largest)")

@@ -363,6 +363,8 @@ class RetinaContact(Term):
         solver.converged_depth_hooks.append(contact.depth_through)
         if self.params.restore_contact_memory:
             solver.memory_hooks.append((contact.memory, contact.restore_memory))
+        if self.params.retina_contact_prediction:
+            contact.predict_active_set(solver, below=self.params.flat_residual_limit)
         contact.allow_new_nonzeros(solver.problem.A)
         solver.pattern_hooks.append(contact.grow_pattern)
         if self.augmented:  # the multipliers go back with a cut step

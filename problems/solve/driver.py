@@ -186,6 +186,10 @@ class NonlinearSolver:
         # that may form in it): the pattern, and so MUMPS's symbolic analysis, then stays
         # fixed through the solve (NodeToSurfaceContact.grow_pattern)
         self.pattern_hooks: list[Callable[[PETSc.Mat], None]] = []
+        # SNES's line-search pre-check (x, y) -> None, which may change the direction y
+        # (the update is x − λ y) before the line search: e.g. a contact's predicted active
+        # set (NodeToSurfaceContact.predict_active_set); None: none
+        self.line_search_precheck: Callable[[PETSc.Vec, PETSc.Vec], None] | None = None
         self.rejected_predictions = 0  # predicted starts refused for their depth
         self.through_obstacle = False  # the last converged solve was refused for its depth
         self._jacobians = 0  # Jacobian assemblies so far
@@ -535,6 +539,7 @@ class NonlinearSolver:
         self.through_obstacle = False
         self._kept_iterations = 0
         self._iterations_begun = 0
+        self.flat_acceptance: tuple[float, float] | None = None
         start = time.perf_counter()
         assembly_before = self.timings.seconds["assembly"]
         self._callback_error = None
@@ -543,6 +548,10 @@ class NonlinearSolver:
         mallocs_before = self._matrix_mallocs()
         for hook in self.pattern_hooks:
             hook(self.problem.A)
+        if self.line_search_precheck is not None:
+            # installed at every solve: setting the line search's type (a stage's Newton
+            # settings, a fallback) clears PETSc's pre-check
+            self.snes.setLineSearchPreCheck(self.line_search_precheck)
         converged = False
         # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
         self._insert_options()
@@ -554,6 +563,8 @@ class NonlinearSolver:
             self.problem.solve()
             reason = self.snes.getConvergedReason()
             converged = reason > 0 and all(np.isfinite(self.residual_history))
+            if not converged and self.options.increment_tolerance > 0:
+                converged = self._accept_flat_residual()
             raising = False
         except PETSc.Error:  # e.g. a zero pivot from an inverted element
             if self._callback_error is not None:
@@ -576,6 +587,50 @@ class NonlinearSolver:
         self.linear_iterations = self.snes.getLinearSolveIterations()
         return converged, iterations
 
+    def _accept_flat_residual(self) -> bool:
+        """Whether the unconverged solve's last iterate is accepted as converged
+        (``options.increment_tolerance``): its residual finite and at most
+        ``options.flat_residual_limit``, and the full Newton correction there, from a fresh
+        Jacobian (one more assembly and factorisation, counted with the solve), moving no
+        component of the first unknown by more than ``options.increment_tolerance``. Sets
+        ``flat_acceptance`` to (‖F‖, the largest such component). Collective."""
+        snes, options = self.snes, self.options
+        if self.diverged_to_nan():
+            return False
+        x, residual = self.problem.x, self.problem.b
+        snes.computeFunction(x, residual)
+        norm = residual.norm()
+        if not np.isfinite(norm) or norm > options.flat_residual_limit:
+            return False
+        jacobian, preconditioner, _ = snes.getJacobian()
+        self._iterations_begun += 1  # a Newton linearisation (Jacobian, factorisation, solve)
+        self._reuse_enabled = False
+        try:
+            snes.computeJacobian(x, jacobian, preconditioner)
+        finally:
+            self._reuse_enabled = True
+        correction = x.duplicate()
+        try:
+            snes.getKSP().solve(residual, correction)
+            if self.line_search_precheck is not None:  # e.g. the contact's predicted active set
+                self.line_search_precheck(x, correction)
+            parts = [dolfinx.fem.Function(u.function_space) for u in self.unknowns]
+            dolfinx.fem.petsc.assign(correction, parts if len(parts) > 1 else parts[0])
+        finally:
+            correction.destroy()
+        first = parts[0]
+        owned = first.function_space.dofmap.index_map.size_local * first.function_space.dofmap.index_map_bs
+        largest = float(np.max(np.abs(first.x.array[:owned]), initial=0.0))
+        largest = first.function_space.mesh.comm.allreduce(largest, op=MPI.MAX)
+        if not largest <= options.increment_tolerance:
+            log.info("a flat residual %.3e not accepted: Newton's correction moves %.3e > %.3e",
+                     norm, largest, options.increment_tolerance)
+            return False
+        log.info("a flat residual %.3e (%s) accepted: Newton's correction there moves at most "
+                 "%.3e <= %.3e", norm, self.reason(), largest, options.increment_tolerance)
+        self.flat_acceptance = (float(norm), largest)
+        return True
+
     def _tally(self, converged: bool, numeric_before: int, symbolic_before: int,
                jacobians_before: int, mallocs_before: int | None) -> None:
         """The last solve's work, also when it raised (a callback's error included).
@@ -592,7 +647,8 @@ class NonlinearSolver:
                             symbolic_factorisations=symbolic - symbolic_before,
                             krylov_iterations=self._krylov_iterations(),
                             matrix_mallocs=0 if mallocs_before is None
-                            else self._matrix_mallocs() - mallocs_before)
+                            else self._matrix_mallocs() - mallocs_before,
+                            flat_residual_acceptances=int(self.flat_acceptance is not None))
         self.last_counts = work
         self.counts.add(work)
         SOLVER_COUNTS.add(work)
@@ -751,6 +807,7 @@ class StepRecord:
     krylov_iterations_all: int = 0    # Krylov iterations of all attempts (0: direct solve)
     matrix_mallocs: int = 0           # reallocations of the Jacobian's storage
     augmentations: int = 0            # Newton solves after a multiplier update, all attempts
+    flat_residual_acceptances: int = 0  # solves accepted by their Newton correction
 
     @staticmethod
     def work(counts: SolverCounts) -> dict[str, int]:
@@ -759,7 +816,8 @@ class StepRecord:
                 "jacobians": counts.jacobians, "factorisations": counts.factorisations,
                 "symbolic_factorisations": counts.symbolic_factorisations,
                 "krylov_iterations_all": counts.krylov_iterations,
-                "matrix_mallocs": counts.matrix_mallocs}
+                "matrix_mallocs": counts.matrix_mallocs,
+                "flat_residual_acceptances": counts.flat_residual_acceptances}
 
     def with_work(self, counts: SolverCounts) -> "StepRecord":
         """This record with more work of the step added (solves after its converged one:
@@ -770,7 +828,7 @@ class StepRecord:
             iterations_all=self.iterations_all + extra["iterations_all"],
             **{key: getattr(self, key) + extra[key]
                for key in ("jacobians", "factorisations", "symbolic_factorisations",
-                           "krylov_iterations_all", "matrix_mallocs")})
+                           "krylov_iterations_all", "matrix_mallocs", "flat_residual_acceptances")})
 
     def counts(self) -> dict[str, int]:
         """The step's work under the names of ``results.json``'s step records:
@@ -779,7 +837,8 @@ class StepRecord:
                 "jacobians": self.jacobians, "factorisations": self.factorisations,
                 "symbolic_factorisations": self.symbolic_factorisations,
                 "krylov_iterations_all": self.krylov_iterations_all,
-                "matrix_mallocs": self.matrix_mallocs, "augmentations": self.augmentations}
+                "matrix_mallocs": self.matrix_mallocs, "augmentations": self.augmentations,
+                "flat_residual_acceptances": self.flat_residual_acceptances}
 
 
 def follow_path(solver: NonlinearSolver, apply: Callable[[float, float], None],
