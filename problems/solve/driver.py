@@ -163,33 +163,7 @@ class NonlinearSolver:
         if self.unknowns[0].function_space.mesh.comm.size > 1:
             hold_solver(self)
         self.timings.add("form_compilation", time.perf_counter() - start)
-        self.residual_hooks = list(residual_hooks)
-        self.jacobian_hooks = list(jacobian_hooks)
-        # run with the unknowns at x before the residual and the Jacobian are assembled, and
-        # after a state is restored: fields computed from the unknowns that the forms read
-        # as coefficients (e.g. the condensed pressure, problems/solid/mean_dilatation.py)
-        self.state_hooks: list[Callable[[], None]] = []
-        # (save, restore) pairs of the hooks' memory between iterates (:meth:`save_memory`)
-        self.memory_hooks: list[tuple[Callable[[], object], Callable[[object], None]]] = []
-        self._start_memory: list = []
-        # each returns the largest depth of a point through a rigid obstacle at the current
-        # unknowns, as a fraction of the obstacle's thickness (collective; e.g.
-        # forms/buckle.py's Buckle.depth_through): :func:`follow_path` refuses a predicted
-        # start and a converged state that went through an obstacle (``Stepping.depth_limit``)
-        self.depth_hooks: list[Callable[[], float]] = []
-        # the same question asked of converged states only, not of predicted starts (e.g. a
-        # deformable obstacle's, the retina through the choroid: a refused start there left
-        # Newton 13-18 iterations a step and the load steps at 4e-4)
-        self.converged_depth_hooks: list[Callable[[], float]] = []
-        # each inserts (as zeros) the matrix entries the next solve may need beyond the
-        # finite-element pattern, at the solve's start (collective; e.g. contact pairs
-        # that may form in it): the pattern, and so MUMPS's symbolic analysis, then stays
-        # fixed through the solve (NodeToSurfaceContact.grow_pattern)
-        self.pattern_hooks: list[Callable[[PETSc.Mat], None]] = []
-        # SNES's line-search pre-check (x, y) -> None, which may change the direction y
-        # (the update is x − λ y) before the line search: e.g. a contact's predicted active
-        # set (NodeToSurfaceContact.predict_active_set); None: none
-        self.line_search_precheck: Callable[[PETSc.Vec, PETSc.Vec], None] | None = None
+        self._set_up_hooks(residual_hooks, jacobian_hooks)
         self.rejected_predictions = 0  # predicted starts refused for their depth
         self.through_obstacle = False  # the last converged solve was refused for its depth
         self._jacobians = 0  # Jacobian assemblies so far
@@ -225,6 +199,37 @@ class NonlinearSolver:
         # while its iteration number counts the completed ones only
         self._iterations_begun = 0
         self.snes.setUpdate(petsc_callback(self._begin_iteration))
+
+    def _set_up_hooks(self, residual_hooks: Sequence[ResidualHook],
+                      jacobian_hooks: Sequence[JacobianHook]) -> None:
+        """The places where terms outside the forms join the solve (empty, or as given)."""
+        self.residual_hooks = list(residual_hooks)
+        self.jacobian_hooks = list(jacobian_hooks)
+        # run with the unknowns at x before the residual and the Jacobian are assembled, and
+        # after a state is restored: fields computed from the unknowns that the forms read
+        # as coefficients (e.g. the condensed pressure, problems/solid/mean_dilatation.py)
+        self.state_hooks: list[Callable[[], None]] = []
+        # (save, restore) pairs of the hooks' memory between iterates (:meth:`save_memory`)
+        self.memory_hooks: list[tuple[Callable[[], object], Callable[[object], None]]] = []
+        self._start_memory: list = []
+        # each returns the largest depth of a point through a rigid obstacle at the current
+        # unknowns, as a fraction of the obstacle's thickness (collective; e.g.
+        # forms/buckle.py's Buckle.depth_through): :func:`follow_path` refuses a predicted
+        # start and a converged state that went through an obstacle (``Stepping.depth_limit``)
+        self.depth_hooks: list[Callable[[], float]] = []
+        # the same question asked of converged states only, not of predicted starts (e.g. a
+        # deformable obstacle's, the retina through the choroid: a refused start there left
+        # Newton 13-18 iterations a step and the load steps at 4e-4)
+        self.converged_depth_hooks: list[Callable[[], float]] = []
+        # each inserts (as zeros) the matrix entries the next solve may need beyond the
+        # finite-element pattern, at the solve's start (collective; e.g. contact pairs
+        # that may form in it): the pattern, and so MUMPS's symbolic analysis, then stays
+        # fixed through the solve (NodeToSurfaceContact.grow_pattern)
+        self.pattern_hooks: list[Callable[[PETSc.Mat], None]] = []
+        # SNES's line-search pre-check (x, y) -> None, which may change the direction y
+        # (the update is x − λ y) before the line search: e.g. a contact's predicted active
+        # set (NodeToSurfaceContact.predict_active_set); None: none
+        self.line_search_precheck: Callable[[PETSc.Vec, PETSc.Vec], None] | None = None
 
     def _begin_iteration(self, _snes: PETSc.SNES, _iteration: int) -> None:
         self._iterations_begun += 1
