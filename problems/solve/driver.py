@@ -554,8 +554,8 @@ class NonlinearSolver:
         for hook in self.pattern_hooks:
             hook(self.problem.A)
         if self.line_search_precheck is not None:
-            # installed at every solve: setting the line search's type (a stage's Newton
-            # settings, a fallback) clears PETSc's pre-check
+            # installed at every solve, whatever a stage's Newton settings did to the line
+            # search between solves (cheap: a pointer)
             self.snes.setLineSearchPreCheck(self.line_search_precheck)
         converged = False
         # PCSetUp reads the factor matrix's options (MUMPS ICNTLs) inside the solve
