@@ -34,11 +34,12 @@ BIN = Path(sys.executable).parent
 LEFT_OUT = {"iol-injection": "its default folds the lens first (10–20 min serially)"}
 # Scenes whose serial path is itself sensitive at round-off: self-contact with friction,
 # Newton updates cut by a collision-free fraction, adaptive time steps (docs/parallel.md,
-# "Every scene on 1, 2 and 3 ranks"). A partition changes the last bits of the assembled sums, and that may be
-# enough to take another path to nearly the same end. For these the serial run is repeated
-# with the named parameter scaled by 1 + PERTURBATION, a change of the size of round-off;
-# that run's distance from the serial end state is the reach of round-off on this path, and
-# the N-rank runs are compared with the serial one by their end states too.
+# "Every scene on 1, 2 and 3 ranks"). A partition changes the last bits of the assembled
+# sums, and that may be enough to take another path to nearly the same end. For these the
+# serial run is repeated with the named parameter scaled by 1 + PERTURBATION, a change of
+# the size of round-off; that run's distance from the serial end state is the reach of
+# round-off on this path, and the N-rank runs are compared with the serial one by their end
+# states too.
 PATH_SENSITIVE = {"iol-fold": "youngs_modulus", "iol-injection": "youngs_modulus"}
 PERTURBATION = 1e-12
 COLUMNS = ("scene", "ranks", "exit_code", "wall_s", "load", "max_rel_diff", "worst_quantity",
