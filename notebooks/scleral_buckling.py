@@ -52,7 +52,7 @@ rows = [("axial length change (mm)", "axial_length_change_mm"),
         ("volume change (mm³)", "volume_change_mm3"),
         ("tear's rim gap, widest (mm)", "tear_rim_gap_max_mm"),
         ("mean retina–choroid gap (mm)", "retina_choroid_gap_mean_mm"),
-        ("tear closed", "tear_closed"),
+        ("tear closed (rim gap < tolerance)", "tear_closed_nts"),
         ("largest von Mises stress (MPa)", "von_mises_max_MPa")]
 print(f"{'':32s}" + "".join(f"{name.removeprefix('after_'):>12s}" for name in stages))
 for label, key in rows:

@@ -429,7 +429,7 @@ def _run(scene, overrides, args, options, comm, say) -> int:
             if args.json:
                 say(json.dumps(finished))
             else:
-                _summary(_Record(finished), Path(args.resume), say)
+                _summary(_Record(finished), Path(args.resume), say, scene.headline)
             return 0
     params = build(scene.parameters, overrides)  # raises before anything is created
     out = Path(args.out) if args.out else Path(args.resume) if args.resume \
@@ -445,7 +445,7 @@ def _run(scene, overrides, args, options, comm, say) -> int:
     if args.json:
         say(json.dumps(result.as_json()))
     else:
-        _summary(result, out, say)
+        _summary(result, out, say, scene.headline)
     return 0
 
 
@@ -492,13 +492,16 @@ class _Record:
         self.quantities = data.get("quantities") or {}
 
 
-def _summary(result, out: Path, say) -> None:
-    """The result's scalar quantities; a staged scene's as a table, a column per stage
-    (``after_<stage>`` groups), then the quantities that belong to no stage."""
+def _summary(result, out: Path, say, headline=None) -> None:
+    """The scene's headline (``Scene.headline``), then the result's scalar quantities; a
+    staged scene's as a table, a column per stage (``after_<stage>`` groups), then the
+    quantities that belong to no stage."""
     from eyemech.problems.run.results import stage_groups
 
     say(f"{result.scene}: {result.status} in {result.timings.get('total', 0):.1f} s "
         f"on {result.mpi_size} rank(s); results in {out}/results.json")
+    for line in headline(result.quantities) if headline else []:
+        say(f"  {line}")
     stages = stage_groups(result.quantities)
     staged: list[str] = []
     for group in stages.values():

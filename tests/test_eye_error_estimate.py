@@ -139,6 +139,18 @@ def test_the_estimate_leaves_the_runs_own_numbers_and_draws_the_margin(estimated
     assert f"rim gap {gap:.3f} mm (closed by {margin:.3f} mm)" in caption
 
 
+def test_the_headline_reads_the_margin_against_its_band(estimated):
+    """With the estimate, the run's first lines (``Scene.headline``) give each verdict
+    (closed / open / uncertain) with its margin ± the rim gap's band, and no longer ask
+    for the estimate."""
+    tear = sb.SCENE.headline(estimated.quantities)[0]
+    for stage in ("suturing", "settling"):
+        group = estimated.quantities[f"after_{stage}"]
+        assert (f"{group['tear_verdict']} after {stage} (margin {group['tear_rim_margin_mm']:+.3f} "
+                f"± {group['tear_rim_gap_max_mm_error_estimate']:.3f} mm)") in tear
+    assert "error_estimate=true" not in tear
+
+
 def test_a_second_mesh_the_scene_would_refuse_is_bad_input(tmp_path):
     # the default mesh's companion, the coarse eye, cannot hold a 0.15 mm retina (2.26 mm
     # elements: aspect ratio 15 > 12); the default mesh alone can (10)

@@ -608,7 +608,7 @@ def test_segment_to_segment_retina_contact_gives_the_node_to_surface_eye(budget_
     mortar = scleral_buckling.run(scleral_buckling.Parameters(
         **BUDGET_EYE, retina_contact_method="segment-to-segment"), options=options)
     assert_same_eye(budget_eye, mortar, rim_gap_tolerance=0.01)
-    assert mortar.quantities["after_suturing"]["tear_closed"]
+    assert mortar.quantities["after_suturing"]["tear_closed_nts"]
 
 
 def test_full_steps_while_the_buckle_moves_reach_the_reference_eye(budget_eye):

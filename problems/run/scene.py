@@ -15,3 +15,6 @@ class Scene:
     parameters: type[SceneParameters]
     run: Callable
     summary: str
+    # the lines a user reads first after a run: what it found, in the terms of the scene's
+    # users (the quantities of its results.json in, lines out); None: the table alone
+    headline: Callable[[dict], list[str]] | None = None

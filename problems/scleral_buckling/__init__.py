@@ -47,7 +47,7 @@ from eyemech.problems.run.scene import Scene
 from eyemech.problems.scleral_buckling import error_estimate
 from eyemech.problems.scleral_buckling.measures import DIOPTRES_PER_MM
 from eyemech.problems.scleral_buckling.model import BucklingModel
-from eyemech.problems.scleral_buckling.output import Writer
+from eyemech.problems.scleral_buckling.output import Writer, headline
 from eyemech.problems.scleral_buckling.parameters import (
     CALIBRATED_C20_SCLERA,
     CORNEA_TO_SCLERA,
@@ -147,4 +147,5 @@ def slide_note(measured: dict, params: Parameters) -> str:
 
 
 SCENE = Scene(name="scleral-buckling", kind="scene", parameters=Parameters, run=run,
-              summary="encircling scleral buckling on a half eye: IOP, buckle, sutures (seed 002)")
+              summary="encircling scleral buckling on a half eye: IOP, buckle, sutures (seed 002)",
+              headline=headline)

@@ -118,9 +118,10 @@ def rim_verdict(margin_mm: float, error_estimate_mm: float | None = None) -> str
 
 class RetinaGaps:
     """The detached retina's gap to the choroid, node by node along the radius to the
-    choroid's node it started above (twin nodes of the mesh), and the tear's rim: closed
-    when every lifted retina node on it is back on the choroid (gap below
-    ``tolerance``). Nothing to measure with an attached retina."""
+    choroid's node it started above (twin nodes of the mesh), and the tear's rim by that
+    measure (``tear_closed_radial``). The tear's verdict is the retina contact's
+    node-to-surface one (``tear_closed_nts``, ``tear_rim_margin_mm``), which this class
+    turns into the margin. Nothing to measure with an attached retina."""
 
     # gaps within this (mm) of the widest count as tied (a closed rim's nodes all sit at
     # the penalty's penetration, and their order there is round-off, which differs between
@@ -188,7 +189,9 @@ class RetinaGaps:
                 # nodal estimate: the share of lifted retina nodes back on the choroid
                 "retina_contact_area_mm2": 2.0 * self.detached_area() * float(in_contact.mean()),
                 "retina_choroid_gap_mean_mm": float(gaps.mean()),
-                # closed: every lifted retina node on the tear's rim is back on the choroid
-                "tear_closed": bool(self.tear_rim.any() and self.pairing is not None
+                # every lifted retina node on the tear's rim within the tolerance of the
+                # choroid node it started above; not the verdict (tear_closed_nts): a rim
+                # slid along the choroid, or carried through it, reads closed here
+                "tear_closed_radial": bool(self.tear_rim.any() and self.pairing is not None
                                     and np.all(gaps[self.tear_rim] < self.tolerance))}
 

@@ -22,6 +22,7 @@ from eyemech.problems.run.output import (
     render_png,
     save_screenshot,
 )
+from eyemech.problems.scleral_buckling.error_estimate import RIM_GAP
 from eyemech.problems.scleral_buckling.measures import rim_verdict
 
 
@@ -332,3 +333,42 @@ def _scale_and_directions(plotter, corner) -> None:
         plotter.add_mesh(pyvista.Arrow(start=origin, direction=direction, scale=1.5), color="black")
         plotter.add_point_labels((origin + np.array(direction) + shift)[None], [label], font_size=13,
                                  shape_opacity=0.0, show_points=False, always_visible=True)
+
+
+
+def headline(quantities: dict) -> list[str]:
+    """What the operation did, in a surgeon's terms, ahead of the run's table: the tear
+    after suturing and settled (its verdict and margin, measures.rim_verdict; with
+    ``error_estimate`` the verdict reads the margin against the rim gap's estimated
+    discretisation error, shown as ±), then the last stage's axial and refractive change,
+    the operation's peak IOP and the liquid vented."""
+    stages = {name: group for name, group in quantities.items()
+              if name.startswith("after_") and isinstance(group, dict)}
+    sutured = [name for name in ("after_suturing", "after_settling") if name in stages]
+    tear, estimated = [], False
+    for name in sutured:
+        stage = stages[name]
+        margin = stage.get("tear_rim_margin_mm", math.nan)
+        verdict = stage.get("tear_verdict") or rim_verdict(margin)
+        if verdict is None:  # no tear
+            continue
+        error = stage.get(f"{RIM_GAP}_error_estimate")
+        estimated |= error is not None
+        band = f" ± {error:.3f}" if error is not None else ""
+        tear.append(f"{verdict} {name.replace('_', ' ')} (margin {margin:+.3f}{band} mm)")
+    lines = []
+    if tear:
+        lines.append("the tear: " + ", ".join(tear) + ("" if estimated else
+                     "; the margin's discretisation error not estimated (--set error_estimate=true)"))
+    if sutured:
+        name, last = sutured[-1], stages[sutured[-1]]
+        peak = max((group.get("peak_iop_mmHg", -math.inf) for group in stages.values()),
+                   default=-math.inf)
+        outcome = [f"ΔAL {last['axial_length_change_mm']:+.2f} mm"
+                   if "axial_length_change_mm" in last else "",
+                   f"ΔSE {last['refraction_change_D']:+.2f} D" if "refraction_change_D" in last else "",
+                   f"peak IOP {peak:.0f} mmHg" if math.isfinite(peak) else "",
+                   f"vented {last['vented_volume_uL']:.0f} µL ({last.get('venting_route', '?')})"
+                   if last.get("vented_volume_uL") else "nothing vented"]
+        lines.append(f"{name.replace('_', ' ')}: " + ", ".join(item for item in outcome if item))
+    return lines

@@ -81,7 +81,7 @@ def _chart(rows: list[dict], grid: dict, path: Path) -> None:
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
     for r in rows:
-        if str(r.get("after_suturing.tear_closed")) == "True":
+        if str(r.get("after_suturing.tear_closed_nts")) == "True":
             axes[1].annotate("tear closed", (float(r["indentation"]),
                                              float(r["after_suturing.retina_choroid_gap_mean_mm"])),
                              fontsize=7)
