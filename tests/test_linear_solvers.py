@@ -82,7 +82,7 @@ def test_bad_solver_choice_is_refused(overrides, key):
 # scleral buckling: the coarse eye (802 Q1P0 cells, 4,242 dofs) keeps this under a
 # minute; the issue's default resolution takes ~3 min iterative on 2 ranks here.
 # The sutured buckle at its default place, 1 mm of travel, steps 1–3 (the sutured eye's
-# result can depend on its load path: docs/scleral_buckling.md, "Not done / not verified").
+# result can depend on its load path: docs/scleral_buckling.md, "Known limits").
 # the paper's operation (Table 1's clamped eye) with 1 mm of rigid travel
 BUCKLING = ["--set", "resolution=coarse", "--set", "indentation=1.0", "--set", "settle=false",
             *[a for k, v in scleral_buckling.PAPER_SETTINGS.items() for a in ("--set", f"{k}={v}")]]

@@ -192,7 +192,8 @@ class EyeParameters(SceneParameters):
     suture_model: Literal["loop", "bites", "mattress"] = field(
         "loop", "loop: a suture is a loop over the tire; its tension pulls the bites and pushes "
         "the tire in, whose radial travel in steps 3-4 balances the sclera's contact force "
-        "(the band keeps its prescribed travel); bites: the pull acts on the bites only and "
+        "(a rigid band, buckle_control=travel, keeps its travel; the elastic band carries "
+        "the tire at its own); bites: the pull acts on the bites only and "
         "the tire keeps the band's travel; mattress: each suture is tied to a length, its legs "
         "shortened by suture_tie_fraction of the sclera between its bites beyond the element's "
         "width, so that wider bites imbricate more sclera and raise the buckle; its tension "
