@@ -211,6 +211,12 @@ class EyeParameters(SceneParameters):
         "retina pressed on the choroid reaches no equilibrium in this model (it drifts "
         "along the choroid's facets; docs/scleral_buckling.md, Subretinal drainage)",
         group=PHYSICS)
+    subretinal_pump_mmHg: float = field(
+        0.0, "step 4: the pigment epithelium pumps the subretinal fluid out, its pressure below "
+        "the vitreous' by this much once the IOP is back (ramped with the IOP's return), on the "
+        "detached retina's outer face and the choroid's inner face; it assumes the break sealed "
+        "enough for the pump to win (0: off; docs/scleral_buckling.md, The pigment epithelium's "
+        "pump)", "mmHg", group=PHYSICS)
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm", group=GEOMETRY)
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm", group=GEOMETRY)
@@ -334,7 +340,8 @@ class Parameters(NumericalSettings, EyeParameters):
         self.require_nonnegative("c20_sclera", "c20_cornea", "buckle_corner_radius", "tire_height",
                                  "contact_smoothing", "frictionless_slip_stiffness", "indentation",
                                  "suture_force", "detachment_height", "tear_radius")
-        self.require_nonnegative("c4_sclera", "c4_cornea", "optic_nerve_end_spring")
+        self.require_nonnegative("c4_sclera", "c4_cornea", "optic_nerve_end_spring",
+                                 "subretinal_pump_mmHg")
         for key, default, material in (
                 ("c20_sclera", CALIBRATED_C20_SCLERA, "calibrated"),
                 ("c20_cornea", CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA, "calibrated"),
@@ -359,6 +366,9 @@ class Parameters(NumericalSettings, EyeParameters):
                                  "80 and after 300 solves on the coarse eye, and the default "
                                  "mesh's run fails at 70 % of the drainage; "
                                  "docs/scleral_buckling.md, Subretinal drainage)")
+        if self.subretinal_pump_mmHg > 0 and (self.detachment_height == 0 or not self.settle):
+            raise ParameterError("subretinal_pump_mmHg", "pumps the subretinal fluid in step 4: "
+                                 "it needs a detachment (detachment_height > 0) and settle=true")
 
     def _validate_buckle(self) -> None:
         """The buckle's kind and orientation, its sutures, its travel and its place on the

@@ -151,6 +151,13 @@ class CavityLiquid(Term):
         self.subretinal = self._subretinal_volume_form()
         self.subretinal_fluid = 0.0  # whole eye, µL, in the eye before surgery
         self.closed = False  # the liquid was closed (the operation began)
+        # the pigment epithelium's pump (subretinal_pump_mmHg): its full deficit, switched on
+        # when the liquid is released, and the pressure drop it is ramped over (P's return)
+        self.pump = None
+        if params.subretinal_pump_mmHg > 0 and self.subretinal is not None:
+            self.pump = dolfinx.fem.Constant(mesh, 0.0)
+            self.pump_full = params.subretinal_pump_mmHg * MMHG
+            self.pump_span = dolfinx.fem.Constant(mesh, 1.0)
 
     def _subretinal_volume_form(self):
         """The subretinal space's volume, by the field x_x e_x over the faces on either
@@ -162,16 +169,31 @@ class CavityLiquid(Term):
         eye = self.body.eye
         if "retina_detached" not in eye.names:
             return None
-        faces = self.body.ds(tuple(eye.tag(name) for name in ("retina_detached", "choroid_detached")))
-        return dolfinx.fem.form(axis_volumes(self.body.u, faces)[0])
+        return dolfinx.fem.form(axis_volumes(self.body.u, self._subretinal_faces())[0])
 
     def residual(self, tests):
         body, v, qP = self.body, tests[0], tests[-2]
         liquid = self.vent.residual(body.P, qP, self.wall_area)
         pinned = self.initial_volume / self.bulk_modulus * (body.P - self.pressure_target) \
             / self.wall_area * qP * body.wall
-        return (follower_pressure(body.P, body.u, v, body.wall)
+        form = (follower_pressure(body.P, body.u, v, body.wall)
                 + self.coupled * liquid + (1 - self.coupled) * pinned)
+        if self.pump is not None:
+            form += follower_pressure(-self.pump_deficit(), body.u, v, self._subretinal_faces())
+        return form
+
+    def _subretinal_faces(self) -> ufl.Measure:
+        """The faces on either side of the subretinal space (the detached retina's outer
+        face, the choroid's inner face)."""
+        eye = self.body.eye
+        return self.body.ds(tuple(eye.tag(name) for name in ("retina_detached", "choroid_detached")))
+
+    def pump_deficit(self):
+        """How far the subretinal fluid's pressure lies below P: 0 until the liquid is
+        released, then ramped with P's return, from 0 at the acute pressure to
+        ``subretinal_pump_mmHg`` at the IOP before surgery. It pulls the detached retina
+        onto the choroid and the choroid towards it, equal and opposite."""
+        return self.pump * (self.acute_pressure - self.pressure_target) / self.pump_span
 
     def install(self, solver) -> None:
         if self.vent.enabled:  # the branch chosen before every assembly, undone with a failed solve
@@ -199,6 +221,12 @@ class CavityLiquid(Term):
         P): the liquid's volume is free."""
         self.acute_pressure.value = self.pressure()
         self.vent.release()
+        if self.pump is not None:
+            span = float(self.acute_pressure.value) - self.iop
+            if not span > 0:
+                raise RuntimeError(f"subretinal_pump_mmHg is ramped with P's return from the acute "
+                                   f"pressure, which is not above the IOP before surgery ({span:+g} MPa)")
+            self.pump.value, self.pump_span.value = self.pump_full, span
 
     def converged(self) -> None:
         """A converged load step's vented liquid is kept: it does not come back."""
@@ -228,6 +256,9 @@ class CavityLiquid(Term):
             checkpoints.constant(name, getattr(self, name))
         for name in ("liquid_volume", "venting"):
             checkpoints.constant(f"vent_{name}", getattr(self.vent, name))
+        if self.pump is not None:
+            checkpoints.constant("pump", self.pump)
+            checkpoints.constant("pump_span", self.pump_span)
         checkpoints.value("liquid_closed", lambda: [self.closed, self.subretinal_fluid],
                           self._restore_closed)
 
@@ -242,6 +273,10 @@ class CavityLiquid(Term):
         V_ini (P − P_ini)/K while the liquid is held: vented + compression = inward."""
         pressure, volume = self.pressure(), self.volume()
         out = {"iop_mmHg": pressure / MMHG, "cavity_volume_mm3": 2.0 * volume}
+        if self.pump is not None:  # the deficit the pump holds now (pump_deficit's value)
+            out["subretinal_pump_deficit_mmHg"] = float(self.pump.value) * (
+                float(self.acute_pressure.value) - float(self.pressure_target.value)) \
+                / float(self.pump_span.value) / MMHG
         if not self.closed:
             return out
         initial_volume = float(self.initial_volume.value)

@@ -1,0 +1,66 @@
+"""The pigment epithelium's pump in the settling (``subretinal_pump_mmHg``,
+docs/scleral_buckling.md, "The pigment epithelium's pump"): the subretinal fluid's pressure
+held below the vitreous' once the IOP is back, the load the detached flap has nowhere else.
+On the coarse eye with the locking-free retina, whose rim is open after suturing, it
+closes the settled rim and leaves the eye's shape as it was."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import run_cli
+
+from eyemech.problems import scleral_buckling as sb
+from eyemech.problems.run.context import RunOptions
+from eyemech.problems.run.parameters import ParameterError, build
+
+PUMP = 1.0  # mmHg
+LOCKING_FREE = dict(resolution="coarse", retina_incompatible_modes=True)
+
+
+@pytest.fixture(scope="module")
+def pumped(tmp_path_factory):
+    params = sb.Parameters(**LOCKING_FREE, subretinal_pump_mmHg=PUMP)
+    return sb.run(params, out=tmp_path_factory.mktemp("pump"),
+                  options=RunOptions(pictures=False, fields=False))
+
+
+def test_the_pump_closes_the_settled_rim_and_leaves_the_eye_as_it_was(pumped):
+    """Without the pump this eye's rim is 0.136 / 0.083 / 0.030 mm after buckling /
+    suturing / settled and its settled ΔAL / ΔSE +0.66 mm / -2.20 D
+    (docs/scleral_buckling.md, "A retina not locked in bending", measured 6 Dec 2026,
+    printed to 3 digits). The pump acts from the settling on: the acute rims are those, the
+    settled one is on the choroid (measured -0.001 mm: the penalty's penetration), and the
+    eye's shape moves by less than the printed digits."""
+    q = pumped.quantities
+    assert q["after_buckling"]["tear_rim_gap_max_mm"] == pytest.approx(0.136, abs=5e-4)
+    assert q["after_suturing"]["tear_rim_gap_max_mm"] == pytest.approx(0.083, abs=5e-4)
+    settled = q["after_settling"]
+    assert abs(settled["tear_rim_gap_max_mm"]) < 0.005 and settled["tear_closed_nts"]
+    assert settled["axial_length_change_mm"] == pytest.approx(0.66, abs=0.01)
+    assert settled["refraction_change_D"] == pytest.approx(-2.20, abs=0.01)
+
+
+def test_the_deficit_follows_the_iops_return(pumped):
+    """0 through the operation, then ramped with P from the acute pressure (79 mmHg, the
+    vent's limit) to PUMP at 15 mmHg: deficit / PUMP = (79 - IOP) / (79 - 15) at every
+    settling step."""
+    for step in pumped.steps:
+        deficit = step["subretinal_pump_deficit_mmHg"]
+        if step["stage"] < 4:
+            assert deficit == 0.0
+        else:
+            assert deficit == pytest.approx(PUMP * (79.0 - step["iop_mmHg"]) / (79.0 - 15.0),
+                                            rel=1e-9, abs=1e-12)
+    assert pumped.quantities["after_settling"]["subretinal_pump_deficit_mmHg"] == pytest.approx(PUMP)
+
+
+def test_a_pump_without_a_detachment_or_a_settling_is_bad_input(tmp_path):
+    for overrides in ({"detachment_height": 0.0}, {"settle": False}, {}):
+        with pytest.raises(ParameterError, match="subretinal_pump_mmHg"):
+            build(sb.Parameters, {"subretinal_pump_mmHg": -1.0 if not overrides else 1.0,
+                                  **overrides})
+    code, _out, err = run_cli("run", "scleral-buckling", "--set", "subretinal_pump_mmHg=2",
+                              "--set", "settle=false", "--out", str(tmp_path / "run"))
+    assert code == 2, err
+    assert "subretinal_pump_mmHg" in err.strip().splitlines()[-1] and "Traceback" not in err
+    assert not (tmp_path / "run" / "results.json").exists()
