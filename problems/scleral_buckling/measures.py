@@ -193,5 +193,5 @@ class RetinaGaps:
                 # choroid node it started above; not the verdict (tear_closed_nts): a rim
                 # slid along the choroid, or carried through it, reads closed here
                 "tear_closed_radial": bool(self.tear_rim.any() and self.pairing is not None
-                                    and np.all(gaps[self.tear_rim] < self.tolerance))}
+                                           and np.all(gaps[self.tear_rim] < self.tolerance))}
 

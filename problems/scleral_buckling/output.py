@@ -335,7 +335,6 @@ def _scale_and_directions(plotter, corner) -> None:
                                  shape_opacity=0.0, show_points=False, always_visible=True)
 
 
-
 def headline(quantities: dict) -> list[str]:
     """What the operation did, in a surgeon's terms, ahead of the run's table: the tear
     after suturing and settled (its verdict and margin, measures.rim_verdict; with

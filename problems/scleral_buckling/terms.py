@@ -188,12 +188,14 @@ class CavityLiquid(Term):
         eye = self.body.eye
         return self.body.ds(tuple(eye.tag(name) for name in ("retina_detached", "choroid_detached")))
 
-    def pump_deficit(self):
+    def pump_deficit(self, value=lambda constant: constant):
         """How far the subretinal fluid's pressure lies below P: 0 until the liquid is
         released, then ramped with P's return, from 0 at the acute pressure to
         ``subretinal_pump_mmHg`` at the IOP before surgery. It pulls the detached retina
-        onto the choroid and the choroid towards it, equal and opposite."""
-        return self.pump * (self.acute_pressure - self.pressure_target) / self.pump_span
+        onto the choroid and the choroid towards it. A UFL expression of the Constants, or
+        with ``value=float`` its number now."""
+        return value(self.pump) * (value(self.acute_pressure) - value(self.pressure_target)) \
+            / value(self.pump_span)
 
     def install(self, solver) -> None:
         if self.vent.enabled:  # the branch chosen before every assembly, undone with a failed solve
@@ -273,10 +275,8 @@ class CavityLiquid(Term):
         V_ini (P − P_ini)/K while the liquid is held: vented + compression = inward."""
         pressure, volume = self.pressure(), self.volume()
         out = {"iop_mmHg": pressure / MMHG, "cavity_volume_mm3": 2.0 * volume}
-        if self.pump is not None:  # the deficit the pump holds now (pump_deficit's value)
-            out["subretinal_pump_deficit_mmHg"] = float(self.pump.value) * (
-                float(self.acute_pressure.value) - float(self.pressure_target.value)) \
-                / float(self.pump_span.value) / MMHG
+        if self.pump is not None:
+            out["subretinal_pump_deficit_mmHg"] = self.pump_deficit(lambda c: float(c.value)) / MMHG
         if not self.closed:
             return out
         initial_volume = float(self.initial_volume.value)
