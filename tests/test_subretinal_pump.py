@@ -9,11 +9,9 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
-from pathlib import Path
 
 import pytest
-from conftest import run_cli
+from conftest import BIN, run_cli
 
 from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
@@ -61,10 +59,11 @@ def test_the_deficit_follows_the_iops_return(pumped):
 
 
 def test_a_pump_without_a_detachment_or_a_settling_is_bad_input(tmp_path):
-    for overrides in ({"detachment_height": 0.0}, {"settle": False}, {}):
+    for bad in ({"subretinal_pump_mmHg": 1.0, "detachment_height": 0.0},  # nothing to pump
+                {"subretinal_pump_mmHg": 1.0, "settle": False},  # no step 4 to pump in
+                {"subretinal_pump_mmHg": -1.0}):  # a negative deficit
         with pytest.raises(ParameterError, match="subretinal_pump_mmHg"):
-            build(sb.Parameters, {"subretinal_pump_mmHg": -1.0 if not overrides else 1.0,
-                                  **overrides})
+            build(sb.Parameters, bad)
     code, _out, err = run_cli("run", "scleral-buckling", "--set", "subretinal_pump_mmHg=2",
                               "--set", "settle=false", "--out", str(tmp_path / "run"))
     assert code == 2, err
@@ -84,7 +83,7 @@ def test_a_run_killed_while_the_pump_acts_resumes_to_the_same_numbers(pumped, tm
                 for a in ("--set", f"{k}={v}")]
     quiet = ("--no-fields", "--no-pictures", "--quiet")
     env = dict(os.environ, EYEMECH_TEST_KILL="step:36")
-    killed = subprocess.run([str(Path(sys.executable).parent / "eyemech"), "run",
+    killed = subprocess.run([str(BIN / "eyemech"), "run",
                              "scleral-buckling", *settings, "--out", str(tmp_path),
                              "--checkpoint-every", "1", *quiet],
                             capture_output=True, text=True, timeout=900, env=env)
