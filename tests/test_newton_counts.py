@@ -633,6 +633,7 @@ def test_full_steps_while_the_buckle_moves_reach_the_reference_eye(budget_eye):
 @pytest.mark.parametrize("key, value", [("jacobian_reuse", 1.0), ("jacobian_reuse", -0.1),
                                         ("buckle_step", 0.5), ("buckle_step", 0.0),
                                         ("hard_step_effort", -1), ("stagnation_window", -1),
+                                        ("cycle_max_period", -1),
                                         ("settle_step", 0.9), ("settle_step", -0.1),
                                         ("full_step_nan", "sometimes")])
 def test_budget_parameters_out_of_range_are_refused(key, value):
@@ -884,6 +885,52 @@ def test_a_stagnating_backtracking_solve_is_stopped_early():
     problem["load"].value = 1.0
     assert problem["solver"].solve()[0] and not problem["solver"].stagnated
     assert problem["solver"].counts.newton_iterations >= 4  # the window was reached
+
+
+def test_full_steps_that_cycle_are_stopped_early():
+    """``cycle_max_period``: full Newton steps on u³ − 2u + 2 = 0 from 0 hop 0 → 1 → 0 → …
+    for ever (‖F‖ = 2, 1, 2, 1, …, the textbook 2-cycle): without the test the solve runs to
+    the iteration limit, a factorisation per iteration; with it the solve stops once the
+    norms have repeated one period (4 norms, 3 iterations), counted as a failed solve, and
+    the fallback line search (bt) then finds the root from the same start."""
+    def two_cycle(u):
+        return u**3 - 2 * u + 2
+
+    plain = _scalar(two_cycle, 0.0, NewtonOptions(line_search="basic", max_it=20))
+    assert plain.solve()[0] is False and not plain.cycled
+    assert plain.counts.newton_iterations_all == 20
+    stopped = _scalar(two_cycle, 0.0, NewtonOptions(line_search="basic", max_it=20,
+                                                    cycle_max_period=8))
+    assert stopped.solve()[0] is False
+    assert stopped.cycled and stopped.reason().startswith("CYCLED")
+    assert stopped.residual_history == pytest.approx([2.0, 1.0, 2.0, 1.0])
+    assert stopped.counts.failed_newton_solves == 1
+    assert stopped.counts.factorisations == stopped.counts.newton_iterations_all == 3
+    retried = _scalar(two_cycle, 0.0, NewtonOptions(line_search="basic", max_it=20,
+                                                    cycle_max_period=8, fallback_line_search="bt"))
+    assert retried.solve()[0] is True
+    assert retried.counts.failed_newton_solves == 1
+    assert retried.counts.factorisations < plain.counts.factorisations
+    # backtracking is monotone in ‖F‖ and never cycles: the test leaves it alone
+    escapes = _scalar(two_cycle, 0.0, NewtonOptions(line_search="bt", cycle_max_period=8))
+    assert escapes.solve() == (True, 9) and not escapes.cycled
+    # a converging solve is not touched
+    problem = _nonlinear_poisson(NewtonOptions(line_search="basic", cycle_max_period=8))
+    problem["load"].value = 1.0
+    assert problem["solver"].solve()[0] and not problem["solver"].cycled
+
+
+@pytest.mark.parametrize("period, norms, cycles", [
+    (8, [2.0, 1.0, 2.0, 1.0], True),                          # period 2, one repeat
+    (8, [1.0, 0.5, 0.5, 0.5], True),                          # period 1: three equal norms
+    (8, [3.0, 5.0, 4.0, 6.0, 7.0, 5.0, 4.0, 6.0, 7.0], True),  # period 4
+    (3, [3.0, 5.0, 4.0, 6.0, 7.0, 5.0, 4.0, 6.0, 7.0], False),  # ... beyond the longest asked
+    (8, [2.0, 1.0, 2.0, 1.01], False),                        # 1 % apart: not a repeat
+    (8, [1.0, 1e-2, 1e-5, 1e-10], False),                     # converging
+    (8, [1.0, 0.5], False),                                   # too short to tell
+])
+def test_a_cycle_is_a_period_of_norms_repeated(period, norms, cycles):
+    assert driver.repeats_a_cycle(norms, period, 1e-3) is cycles
 
 
 def test_a_cut_step_restores_the_hooks_memory_of_its_start():

@@ -648,16 +648,75 @@ class NodeToSurfaceContact:
         contact: a load step that carries one through that far must be cut, not kept
         (:attr:`NonlinearSolver.converged_depth_hooks`). Leaves the search's state as it
         was (its nearest-triangle choice is :meth:`search`'s without the sticky memory)."""
-        depth = -np.inf
         if not np.isfinite(self.search_depth):  # every pair counts: none is unpaired
-            return depth
+            return -np.inf
+        depths = self._depths()
+        depth = float(np.max(depths)) / self.search_depth if len(depths) else -np.inf
+        return self.comm.allreduce(depth, op=MPI.MAX)
+
+    def _depths(self) -> np.ndarray:
+        """Collective: each owned slave node's depth under the plane of its nearest master
+        triangle at the current unknowns (negative above it; mm)."""
         corners = self._master_positions()[self.triangle_nodes]  # collective: on every rank
         slaves = self._positions(self.slave_blocks)
-        if len(slaves):
-            nearest, best = self._nearest_triangles(slaves, corners, min(self.candidates, len(corners)))
-            a, normal = _planes(corners[nearest[np.arange(len(slaves)), best]])
-            depth = float(np.max(-np.einsum("ij,ij->i", slaves - a, normal))) / self.search_depth
-        return self.comm.allreduce(depth, op=MPI.MAX)
+        if not len(slaves):
+            return np.empty(0)
+        nearest, best = self._nearest_triangles(slaves, corners, min(self.candidates, len(corners)))
+        a, normal = _planes(corners[nearest[np.arange(len(slaves)), best]])
+        return -np.einsum("ij,ij->i", slaves - a, normal)
+
+    def limit_step_depth(self, solver, fraction: float) -> None:
+        """Install, after ``solver``'s line-search pre-check if it has one, a limit on the
+        Newton update x − y: where the full update would carry a slave node deeper than
+        ``fraction`` of ``search_depth`` under its master triangle, y is shortened so that
+        the deepest node, its depth interpolated linearly between x and x − y, reaches that
+        depth. Why: an open pair contributes no stiffness, so the direction of a soft slave
+        body under a load (a detached retina under the pigment epithelium's pump) can carry
+        a node through the master body in one full step, beyond ``search_depth``, where it
+        is unpaired: Newton then converges to an equilibrium with the node on the wrong side
+        (docs/scleral_buckling.md, "Full steps through the choroid"). The residual is
+        untouched, and so is a direction that keeps every node within the limit."""
+        self._step_depth_limit = fraction * self.search_depth
+        self._limited_solver = solver
+        self.limited_steps = 0  # updates shortened, all solves (the same on every rank)
+        earlier = solver.line_search_precheck
+
+        def precheck(x_vec: PETSc.Vec, y_vec: PETSc.Vec) -> None:
+            if earlier is not None:
+                earlier(x_vec, y_vec)
+            self._limit_step(x_vec, y_vec)
+
+        solver.line_search_precheck = precheck
+
+    def _limit_step(self, x_vec: PETSc.Vec, y_vec: PETSc.Vec) -> None:
+        """SNES line-search pre-check (the update is x − λ y): y scaled by the largest
+        λ ≤ 1 that keeps every slave node within the depth limit. Collective."""
+        solver = self._limited_solver
+        unknowns = solver.unknowns if len(solver.unknowns) > 1 else solver.unknowns[0]
+        at_x = self._depths()  # the search's state is not touched
+        trial = x_vec.duplicate()
+        try:
+            trial.waxpy(-1.0, y_vec, x_vec)
+            trial.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            dolfinx.fem.petsc.assign(trial, unknowns)
+            for u in solver.unknowns:
+                u.x.scatter_forward()
+            at_trial = self._depths()
+        finally:
+            x_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            dolfinx.fem.petsc.assign(x_vec, unknowns)
+            for u in solver.unknowns:
+                u.x.scatter_forward()
+            trial.destroy()
+        limit = self._step_depth_limit
+        # nodes the full update carries past the limit from above it (one already past
+        # it at x is left to the penalty, which pushes it back)
+        past = (at_trial > limit) & (at_x < limit)
+        scale = np.min((limit - at_x[past]) / (at_trial[past] - at_x[past]), initial=1.0)
+        scale = self.comm.allreduce(scale, op=MPI.MIN)
+        if scale < 1.0:
+            y_vec.scale(scale)
+            self.limited_steps += 1
 
     def min_gap(self) -> float:
         """Smallest gap of any paired slave node (collective; negative = penetration)."""

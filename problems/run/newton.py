@@ -98,6 +98,16 @@ class NewtonOptions:
     # does not apply to them (docs/scleral_buckling.md, "Newton's budget")
     stagnation_window: int = 0
     stagnation_factor: float = 0.9
+    # a solve with full steps (line search ``basic``) whose residual norms repeat a cycle
+    # (:func:`~eyemech.problems.solve.driver.repeats_a_cycle`: the last ``period`` norms
+    # equal, to ``cycle_rtol``, the ``period`` before them, for a period of 1 to
+    # ``cycle_max_period`` iterations) is stopped as failed before its next Jacobian: full
+    # Newton steps that hop between the same contact states revisit the same iterates and
+    # would do so to the iteration limit, a factorisation per iteration (the paper mesh's
+    # settling: periods 5 and 7, the norms equal to 4 digits; docs/scleral_buckling.md,
+    # "Full steps that cycle"). 0: never.
+    cycle_max_period: int = 0
+    cycle_rtol: float = 1e-3
     # a solve that stops unconverged at a small finite residual (backtracking finds no
     # descent, or the iteration limit) is accepted as converged when ‖F‖ ≤
     # ``flat_residual_limit`` and the full Newton correction at its last iterate, from a fresh
@@ -140,6 +150,8 @@ class NewtonOptions:
             raise ParameterError("increment_tolerance", f"{self.increment_tolerance}: must be >= 0")
         if not self.flat_residual_limit > 0:
             raise ParameterError("flat_residual_limit", f"{self.flat_residual_limit}: must be > 0")
+        if self.cycle_max_period < 0:
+            raise ParameterError("cycle_max_period", f"{self.cycle_max_period}: must be >= 0")
         if not 0 < self.stagnation_factor < 1:
             raise ParameterError("stagnation_factor", f"{self.stagnation_factor}: a reduction "
                                  "factor in (0, 1)")

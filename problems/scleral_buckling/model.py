@@ -141,6 +141,7 @@ class BucklingModel:
                                      cut_on_nan=params.full_step_nan == "cut",
                                      increment_tolerance=params.increment_tolerance,
                                      flat_residual_limit=params.flat_residual_limit,
+                                     cycle_max_period=params.cycle_max_period,
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,
                                          params.settle_line_search} != {"bt"}

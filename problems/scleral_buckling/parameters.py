@@ -341,7 +341,7 @@ class Parameters(NumericalSettings, EyeParameters):
                                  "contact_smoothing", "frictionless_slip_stiffness", "indentation",
                                  "suture_force", "detachment_height", "tear_radius")
         self.require_nonnegative("c4_sclera", "c4_cornea", "optic_nerve_end_spring",
-                                 "subretinal_pump_mmHg")
+                                 "subretinal_pump_mmHg", "cycle_max_period")
         for key, default, material in (
                 ("c20_sclera", CALIBRATED_C20_SCLERA, "calibrated"),
                 ("c20_cornea", CORNEA_TO_SCLERA * CALIBRATED_C20_SCLERA, "calibrated"),

@@ -181,6 +181,17 @@ class NumericalSettings(SolverChoice):
         "limit or a failed line search stops it; with 3, settling steps of 1/8 that creep "
         "for 3 iterations and then converge were cut until the run failed: "
         "docs/scleral_buckling.md, Stalled backtracking, The settling step)", group=SOLVER)
+    cycle_max_period: int = field(
+        0, "a Newton solve with full steps (line_search, settle_line_search or suture_line_search "
+        "basic, or the bt solves' basic retry) whose residual norms repeat a cycle of 1 to this "
+        "many iterations (equal to 1e-3) is stopped as failed, and retried or its load step cut "
+        "as any failed solve, before it spends a factorisation per iteration to the iteration "
+        "limit (0: off; docs/scleral_buckling.md, Full steps that cycle)", group=SOLVER)
+    retina_step_depth: float = field(
+        0.0, "the Newton update shortened where it would carry a retina node deeper through "
+        "the choroid than this fraction of the choroid's thickness (a node beyond the whole "
+        "thickness is unpaired: the load step is cut); 0: off (docs/scleral_buckling.md, "
+        "Full steps through the choroid)", group=SOLVER)
     retina_contact_prediction: bool = field(
         False, "at Newton iterates with a residual of at most flat_residual_limit, a retina "
         "node open there that Newton's full step would carry into the choroid gets the "
@@ -236,6 +247,9 @@ class NumericalSettings(SolverChoice):
         if self.retina_contact_prediction and self.retina_contact_method != "node-to-surface":
             raise ParameterError("retina_contact_prediction", "predicts node-to-surface pairs: "
                                  "with retina_contact_method=node-to-surface only")
+        if not 0 <= self.retina_step_depth < 1:
+            raise ParameterError("retina_step_depth", f"{self.retina_step_depth}: a fraction in "
+                                 "[0, 1) of the choroid's thickness (0: off)")
         if not self.increment_tolerance >= 0:
             raise ParameterError("increment_tolerance", f"{self.increment_tolerance} mm: must be >= 0")
         if not self.flat_residual_limit > 0:

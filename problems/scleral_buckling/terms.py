@@ -400,6 +400,8 @@ class RetinaContact(Term):
             solver.memory_hooks.append((contact.memory, contact.restore_memory))
         if self.params.retina_contact_prediction:
             contact.predict_active_set(solver, below=self.params.flat_residual_limit)
+        if self.params.retina_step_depth > 0:
+            contact.limit_step_depth(solver, self.params.retina_step_depth)
         contact.allow_new_nonzeros(solver.problem.A)
         solver.pattern_hooks.append(contact.grow_pattern)
         if self.augmented:  # the multipliers go back with a cut step

@@ -126,6 +126,22 @@ ResidualHook = Callable[[PETSc.Vec, PETSc.Vec], None]
 JacobianHook = Callable[[PETSc.Vec, PETSc.Mat], None]
 
 
+def repeats_a_cycle(norms: Sequence[float], max_period: int, rtol: float) -> bool:
+    """Whether the last residual norms repeat a cycle: for some period p in 1 … ``max_period``
+    the last max(p, 2) norms each equal, to ``rtol``, the one p iterations before it. A
+    converging or diverging solve changes its norm by far more than ``rtol`` between
+    iterations; full Newton steps that hop between the same states revisit the same norms."""
+    for period in range(1, max_period + 1):
+        span = max(period, 2)
+        if len(norms) < span + period:
+            break
+        latest = np.asarray(norms[-span:])
+        earlier = np.asarray(norms[-span - period:len(norms) - period])
+        if np.all(np.abs(latest - earlier) <= rtol * np.abs(earlier)):
+            return True
+    return False
+
+
 class NonlinearSolver:
     """A residual F(u) = 0 on one function or a block of functions, solved by SNES.
 
@@ -193,6 +209,7 @@ class NonlinearSolver:
         self.last_counts = SolverCounts()  # work of the last solve
         self._factorisations = FactorisationCounter()
         self.stagnated = False  # the last solve was stopped by the stagnation test
+        self.cycled = False     # ... by the cycle test (options.cycle_max_period)
         self.snes.setMonitor(petsc_callback(self._monitor))
         # Newton iterations begun: SNES calls its update at the start of every iteration,
         # the one that fails in its line search (a NaN residual) or in a callback included,
@@ -239,12 +256,17 @@ class NonlinearSolver:
         calls the monitor after its convergence test and breaks out when a reason is set,
         so the stop costs no further Jacobian."""
         self.residual_history.append(float(norm))
-        window = self.options.stagnation_window
-        history = self.residual_history
-        if (window > 0 and len(history) > window and snes.getConvergedReason() == 0
-                and history[-1] > self.options.stagnation_factor * history[-1 - window]
-                and snes.getLineSearch().getType() == "bt"):
+        options, history = self.options, self.residual_history
+        if snes.getConvergedReason() != 0:
+            return
+        window, line_search = options.stagnation_window, snes.getLineSearch().getType()
+        if (window > 0 and len(history) > window and line_search == "bt"
+                and history[-1] > options.stagnation_factor * history[-1 - window]):
             self.stagnated = True
+            snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
+        elif (options.cycle_max_period > 0 and line_search == "basic"
+              and repeats_a_cycle(history, options.cycle_max_period, options.cycle_rtol)):
+            self.cycled = True
             snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
 
     # -- set-up -----------------------------------------------------------------
@@ -540,7 +562,7 @@ class NonlinearSolver:
         """One SNES solve; its work, converged or not, is added to ``counts`` and to the
         process's ``SOLVER_COUNTS``."""
         self.residual_history = []
-        self.stagnated = False
+        self.stagnated = self.cycled = False
         self.through_obstacle = False
         self._kept_iterations = 0
         self._iterations_begun = 0
@@ -681,6 +703,8 @@ class NonlinearSolver:
     def reason(self) -> str:
         if self.stagnated:
             return "STAGNATED (stagnation_window)"
+        if self.cycled:
+            return "CYCLED (cycle_max_period)"
         if self.through_obstacle:
             return "THROUGH_OBSTACLE (depth_limit)"
         code = self.snes.getConvergedReason()
