@@ -95,6 +95,8 @@ class BucklingModel:
         self.zonules = Zonules(body, params) if params.lens else None
         self.retina = RetinaContact(body, params, self.gaps, self.tissues.youngs_modulus("retina")) \
             if params.retina_contact and self.gaps.detached else None
+        if self.retina is not None:  # the pigment epithelium's pump waits for a sealed break
+            self.liquid.break_sealed = self.retina.tear_sealed
         self.nerve_spring = OpticNerveSpring(body, params.optic_nerve_end_spring) \
             if params.optic_nerve_end_spring > 0 else None
         self.terms = [term for term in (self.tissues, self.liquid, self.contact,

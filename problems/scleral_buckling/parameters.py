@@ -212,10 +212,12 @@ class EyeParameters(SceneParameters):
         "along the choroid's facets; docs/scleral_buckling.md, Subretinal drainage)",
         group=PHYSICS)
     subretinal_pump_mmHg: float = field(
-        0.0, "step 4: the pigment epithelium pumps the subretinal fluid out, its pressure below "
-        "the vitreous' by this much once the IOP is back (ramped with the IOP's return), on the "
-        "detached retina's outer face and the choroid's inner face; it assumes the break sealed "
-        "enough for the pump to win (0: off; docs/scleral_buckling.md, The pigment epithelium's "
+        0.0, "step 4: once the break is sealed (tear_closed_nts), the pigment epithelium pumps "
+        "the subretinal fluid out, its pressure below the vitreous' by this much once the IOP "
+        "is back (ramped with the rest of the IOP's return), on the detached retina's outer "
+        "face and the choroid's inner face; through an open break the vitreous refills the "
+        "space and no deficit builds up. Nothing to pump without a detachment, the settling "
+        "or the retina's contact (0: off; docs/scleral_buckling.md, The pigment epithelium's "
         "pump)", "mmHg", group=PHYSICS)
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm", group=GEOMETRY)
@@ -366,9 +368,6 @@ class Parameters(NumericalSettings, EyeParameters):
                                  "80 and after 300 solves on the coarse eye, and the default "
                                  "mesh's run fails at 70 % of the drainage; "
                                  "docs/scleral_buckling.md, Subretinal drainage)")
-        if self.subretinal_pump_mmHg > 0 and (self.detachment_height == 0 or not self.settle):
-            raise ParameterError("subretinal_pump_mmHg", "pumps the subretinal fluid in step 4: "
-                                 "it needs a detachment (detachment_height > 0) and settle=true")
 
     def _validate_buckle(self) -> None:
         """The buckle's kind and orientation, its sutures, its travel and its place on the

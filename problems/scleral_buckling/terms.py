@@ -7,6 +7,8 @@ its checkpoint state, its measurements, its controls."""
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Callable
 
 import dolfinx
 import dolfinx.fem
@@ -152,11 +154,17 @@ class CavityLiquid(Term):
         self.subretinal_fluid = 0.0  # whole eye, µL, in the eye before surgery
         self.closed = False  # the liquid was closed (the operation began)
         # the pigment epithelium's pump (subretinal_pump_mmHg): its full deficit, switched on
-        # when the liquid is released, and the pressure drop it is ramped over (P's return)
+        # once the liquid is released and the break is sealed (``break_sealed``, given by the
+        # model: the retina contact's verdict), the target pressure it started at and the
+        # pressure drop from there it is ramped over (the rest of P's return)
         self.pump = None
-        if params.subretinal_pump_mmHg > 0 and self.subretinal is not None:
+        self.break_sealed: Callable[[], bool] | None = None
+        self.pump_waiting = False  # released, the break not yet sealed
+        if (params.subretinal_pump_mmHg > 0 and self.subretinal is not None and params.settle
+                and params.retina_contact):
             self.pump = dolfinx.fem.Constant(mesh, 0.0)
             self.pump_full = params.subretinal_pump_mmHg * MMHG
+            self.pump_start = dolfinx.fem.Constant(mesh, self.iop)
             self.pump_span = dolfinx.fem.Constant(mesh, 1.0)
 
     def _subretinal_volume_form(self):
@@ -190,12 +198,27 @@ class CavityLiquid(Term):
 
     def pump_deficit(self, value=lambda constant: constant):
         """How far the subretinal fluid's pressure lies below P: 0 until the liquid is
-        released, then ramped with P's return, from 0 at the acute pressure to
-        ``subretinal_pump_mmHg`` at the IOP before surgery. It pulls the detached retina
-        onto the choroid and the choroid towards it. A UFL expression of the Constants, or
-        with ``value=float`` its number now."""
-        return value(self.pump) * (value(self.acute_pressure) - value(self.pressure_target)) \
+        released and the break sealed, then ramped with the rest of P's return, from 0 at
+        the target pressure where the pump started (the acute pressure, for a break sealed
+        after suturing) to ``subretinal_pump_mmHg`` at the IOP before surgery. It pulls the
+        detached retina onto the choroid and the choroid towards it. A UFL expression of the
+        Constants, or with ``value=float`` its number now."""
+        return value(self.pump) * (value(self.pump_start) - value(self.pressure_target)) \
             / value(self.pump_span)
+
+    def _start_the_pump_if_sealed(self, start: float) -> None:
+        """Once the liquid is released: the pump starts at the target pressure ``start``
+        (MPa) if the break is sealed (collective). Through an open break the vitreous fills the
+        subretinal space as fast as the pigment epithelium empties it, so no deficit builds
+        up; once sealed, the retina stays on (the pump keeps it there). A break that seals
+        only as P reaches the IOP before surgery leaves no pressure drop to ramp over: the
+        pump then stays off."""
+        if self.pump is None or not self.pump_waiting or self.break_sealed is None:
+            return
+        if start - self.iop > 1e-9 * self.iop and self.break_sealed():
+            self.pump_waiting = False
+            self.pump_start.value, self.pump_span.value = start, start - self.iop
+            self.pump.value = self.pump_full
 
     def install(self, solver) -> None:
         if self.vent.enabled:  # the branch chosen before every assembly, undone with a failed solve
@@ -224,15 +247,20 @@ class CavityLiquid(Term):
         self.acute_pressure.value = self.pressure()
         self.vent.release()
         if self.pump is not None:
-            span = float(self.acute_pressure.value) - self.iop
-            if not span > 0:
-                raise RuntimeError(f"subretinal_pump_mmHg is ramped with P's return from the acute "
-                                   f"pressure, which is not above the IOP before surgery ({span:+g} MPa)")
-            self.pump.value, self.pump_span.value = self.pump_full, span
+            self.pump_waiting = True
+            self._start_the_pump_if_sealed(float(self.acute_pressure.value))
+
+    def started_pump_at(self) -> float:
+        """The IOP (mmHg) at which the pump started; nan while it waits or is off."""
+        if self.pump is None or float(self.pump.value) == 0.0:
+            return math.nan
+        return float(self.pump_start.value) / MMHG
 
     def converged(self) -> None:
-        """A converged load step's vented liquid is kept: it does not come back."""
+        """A converged load step's vented liquid is kept: it does not come back. A pump
+        waiting for the break starts here if the step sealed it."""
         self.vent.accept(self.pressure())
+        self._start_the_pump_if_sealed(float(self.pressure_target.value))
 
     def _start_at_target(self) -> None:
         """P starts a load step at its pinned target, as a prescribed travel does. Newton's
@@ -259,13 +287,15 @@ class CavityLiquid(Term):
         for name in ("liquid_volume", "venting"):
             checkpoints.constant(f"vent_{name}", getattr(self.vent, name))
         if self.pump is not None:
-            checkpoints.constant("pump", self.pump)
-            checkpoints.constant("pump_span", self.pump_span)
-        checkpoints.value("liquid_closed", lambda: [self.closed, self.subretinal_fluid],
+            for name in ("pump", "pump_start", "pump_span"):
+                checkpoints.constant(name, getattr(self, name))
+        checkpoints.value("liquid_closed",
+                          lambda: [self.closed, self.subretinal_fluid, self.pump_waiting],
                           self._restore_closed)
 
     def _restore_closed(self, saved) -> None:
         self.closed, self.subretinal_fluid = bool(saved[0]), float(saved[1])
+        self.pump_waiting = bool(saved[2]) if len(saved) > 2 else False
 
     def measure(self) -> dict:
         """IOP and volume; from the liquid's closing on (the eye before surgery) the
@@ -277,6 +307,7 @@ class CavityLiquid(Term):
         out = {"iop_mmHg": pressure / MMHG, "cavity_volume_mm3": 2.0 * volume}
         if self.pump is not None:
             out["subretinal_pump_deficit_mmHg"] = self.pump_deficit(lambda c: float(c.value)) / MMHG
+            out["subretinal_pump_from_iop_mmHg"] = self.started_pump_at()
         if not self.closed:
             return out
         initial_volume = float(self.initial_volume.value)
@@ -417,18 +448,32 @@ class RetinaContact(Term):
             checkpoints.value("retina_multipliers", self.contact.multiplier_state,
                               self.contact.restore_multiplier_state)
 
+    def _rim(self) -> tuple[np.ndarray, bool]:
+        """The tear's rim nodes' gaps (from the last search) and the verdict: closed when
+        every paired one is below ``tear_closure_tolerance``. Collective."""
+        rim = self.contact.gaps_of(self.gaps.rim_nodes())
+        # nan: not a contact node (shared with the choroid); inf: unpaired, carried
+        # through the choroid (the depth hook cuts such a step): not closed
+        ours = rim[~np.isnan(rim)]
+        return rim, bool(len(ours) and np.all(ours < self.params.tear_closure_tolerance))
+
+    def tear_sealed(self) -> bool:
+        """Whether the tear is closed at the current unknowns (``tear_closed_nts``'s
+        verdict; a fresh search); without a tear there is no break to seal. Collective."""
+        if not len(self.gaps.rim_nodes()):
+            return True
+        with self.body.timings("contact_search"):
+            self.contact.state = self.contact.search()
+            return self._rim()[1]
+
     def measure(self) -> dict:
         """The penalty contact's own view (whole eye: twice the half model's area and
         force); max_penetration_mm is the deepest retina node under the choroid."""
-        contact, gaps, tolerance = self.contact, self.gaps, self.params.tear_closure_tolerance
+        contact, gaps = self.contact, self.gaps
         with self.body.timings("contact_search"):
             contact.state = contact.search()
             summary = contact.summary()
-            rim = contact.gaps_of(gaps.rim_nodes())
-            # nan: not a contact node (shared with the choroid); inf: unpaired, carried
-            # through the choroid (the depth hook cuts such a step): not closed
-            ours = rim[~np.isnan(rim)]
-            closed = bool(len(ours) and np.all(ours < tolerance))
+            rim, closed = self._rim()
             widest = gaps.widest_rim_node(rim)
             gap_min = contact.min_gap()
             # nodes the penalty presses (g < ε: with the round-off a very soft retina can
