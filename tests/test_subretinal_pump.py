@@ -69,6 +69,9 @@ def test_the_pump_waits_for_the_break_to_seal(sealing):
     assert q["after_settling"]["subretinal_pump_from_iop_mmHg"] == pytest.approx(started, rel=1e-12)
     assert q["after_settling"]["tear_closed_nts"]
     assert abs(q["after_settling"]["tear_rim_gap_max_mm"]) < 0.005
+    # the run's first lines say where the pump started
+    assert f"pump: from {started:.0f} mmHg, where the break sealed" in \
+        "\n".join(sb.SCENE.headline(q))
 
 
 def test_the_deficit_follows_the_rest_of_the_iops_return(sealing):
@@ -97,6 +100,8 @@ def test_a_break_that_never_seals_gets_no_pump(tmp_path):
     assert _waiting(pumped.quantities["after_settling"]["subretinal_pump_from_iop_mmHg"])
     for key, value in plain.quantities["after_settling"].items():
         assert pumped.quantities["after_settling"][key] == value, key
+    assert "pump: never started, the break did not seal" in \
+        "\n".join(sb.SCENE.headline(pumped.quantities))
 
 
 def test_a_negative_pump_is_bad_input_and_one_with_nothing_to_pump_does_nothing(tmp_path):

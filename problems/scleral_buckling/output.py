@@ -370,4 +370,11 @@ def headline(quantities: dict) -> list[str]:
                    f"vented {last['vented_volume_uL']:.0f} µL ({last.get('venting_route', '?')})"
                    if last.get("vented_volume_uL") else "nothing vented"]
         lines.append(f"{name.replace('_', ' ')}: " + ", ".join(item for item in outcome if item))
+    settled = stages.get("after_settling", {})
+    if "subretinal_pump_from_iop_mmHg" in settled:  # subretinal_pump_mmHg on
+        started = settled["subretinal_pump_from_iop_mmHg"]
+        lines.append("the pigment epithelium's pump: "
+                     + (f"from {started:.0f} mmHg, where the break sealed"
+                        if started is not None and math.isfinite(started)
+                        else "never started, the break did not seal"))
     return lines
