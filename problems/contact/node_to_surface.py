@@ -458,7 +458,6 @@ class NodeToSurfaceContact:
         norm = residual.norm()
         if norm > self._prediction_below:
             return
-        unknowns = solver.unknowns if len(solver.unknowns) > 1 else solver.unknowns[0]
         open_at_x = np.ones(len(self.slave_blocks), dtype=bool)
         if self.state is not None:
             open_at_x[self.state.active] = False
@@ -469,10 +468,7 @@ class NodeToSurfaceContact:
         try:
             for _ in range(self._prediction_rounds):
                 trial.waxpy(-1.0, y_vec, x_vec)
-                trial.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-                dolfinx.fem.petsc.assign(trial, unknowns)
-                for u in solver.unknowns:
-                    u.x.scatter_forward()
+                _set_unknowns(solver, trial)
                 predicted = self.search()
                 self._previous = None if memory[0] is None else memory[0].copy()
                 new = predicted.active[(predicted.gaps < 0) & open_at_x[predicted.active]]
@@ -492,10 +488,7 @@ class NodeToSurfaceContact:
                 self._add_force(pairs, rhs, -self.penalty * np.where(np.isfinite(at_x), at_x, 0.0))
                 ksp.solve(rhs, y_vec)
         finally:
-            x_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-            dolfinx.fem.petsc.assign(x_vec, unknowns)
-            for u in solver.unknowns:
-                u.x.scatter_forward()
+            _set_unknowns(solver, x_vec)
             self._previous, self.slave_gaps, self.state = memory
             trial.destroy()
             rhs.destroy()
@@ -692,21 +685,14 @@ class NodeToSurfaceContact:
         """SNES line-search pre-check (the update is x − λ y): y scaled by the largest
         λ ≤ 1 that keeps every slave node within the depth limit. Collective."""
         solver = self._limited_solver
-        unknowns = solver.unknowns if len(solver.unknowns) > 1 else solver.unknowns[0]
         at_x = self._depths()  # the search's state is not touched
         trial = x_vec.duplicate()
         try:
             trial.waxpy(-1.0, y_vec, x_vec)
-            trial.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-            dolfinx.fem.petsc.assign(trial, unknowns)
-            for u in solver.unknowns:
-                u.x.scatter_forward()
+            _set_unknowns(solver, trial)
             at_trial = self._depths()
         finally:
-            x_vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-            dolfinx.fem.petsc.assign(x_vec, unknowns)
-            for u in solver.unknowns:
-                u.x.scatter_forward()
+            _set_unknowns(solver, x_vec)
             trial.destroy()
         limit = self._step_depth_limit
         # nodes the full update carries past the limit from above it (one already past
@@ -721,6 +707,16 @@ class NodeToSurfaceContact:
     def min_gap(self) -> float:
         """Smallest gap of any paired slave node (collective; negative = penetration)."""
         return self.comm.allreduce(self.search().min_gap, op=MPI.MIN)
+
+
+def _set_unknowns(solver, vec: PETSc.Vec) -> None:
+    """The solver's unknowns (Functions) set to the PETSc vector ``vec`` (ghosts updated):
+    a line-search pre-check looks at a trial state through them and then puts x back."""
+    vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    unknowns = solver.unknowns if len(solver.unknowns) > 1 else solver.unknowns[0]
+    dolfinx.fem.petsc.assign(vec, unknowns)
+    for u in solver.unknowns:
+        u.x.scatter_forward()
 
 
 def _geometric_rank(corners: np.ndarray) -> np.ndarray:
