@@ -184,9 +184,10 @@ class NumericalSettings(SolverChoice):
     cycle_max_period: int = field(
         0, "a Newton solve with full steps (line_search, settle_line_search or suture_line_search "
         "basic, or the bt solves' basic retry) whose residual norms repeat a cycle of 1 to this "
-        "many iterations (equal to 1e-3) is stopped as failed, and retried or its load step cut "
-        "as any failed solve, before it spends a factorisation per iteration to the iteration "
-        "limit (0: off; docs/scleral_buckling.md, Full steps that cycle)", group=SOLVER)
+        "many iterations (each within 1e-3 of the norm a period before) is stopped as "
+        "failed, and retried or its load step cut as any failed solve, before it spends a "
+        "factorisation per iteration to the iteration limit (0: off; docs/scleral_buckling.md, "
+        "Full steps that cycle)", group=SOLVER)
     retina_step_depth: float = field(
         0.0, "the Newton update shortened where it would carry a retina node deeper through "
         "the choroid than this fraction of the choroid's thickness (a node beyond the whole "
