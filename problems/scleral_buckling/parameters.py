@@ -57,11 +57,13 @@ BAND_MODULUS = 3.0
 BAND_SHORTENING_PERCENT = 25.0
 
 # the paper's operation (seed 002): Table 1's neo-Hookean coats, the optic nerve's end
-# clamped, the rigid buckle moved in by ``indentation``, the liquid's volume conserved.
-# ``eyemech run scleral-buckling --set material=table-1 --set optic_nerve_end_spring=0
-# --set buckle_control=travel --set venting=false`` (docs/scleral_buckling.md)
+# clamped, the rigid buckle (a 1.0 mm tire on the band) moved in by ``indentation``, the
+# liquid's volume conserved, no pump (the paper has none). ``eyemech run scleral-buckling
+# --set material=table-1 --set optic_nerve_end_spring=0 --set buckle_control=travel --set
+# venting=false --set tire_height=1 --set subretinal_pump_mmHg=0`` (docs/scleral_buckling.md)
 PAPER_OPERATION = {"material": "table-1", "optic_nerve_end_spring": 0.0,
-                   "buckle_control": "travel", "venting": False}
+                   "buckle_control": "travel", "venting": False, "tire_height": 1.0,
+                   "subretinal_pump_mmHg": 0.0}
 # the same as `--set` / TOML strings (for ``build``, sweeps and command lines)
 PAPER_SETTINGS = {key: str(value) for key, value in PAPER_OPERATION.items()}
 # the optic nerve's end spring of the living eye: within 4 % of the free eye's settled axial
@@ -168,7 +170,7 @@ class EyeParameters(SceneParameters):
     band_thickness: float = field(0.6, "encircling band thickness", "mm", group=GEOMETRY)
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
                               "tire)", "mm", group=GEOMETRY)
-    tire_height: float = field(1.0, "silicone tire height (radial)", "mm", group=GEOMETRY)
+    tire_height: float = field(1.5, "silicone tire height (radial)", "mm", group=GEOMETRY)
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm", group=GEOMETRY)
     indentation: float = field(
@@ -212,7 +214,7 @@ class EyeParameters(SceneParameters):
         "along the choroid's facets; docs/scleral_buckling.md, Subretinal drainage)",
         group=PHYSICS)
     subretinal_pump_mmHg: float = field(
-        0.0, "step 4: once the break is sealed (tear_closed_nts), the pigment epithelium pumps "
+        1.0, "step 4: once the break is sealed (tear_closed_nts), the pigment epithelium pumps "
         "the subretinal fluid out, its pressure below the vitreous' by this much once the IOP "
         "is back (ramped with the rest of the IOP's return), on the detached retina's outer "
         "face and the choroid's inner face; through an open break the vitreous refills the "

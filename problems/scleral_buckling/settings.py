@@ -148,7 +148,7 @@ class NumericalSettings(SolverChoice):
         "creep at its 0.1 floor keeps the factorisation; residual = as in the other steps, "
         "jacobian_reuse_test (docs/scleral_buckling.md, The settling step)", group=SOLVER)
     settle_line_search: Literal["bt", "basic", "cp"] = field(
-        "bt", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
+        "basic", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
         "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
         "at its 0.1 floor in the first settling load step, more at the paper's resolution; "
         "cp as in suture_line_search (docs/scleral_buckling.md, Newton's budget)", group=SOLVER)
@@ -182,14 +182,14 @@ class NumericalSettings(SolverChoice):
         "for 3 iterations and then converge were cut until the run failed: "
         "docs/scleral_buckling.md, Stalled backtracking, The settling step)", group=SOLVER)
     cycle_max_period: int = field(
-        0, "a Newton solve with full steps (line_search, settle_line_search or suture_line_search "
+        8, "a Newton solve with full steps (line_search, settle_line_search or suture_line_search "
         "basic, or the bt solves' basic retry) whose residual norms repeat a cycle of 1 to this "
         "many iterations (each within 1e-3 of the norm a period before) is stopped as "
         "failed, and retried or its load step cut as any failed solve, before it spends a "
         "factorisation per iteration to the iteration limit (0: off; docs/scleral_buckling.md, "
         "Full steps that cycle)", group=SOLVER)
     retina_step_depth: float = field(
-        0.0, "the Newton update shortened where it would carry a retina node deeper through "
+        0.25, "the Newton update shortened where it would carry a retina node deeper through "
         "the choroid than this fraction of the choroid's thickness (a node beyond the whole "
         "thickness is unpaired: the load step is cut); 0: off (docs/scleral_buckling.md, "
         "Full steps through the choroid)", group=SOLVER)
