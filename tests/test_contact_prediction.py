@@ -34,7 +34,7 @@ E_BLOCK, ALPHA = 1.0, 100.0  # MPa, MPa/mm
 SEARCH_DEPTH = 0.25  # mm: deeper, a slave node is unpaired
 
 
-def _blocks(predict: bool, options: NewtonOptions, depth_limit: float = 0.0):
+def _blocks(predict: bool, options: NewtonOptions, depth_limit: float = 0.0, acting=None):
     blocks = stacked_blocks(1.0, 0.5, 0.5, 0.5, 0.4, comm=MPI.COMM_SELF)
     V = dolfinx.fem.functionspace(blocks.mesh, ("Lagrange", 1, (3,)))
     u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
@@ -50,14 +50,14 @@ def _blocks(predict: bool, options: NewtonOptions, depth_limit: float = 0.0):
     if predict:
         contact.predict_active_set(solver, below=np.inf)
     if depth_limit > 0:
-        contact.limit_step_depth(solver, depth_limit)
+        contact.limit_step_depth(solver, depth_limit, acting)
     return solver, contact, u
 
 
-def _first_step_depth(predict: bool, depth_limit: float = 0.0) -> float:
+def _first_step_depth(predict: bool, depth_limit: float = 0.0, acting=None) -> float:
     """The deepest slave node after one full Newton step from u = 0."""
     solver, contact, _u = _blocks(predict, NewtonOptions(line_search="basic", max_it=1),
-                                  depth_limit)
+                                  depth_limit, acting)
     solver.solve()
     depth = -contact.search().min_gap
     solver.close()  # the pre-check's reference to the contact lives in PETSc's SNES
@@ -84,6 +84,16 @@ def test_the_first_step_stops_at_the_depth_limit():
     # a limit the full step stays within leaves it whole
     assert _first_step_depth(False, depth_limit=0.5) == pytest.approx(_first_step_depth(False),
                                                                       rel=1e-12)
+
+
+def test_the_depth_limit_acts_only_when_told():
+    """The eye's limit acts in the settling only (``acting``: the liquid released): while
+    ``acting()`` is false the first step is the unlimited one, to the last bit; once true
+    it stops at the limit."""
+    free = _first_step_depth(False)
+    assert _first_step_depth(False, depth_limit=0.01, acting=lambda: False) == free
+    assert _first_step_depth(False, depth_limit=0.01, acting=lambda: True) == \
+        pytest.approx(0.01 * SEARCH_DEPTH, rel=1e-4)
 
 
 @pytest.mark.parametrize("line_search", ["bt", "basic"])

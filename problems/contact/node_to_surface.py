@@ -40,6 +40,7 @@ Slave weights: the row of the slave surface's mass matrix lumped by HRZ
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import basix
 import dolfinx
@@ -658,15 +659,17 @@ class NodeToSurfaceContact:
         a, normal = _planes(corners[nearest[np.arange(len(slaves)), best]])
         return -np.einsum("ij,ij->i", slaves - a, normal)
 
-    def limit_step_depth(self, solver, fraction: float) -> None:
+    def limit_step_depth(self, solver, fraction: float,
+                         acting: Callable[[], bool] | None = None) -> None:
         """Install, after ``solver``'s line-search pre-check if it has one, a limit on the
         Newton update x − y: where the full update would carry a slave node deeper than
         ``fraction`` of ``search_depth`` under its master triangle, y is shortened so that
         the deepest node, its depth interpolated linearly between x and x − y, reaches that
-        depth. Why: an open pair contributes no stiffness, so the direction of a soft slave
-        body under a load (a detached retina under the pigment epithelium's pump) can carry
-        a node through the master body in one full step, beyond ``search_depth``, where it
-        is unpaired: Newton then converges to an equilibrium with the node on the wrong side
+        depth; only while ``acting()`` says so (None: always; the same on every rank).
+        Why: an open pair contributes no stiffness, so the direction of a soft slave body
+        under a load (a detached retina under the pigment epithelium's pump) can carry a
+        node through the master body in one full step, beyond ``search_depth``, where it is
+        unpaired: Newton then converges to an equilibrium with the node on the wrong side
         (docs/scleral_buckling.md, "Full steps through the choroid"). The residual is
         untouched, and so is a direction that keeps every node within the limit."""
         self._step_depth_limit = fraction * self.search_depth
@@ -677,7 +680,8 @@ class NodeToSurfaceContact:
         def precheck(x_vec: PETSc.Vec, y_vec: PETSc.Vec) -> None:
             if earlier is not None:
                 earlier(x_vec, y_vec)
-            self._limit_step(x_vec, y_vec)
+            if acting is None or acting():
+                self._limit_step(x_vec, y_vec)
 
         solver.line_search_precheck = precheck
 

@@ -170,7 +170,10 @@ class EyeParameters(SceneParameters):
     band_thickness: float = field(0.6, "encircling band thickness", "mm", group=GEOMETRY)
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
                               "tire)", "mm", group=GEOMETRY)
-    tire_height: float = field(1.5, "silicone tire height (radial)", "mm", group=GEOMETRY)
+    tire_height: float = field(
+        1.5, "silicone tire height (radial). 1.5: with the pump the settled tear is closed on the "
+        "coarse, default and paper meshes; with 1.0 the paper mesh's break never seals and "
+        "stays 0.586 mm open settled (docs/scleral_buckling.md, The defaults)", "mm", group=GEOMETRY)
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm", group=GEOMETRY)
     indentation: float = field(
@@ -219,8 +222,9 @@ class EyeParameters(SceneParameters):
         "is back (ramped with the rest of the IOP's return), on the detached retina's outer "
         "face and the choroid's inner face; through an open break the vitreous refills the "
         "space and no deficit builds up. Nothing to pump without a detachment, the settling "
-        "or the retina's contact (0: off; docs/scleral_buckling.md, The pigment epithelium's "
-        "pump)", "mmHg", group=PHYSICS)
+        "or the retina's contact. 1: an assumed deficit (the clinic measures resorption times, "
+        "not pressures); 0: off (docs/scleral_buckling.md, The pigment epithelium's pump)",
+        "mmHg", group=PHYSICS)
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm", group=GEOMETRY)
     tear_radius: float = field(1.6, "radius of the causative tear (0: no tear)", "mm", group=GEOMETRY)

@@ -149,9 +149,12 @@ class NumericalSettings(SolverChoice):
         "jacobian_reuse_test (docs/scleral_buckling.md, The settling step)", group=SOLVER)
     settle_line_search: Literal["bt", "basic", "cp"] = field(
         "basic", "Newton's line search in step 4: basic = full steps (a failed solve repeated "
-        "once with bt): fewer factorisations on the default and coarse meshes, where bt creeps "
-        "at its 0.1 floor in the first settling load step, more at the paper's resolution; "
-        "cp as in suture_line_search (docs/scleral_buckling.md, Newton's budget)", group=SOLVER)
+        "once with bt), with cycle_max_period and retina_step_depth the settling with the "
+        "pump finishes on the coarse, default and paper meshes; bt = backtracking on the "
+        "residual's norm, which creeps at its 0.1 floor in the first settling load step and "
+        "with the pump stalls (the band alone at 99.5 % of the settling); cp as in "
+        "suture_line_search (docs/scleral_buckling.md, Newton's budget, The pigment "
+        "epithelium's pump)", group=SOLVER)
     settle_retry: Literal["none", "basic"] = field(
         "none", "step 4 with settle_line_search=bt: basic = a solve that fails (bt's step "
         "below its floor) is repeated once from its start with full steps before the load "
@@ -189,10 +192,11 @@ class NumericalSettings(SolverChoice):
         "factorisation per iteration to the iteration limit (0: off; docs/scleral_buckling.md, "
         "Full steps that cycle)", group=SOLVER)
     retina_step_depth: float = field(
-        0.25, "the Newton update shortened where it would carry a retina node deeper through "
-        "the choroid than this fraction of the choroid's thickness (a node beyond the whole "
-        "thickness is unpaired: the load step is cut); 0: off (docs/scleral_buckling.md, "
-        "Full steps through the choroid)", group=SOLVER)
+        0.25, "step 4 (settling): the Newton update shortened where it would carry a retina "
+        "node deeper through the choroid than this fraction of the choroid's thickness (a "
+        "node beyond the whole thickness is unpaired: the load step is cut). Not in steps 2-3, "
+        "where a shortened update stalled a radial tire's suturing; 0: off "
+        "(docs/scleral_buckling.md, Full steps through the choroid)", group=SOLVER)
     retina_contact_prediction: bool = field(
         False, "at Newton iterates with a residual of at most flat_residual_limit, a retina "
         "node open there that Newton's full step would carry into the choroid gets the "

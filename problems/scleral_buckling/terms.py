@@ -250,6 +250,10 @@ class CavityLiquid(Term):
             self.pump_waiting = True
             self._start_the_pump_if_sealed(float(self.acute_pressure.value))
 
+    def released(self) -> bool:
+        """Step 4: the liquid was closed for the operation and is free again, P driven back."""
+        return self.closed and float(self.coupled.value) == 0.0
+
     def started_pump_at(self) -> float:
         """The IOP (mmHg) at which the pump started; nan while it waits or is off."""
         if self.pump is None or float(self.pump.value) == 0.0:
@@ -402,6 +406,8 @@ class RetinaContact(Term):
     def __init__(self, body: Body, params: Parameters, gaps, retina_modulus: float):
         self.body, self.params, self.gaps = body, params, gaps
         self.augmented = params.contact_method == "augmented-lagrangian"
+        # when retina_step_depth acts (the model gives the settling's test; None: always)
+        self.limit_depth_while: Callable[[], bool] | None = None
         alpha = default_penalty(retina_modulus, body.element_size, params.retina_penalty_factor)
         if self.augmented:
             alpha *= params.augmented_penalty_scale
@@ -432,7 +438,7 @@ class RetinaContact(Term):
         if self.params.retina_contact_prediction:
             contact.predict_active_set(solver, below=self.params.flat_residual_limit)
         if self.params.retina_step_depth > 0:
-            contact.limit_step_depth(solver, self.params.retina_step_depth)
+            contact.limit_step_depth(solver, self.params.retina_step_depth, self.limit_depth_while)
         contact.allow_new_nonzeros(solver.problem.A)
         solver.pattern_hooks.append(contact.grow_pattern)
         if self.augmented:  # the multipliers go back with a cut step
