@@ -3,7 +3,7 @@ compare another method's eye with it (tests/test_newton_counts.py, tests/test_ne
 
 The reference method: penalty contact, full Newton with backtracking (bt) from step 2 on,
 MUMPS LU, the stepping without the budget's predictor, factorisation reuse and step-2
-limit (docs/scleral_buckling.md, "Newton's budget")."""
+limit, no cycle stop or depth limit (docs/scleral_buckling.md, "Newton's budget")."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import pytest
 
 REFERENCE_METHOD = {"predictor": "none", "jacobian_reuse": 0.0, "buckle_step": 0.25,
                     "step_effort": "iterations", "hard_step_effort": 0, "line_search": "bt",
-                    "suture_line_search": "bt", "settle_line_search": "bt", "settle_retry": "none"}
+                    "suture_line_search": "bt", "settle_line_search": "bt", "settle_retry": "none",
+                    "cycle_max_period": 0, "retina_step_depth": 0.0}
 QUANTITIES = ("axial_length_change_mm", "iop_mmHg", "refraction_change_D", "corneal_power_change_D")
 
 

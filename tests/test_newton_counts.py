@@ -685,6 +685,7 @@ def test_full_steps_in_the_settling_step_save_factorisations():
         scleral_buckling.Parameters(resolution="coarse", settle_line_search=line_search,
                                     settle_start="converged", settle_step=0.0,
                                     stagnation_window=3, settle_reuse_test="residual",
+                                    cycle_max_period=0, retina_step_depth=0.0,  # as measured
                                     **scleral_buckling.PAPER_OPERATION),
         options=options) for line_search in ("basic", "bt"))
     expected, actual = backtracking.quantities["after_settling"], full.quantities["after_settling"]
@@ -970,7 +971,8 @@ def test_stopping_stalled_backtracking_costs_the_default_eye_nothing():
     # the settling this was measured with: from the converged P, the other steps' load steps
     # (tests/test_settle.py for the default settling, which stops no solve)
     former = {"buckle_position": 12.5, "indentation": 1.5, "settle_start": "converged",
-              "settle_step": 0.0, "settle_reuse_test": "residual",
+              "settle_step": 0.0, "settle_reuse_test": "residual", "settle_line_search": "bt",
+              "cycle_max_period": 0, "retina_step_depth": 0.0,
               **scleral_buckling.PAPER_OPERATION}
     stopped, plain = (scleral_buckling.run(scleral_buckling.Parameters(
         stagnation_window=window, **former), options=options) for window in (3, 0))

@@ -20,9 +20,11 @@ from eyemech.problems import scleral_buckling
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.scleral_buckling.stages import ramp_value as settle_pressure
 
-# the buckle as measured in docs/scleral_buckling.md ("The settling step"), pinned so that a
-# change of the scene's buckle defaults does not change what this test measures
+# the buckle and the settling's Newton (bt, no cycle stop, no depth limit) as measured in
+# docs/scleral_buckling.md ("The settling step"), pinned so that a change of the scene's
+# defaults does not change what this test measures
 EYE = {"resolution": "coarse", "buckle_position": 12.5, "indentation": 1.5,
+       "settle_line_search": "bt", "cycle_max_period": 0, "retina_step_depth": 0.0,
        **scleral_buckling.PAPER_OPERATION}
 SETTLED = ("axial_length_change_mm", "refraction_change_D", "iop_mmHg", "cavity_volume_mm3")
 

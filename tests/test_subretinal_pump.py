@@ -120,24 +120,31 @@ def test_a_negative_pump_is_bad_input_and_one_with_nothing_to_pump_does_nothing(
 
 def test_a_run_killed_while_the_pump_waits_resumes_to_the_same_numbers(sealing, tmp_path):
     """Whether the pump waits, where it started, its deficit and its span are in the
-    checkpoint: killed in Newton of step 36 (the settling's fifth load step, the break still
-    open) and resumed from step 35's checkpoint, the run starts the pump at the same step and
-    ends on the uninterrupted run's numbers (bitwise: the Q1P0 retina)."""
+    checkpoint: killed in Newton of the load step before the one that seals the break (the
+    settling under way, the break still open) and resumed from the checkpoint of the step
+    before, the run starts the pump at the same step and ends on the uninterrupted run's
+    numbers (bitwise: the Q1P0 retina)."""
+    starts = _starts(sealing.steps)
+    sealed = next(i for i, start in enumerate(starts) if start is not None)  # 0-based
+    assert sealing.steps[sealed - 2]["stage"] == 4  # two settling steps before it waited
+    killed_step = sealed  # the 1-based number of the step before the sealing one
     settings = [a for k, v in {**BAND_ALONE, "subretinal_pump_mmHg": PUMP}.items()
                 for a in ("--set", f"{k}={v}")]
     quiet = ("--no-fields", "--no-pictures", "--quiet")
-    env = dict(os.environ, EYEMECH_TEST_KILL="step:36")
+    env = dict(os.environ, EYEMECH_TEST_KILL=f"step:{killed_step}")
     killed = subprocess.run([str(BIN / "eyemech"), "run",
                              "scleral-buckling", *settings, "--out", str(tmp_path),
                              "--checkpoint-every", "1", *quiet],
                             capture_output=True, text=True, timeout=900, env=env)
-    assert killed.returncode != 0 and (tmp_path / "checkpoints" / "ckpt_000035").is_dir()
+    checkpoint = f"ckpt_{killed_step - 1:06d}"
+    assert killed.returncode != 0 and (tmp_path / "checkpoints" / checkpoint).is_dir()
     code, _, err = run_cli("run", "scleral-buckling", "--resume", str(tmp_path), *quiet)
     assert code == 0, err
     resumed = json.loads((tmp_path / "results.json").read_text())
-    assert resumed["checkpoints"]["resumed_from"].endswith("ckpt_000035")
-    assert resumed["steps"][34]["stage"] == 4
-    assert _waiting(resumed["steps"][34]["subretinal_pump_from_iop_mmHg"])  # killed while waiting
+    assert resumed["checkpoints"]["resumed_from"].endswith(checkpoint)
+    last_saved = resumed["steps"][killed_step - 2]  # the checkpoint's step
+    assert last_saved["stage"] == 4
+    assert _waiting(last_saved["subretinal_pump_from_iop_mmHg"])  # killed while waiting
     assert _starts(resumed["steps"]) == _starts(sealing.steps)
     assert [s["subretinal_pump_deficit_mmHg"] for s in resumed["steps"]] == \
         [s["subretinal_pump_deficit_mmHg"] for s in sealing.steps]
