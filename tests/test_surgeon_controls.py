@@ -90,7 +90,7 @@ def test_the_band_carries_the_tire_and_the_sutures_pull(band, tmp_path):
     0.788 mm) and its tension drops (0.215 → 0.179 N). The sibling with settling and
     output of the other tests here (≈ 60 s)."""
     params = build(sb.Parameters, {**BAND, **TEN_PERCENT, "buckle": "encircling+segmental",
-                                   "settle": "true"})
+                                   "settle": "true", "tire_height": "1.0"})  # as measured
     result = sb.run(params, out=tmp_path)
     sewn, settled = result.quantities["after_suturing"], result.quantities["after_settling"]
     for after in (sewn, settled):
