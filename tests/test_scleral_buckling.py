@@ -240,7 +240,7 @@ def test_the_run_says_first_what_the_operation_did(coarse, coarse_folder):
     finished run through ``--resume``): the tear's verdict after suturing and settled with
     its margin (the node-to-surface rim gap against the tolerance, ``tear_closed_nts``),
     that the margin carries no error estimate, then the settled changes, the peak IOP and
-    what was vented (coarse eye: 0.007 / -0.001 mm, +0.65 mm, -2.30 D, 79 mmHg, 192 uL)."""
+    what was vented (coarse eye: 0.007 / -0.000 mm, +0.65 mm, -2.30 D, 79 mmHg, 192 uL)."""
     code, out, err = run_cli("run", "scleral-buckling", "--resume", str(coarse_folder))
     assert code == 0, err
     tear, settled = out.splitlines()[1:3]
@@ -281,7 +281,7 @@ def test_the_tear_is_closed_after_suturing_on_the_coarse_eye(coarse):
     # (slave) on choroid (master) in the blocked [u, p, P] system: before surgery no
     # node touches. At the defaults (the living eye, the band shortened by 25 % over a
     # 1.5 mm tire, 0.2 N) the rim's widest gap is 0.094 mm after buckling, 0.007 mm after
-    # suturing and -0.001 mm settled, against tear_closure_tolerance = 0.05 mm (default
+    # suturing and -0.000 mm settled, against tear_closure_tolerance = 0.05 mm (default
     # mesh: 0.099 / 0.012 / -0.000 mm; docs/scleral_buckling.md, "The defaults")
     q = coarse.quantities
     assert q["retina_contact_penalty"] > 0

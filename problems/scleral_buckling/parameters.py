@@ -217,13 +217,15 @@ class EyeParameters(SceneParameters):
         "along the choroid's facets; docs/scleral_buckling.md, Subretinal drainage)",
         group=PHYSICS)
     subretinal_pump_mmHg: float = field(
-        1.0, "step 4: once the break is sealed (tear_closed_nts), the pigment epithelium pumps "
+        0.3, "step 4: once the break is sealed (tear_closed_nts), the pigment epithelium pumps "
         "the subretinal fluid out, its pressure below the vitreous' by this much once the IOP "
         "is back (ramped with the rest of the IOP's return), on the detached retina's outer "
         "face and the choroid's inner face; through an open break the vitreous refills the "
         "space and no deficit builds up. Nothing to pump without a detachment, the settling "
-        "or the retina's contact. 1: an assumed deficit (the clinic measures resorption times, "
-        "not pressures); 0: off (docs/scleral_buckling.md, The pigment epithelium's pump)",
+        "or the retina's contact. 0.3: an assumed deficit (the clinic measures resorption times, "
+        "not pressures); with 1 the settling fails on 11 of the planning map's 24 coarse "
+        "cases, the retina pressed onto the choroid's facets; 0: off "
+        "(docs/scleral_buckling.md, The pigment epithelium's pump)",
         "mmHg", group=PHYSICS)
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
                                      "(0: the retina is attached)", "mm", group=GEOMETRY)
