@@ -240,7 +240,7 @@ def test_the_run_says_first_what_the_operation_did(coarse, coarse_folder):
     finished run through ``--resume``): the tear's verdict after suturing and settled with
     its margin (the node-to-surface rim gap against the tolerance, ``tear_closed_nts``),
     that the margin carries no error estimate, then the settled changes, the peak IOP and
-    what was vented (coarse eye: 0.007 / -0.000 mm, +0.65 mm, -2.30 D, 79 mmHg, 192 uL)."""
+    what was vented (coarse eye: 0.007 / -0.000 mm, +0.65 mm, -2.31 D, 79 mmHg, 192 uL)."""
     code, out, err = run_cli("run", "scleral-buckling", "--resume", str(coarse_folder))
     assert code == 0, err
     tear, settled = out.splitlines()[1:3]
