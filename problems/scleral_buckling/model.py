@@ -93,13 +93,11 @@ class BucklingModel:
         self.optics = Optics(body)
         self.gaps = RetinaGaps(body, params.tear_closure_tolerance)
         self.zonules = Zonules(body, params) if params.lens else None
-        self.retina = RetinaContact(body, params, self.gaps, self.tissues.youngs_modulus("retina")) \
+        self.retina = RetinaContact(body, params, self.gaps, self.tissues.youngs_modulus("retina"),
+                                    settling=self.liquid.released) \
             if params.retina_contact and self.gaps.detached else None
         if self.retina is not None:  # the pigment epithelium's pump waits for a sealed break
             self.liquid.break_sealed = self.retina.tear_sealed
-            # the depth limit is for the flap the pump pulls on in the settling; in steps 2-3
-            # a shortened update sent a radial tire's suturing to a stall (1.6e-2 N, flat)
-            self.retina.limit_depth_while = self.liquid.released
         self.nerve_spring = OpticNerveSpring(body, params.optic_nerve_end_spring) \
             if params.optic_nerve_end_spring > 0 else None
         self.terms = [term for term in (self.tissues, self.liquid, self.contact,

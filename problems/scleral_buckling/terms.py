@@ -401,13 +401,16 @@ class RetinaContact(Term):
     (its penetration under a contact pressure p is p/α = (p/E_retina) h / factor),
     searched at every Newton iteration and added node by node to the blocked Jacobian.
     With the augmented Lagrangian a multiplier per retina node. ``gaps``: the tear's rim,
-    for the rim's measurements; ``retina_modulus``: E_retina."""
+    for the rim's measurements; ``retina_modulus``: E_retina; ``settling``: whether step 4
+    is under way, the only step where ``retina_step_depth`` acts: it is for the flap the
+    pump pulls on, and in steps 2-3 a shortened update sent a radial tire's suturing to a
+    stall (1.6e-2 N, flat)."""
 
-    def __init__(self, body: Body, params: Parameters, gaps, retina_modulus: float):
+    def __init__(self, body: Body, params: Parameters, gaps, retina_modulus: float,
+                 settling: Callable[[], bool]):
         self.body, self.params, self.gaps = body, params, gaps
+        self.settling = settling
         self.augmented = params.contact_method == "augmented-lagrangian"
-        # when retina_step_depth acts (the model gives the settling's test; None: always)
-        self.limit_depth_while: Callable[[], bool] | None = None
         alpha = default_penalty(retina_modulus, body.element_size, params.retina_penalty_factor)
         if self.augmented:
             alpha *= params.augmented_penalty_scale
@@ -438,7 +441,7 @@ class RetinaContact(Term):
         if self.params.retina_contact_prediction:
             contact.predict_active_set(solver, below=self.params.flat_residual_limit)
         if self.params.retina_step_depth > 0:
-            contact.limit_step_depth(solver, self.params.retina_step_depth, self.limit_depth_while)
+            contact.limit_step_depth(solver, self.params.retina_step_depth, self.settling)
         contact.allow_new_nonzeros(solver.problem.A)
         solver.pattern_hooks.append(contact.grow_pattern)
         if self.augmented:  # the multipliers go back with a cut step
