@@ -110,7 +110,8 @@ def test_every_stage_carries_its_estimates_and_verdict(estimated):
 def test_the_estimate_is_the_coarse_mesh_band_against_the_default_mesh(estimated):
     """The coarse run's band is r^p/(r^p − 1) Fs |q_coarse − q_default| = 9 |Δ| (r = 1.5,
     p = 1, Fs = 3), with the default mesh's settled ΔAL +0.55768 mm and ΔSE −0.89764 D
-    (docs/scleral_buckling.md, "The defaults"; the default mesh's run repeats them to
+    (measured by `eyemech run scleral-buckling --json`, 7 Dec 2026; docs/scleral_buckling.md,
+    "The defaults", to two digits; the default mesh's run repeats them to
     1e-4)."""
     settled = estimated.quantities["after_settling"]
     assert settled["axial_length_change_mm_error_estimate"] == pytest.approx(

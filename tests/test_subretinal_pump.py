@@ -23,7 +23,8 @@ from eyemech.problems import scleral_buckling as sb
 from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
 
-PUMP = 1.0  # mmHg
+PUMP = 1.0  # mmHg: the pump these tests were measured with (the scene's default is 0.3)
+# the settling's Newton aids, pinned as measured (they are the scene's defaults as well)
 AIDS = dict(settle_line_search="basic", retina_step_depth=0.25, cycle_max_period=8)
 BAND_ALONE = dict(resolution="coarse", buckle="encircling", **AIDS)
 QUIET = RunOptions(pictures=False, fields=False)
@@ -126,7 +127,7 @@ def test_a_run_killed_while_the_pump_waits_resumes_to_the_same_numbers(sealing, 
     numbers (bitwise: the Q1P0 retina)."""
     starts = _starts(sealing.steps)
     sealed = next(i for i, start in enumerate(starts) if start is not None)  # 0-based
-    assert sealing.steps[sealed - 2]["stage"] == 4  # two settling steps before it waited
+    assert sealing.steps[sealed - 2]["stage"] == 4  # the checkpoint's step is in the settling
     killed_step = sealed  # the 1-based number of the step before the sealing one
     settings = [a for k, v in {**BAND_ALONE, "subretinal_pump_mmHg": PUMP}.items()
                 for a in ("--set", f"{k}={v}")]
