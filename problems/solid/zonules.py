@@ -24,6 +24,8 @@ bar nodes are gathered every evaluation (a few hundred nodes).
 
 from __future__ import annotations
 
+import functools
+
 import dolfinx
 import numpy as np
 from petsc4py import PETSc
@@ -89,9 +91,7 @@ class ZonuleBars:
         exactly as the uninterrupted one). Collective."""
         matrix.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         matrix.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, False)
-        for dofs in self._dofs():
-            keep = ~np.isin(dofs, self._constrained)
-            index = dofs[keep].astype(PETSc.IntType)
+        for index, _keep in self._free_dofs:
             matrix.setValues(index, index, np.zeros((len(index), len(index))),
                              addv=PETSc.InsertMode.ADD)
         # a flush, not a final assembly: a final one squeezes out every slot not yet
@@ -139,25 +139,34 @@ class ZonuleBars:
         force, n, _ = self.forces()
         f = (force[:, None] * n)[self.mine]
         values = np.hstack([-f, f])
-        dofs = self._dofs()
-        keep = ~np.isin(dofs, self._constrained)
+        dofs, keep = self._bar_dofs
         b.setValues(dofs[keep].astype(PETSc.IntType), values[keep], addv=PETSc.InsertMode.ADD)
         b.assemblyBegin()
         b.assemblyEnd()
 
     def jacobian_hook(self, _x: PETSc.Vec, A: PETSc.Mat) -> None:
         force, n, length = self.forces()
-        dofs = self._dofs()
-        rows = np.flatnonzero(self.mine)
-        for i, bar in enumerate(rows):
-            nn = np.outer(n[bar], n[bar])
-            k = self.axial_stiffness[bar] / self.lengths[bar] * nn \
-                + force[bar] / length[bar] * (np.eye(3) - nn)
-            block = np.block([[k, -k], [-k, k]])
-            keep = ~np.isin(dofs[i], self._constrained)
-            index = dofs[i][keep].astype(PETSc.IntType)
+        mine = self.mine
+        nn = n[mine, :, None] * n[mine, None, :]
+        k = ((self.axial_stiffness / self.lengths)[mine, None, None] * nn
+             + (force / length)[mine, None, None] * (np.eye(3) - nn))
+        blocks = np.block([[k, -k], [-k, k]])  # (bars, 6, 6)
+        for block, (index, keep) in zip(blocks, self._free_dofs):
             A.setValues(index, index, block[np.ix_(keep, keep)], addv=PETSc.InsertMode.ADD)
         A.assemble()
+
+    @functools.cached_property
+    def _bar_dofs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(bars of this rank, 6): their dofs (PETSc numbering) and which are free of
+        Dirichlet conditions; fixed for the run, found once."""
+        dofs = self._dofs()
+        return dofs, ~np.isin(dofs, self._constrained)
+
+    @functools.cached_property
+    def _free_dofs(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per bar of this rank: its free dofs and which of its six they are."""
+        dofs, free = self._bar_dofs
+        return [(bar[keep].astype(PETSc.IntType), keep) for bar, keep in zip(dofs, free)]
 
     def summary(self) -> dict[str, float]:
         """Whole eye (twice the half model's bars, in-plane bars counted once)."""
