@@ -103,8 +103,25 @@ class Tissues(Term):
                 block_spaces=body.block_spaces)
             self.pressure = self.mean_dilatation.pressure
         condensed = getattr(self.mean_dilatation, "pressure", None)
-        return solid_residual(self.law, body.family, body.fields, tests, body.dx,
+        return solid_residual(self._laws_by_cells(), body.family, body.fields, tests, body.dx,
                               condensed_pressure=condensed, modes=body.modes)
+
+    def _laws_by_cells(self):
+        """The law over the whole mesh, or ``{cell tags: law}``: the stiffening law (Yeoh's
+        c20, the fibres' c4) over the coats that have it, neo-Hooke over the other tissues.
+        Both are the same energy where the stiffening modulus is 0; integrated apart, the
+        other tissues' cells (half of the eye's) skip the stiffening term's tangent, which
+        doubles the cost of a Jacobian cell by cell (docs/scleral_buckling.md, "Where the
+        time goes"). The incompatible modes take one law for the mesh."""
+        body, params = self.body, self.params
+        coats = {"fibres": params.fibre_stiffness(), "calibrated": params.stiffening()}.get(params.material)
+        if coats is None or body.modes is not None:
+            return self.law
+        tissues = [name for name, (dim, _) in body.eye.names.items() if dim == body.mesh.topology.dim]
+        stiffened = tuple(body.eye.tag(name) for name in tissues if coats.get(name, 0.0) != 0.0)
+        plain = tuple(body.eye.tag(name) for name in tissues if coats.get(name, 0.0) == 0.0)
+        return {tags: law for tags, law in ((stiffened, self.law), (plain, NeoHooke(self.stiffness)))
+                if tags}
 
     def install(self, solver) -> None:
         if self.mean_dilatation is not None:
