@@ -921,6 +921,47 @@ def test_full_steps_that_cycle_are_stopped_early():
     assert problem["solver"].solve()[0] and not problem["solver"].cycled
 
 
+def test_modified_newton_that_creeps_is_repeated_with_fresh_jacobians_at_once():
+    """``reuse_creep_window``: u³ + u = 0 from u = 2 with modified Newton keeping its first
+    Jacobian (13) while ‖F‖ contracts by 0.95 or better: near the root (J = 1) the kept
+    matrix contracts ‖F‖ by only 1 − 1/13 ≈ 0.92 per iteration, so the solve creeps to the
+    iteration limit (25) and is then repeated with fresh Jacobians, which converge in 6. The
+    creep test stops the first attempt once 4 iterations have lowered ‖F‖ by less than half;
+    the fresh retry is the same solve, to the last bit, so only the wasted iterations go."""
+    def cubic(u):
+        return u**3 + u
+
+    def solve(window: int) -> NonlinearSolver:
+        solver = _scalar(cubic, 2.0, NewtonOptions(line_search="basic", reuse_contraction=0.95,
+                                                   reuse_below=1.0, reuse_creep_window=window))
+        assert solver.solve() == (True, 6)
+        return solver
+
+    plain, stopped = solve(0), solve(4)
+    assert plain.counts.newton_iterations_all == 25 + 6
+    assert stopped.counts.newton_iterations_all == 8 + 6
+    assert stopped.counts.failed_newton_solves == plain.counts.failed_newton_solves == 1
+    assert stopped.unknowns[0].x.array[0] == plain.unknowns[0].x.array[0]
+    # full Newton (no kept Jacobian) is never stopped by it: on the root of sign(u)|u|^0.55,
+    # where |F| is not differentiable, it creeps × 0.9 per iteration to the iteration limit
+    full = _scalar(lambda u: ufl.sign(u) * abs(u) ** 0.55, 1.0, NewtonOptions(line_search="basic"))
+    assert full.solve()[0] is False and not full.crept
+    assert full.counts.newton_iterations_all == full.options.max_it
+    # nor is backtracking's creep on a kept factorisation (the penalised bar:
+    # test_the_step_relative_contraction_test_keeps_the_factorisation_while_backtracking_creeps)
+
+
+@pytest.mark.parametrize("norms, creeping", [
+    ([1.0, 0.95, 0.9, 0.85, 0.8], True),     # × 0.95 per iteration
+    ([1.0, 0.9, 0.8, 0.7, 0.6], True),       # 0.6 over 4: more than half left
+    ([1.0, 0.8, 0.6, 0.45, 0.4], False),     # 0.4 over 4: contracting fast enough
+    ([1.0, 0.95, 0.96, 0.9, 0.85], False),   # not monotone: a kink, not a creep
+    ([1.0, 0.95, 0.9, 0.85], False),         # too short to tell
+])
+def test_a_creep_is_a_slow_monotone_fall(norms, creeping):
+    assert driver.creeps(norms, 4, 0.5) is creeping
+
+
 @pytest.mark.parametrize("period, norms, cycles", [
     (8, [2.0, 1.0, 2.0, 1.0], True),                          # period 2, one repeat
     (8, [1.0, 0.5, 0.5, 0.5], True),                          # period 1: three equal norms

@@ -72,6 +72,18 @@ class NewtonOptions:
     # Jacobian describes the step it was asked for, a fresh one would not lengthen it
     # (docs/scleral_buckling.md, "Newton's budget"). Off: the contraction is compared with θ.
     reuse_step_relative: bool = False
+    # a modified-Newton solve that has iterated on a kept Jacobian and then creeps -- ‖F‖
+    # falls at each of the last ``reuse_creep_window`` iterations, but by less than the
+    # factor ``reuse_creep_factor`` over them -- is stopped as failed, to be repeated from
+    # its start with fresh Jacobians (:meth:`NonlinearSolver.solve`'s retry) at once instead
+    # of at ``reuse_max_it``, a factorisation per iteration: on the default eye a kept
+    # Jacobian's step left the suturing's Newton creeping × 0.92 per iteration for 23
+    # fresh-Jacobian iterations; the retry converged in 5 (docs/scleral_buckling.md, "Where
+    # the time goes"). A solve without a kept Jacobian is never stopped by it, nor one with
+    # bt, whose creep at its 0.1 floor across a contact's kink converges, the factorisation
+    # kept by ``reuse_step_relative`` (tests/test_newton_counts.py). 0: off.
+    reuse_creep_window: int = 4
+    reuse_creep_factor: float = 0.5
     # keep the last converged solve's Jacobian for the next solve's first iteration (off:
     # on the eye a load step started on it failed more often than it saved, see
     # docs/bench/scleral-buckling.md)
@@ -150,6 +162,11 @@ class NewtonOptions:
             raise ParameterError("increment_tolerance", f"{self.increment_tolerance}: must be >= 0")
         if not self.flat_residual_limit > 0:
             raise ParameterError("flat_residual_limit", f"{self.flat_residual_limit}: must be > 0")
+        if self.reuse_creep_window < 0:
+            raise ParameterError("reuse_creep_window", f"{self.reuse_creep_window}: must be >= 0")
+        if not 0 < self.reuse_creep_factor < 1:
+            raise ParameterError("reuse_creep_factor", f"{self.reuse_creep_factor}: a reduction "
+                                 "factor in (0, 1)")
         if self.cycle_max_period < 0:
             raise ParameterError("cycle_max_period", f"{self.cycle_max_period}: must be >= 0")
         if not 0 < self.stagnation_factor < 1:

@@ -126,6 +126,16 @@ ResidualHook = Callable[[PETSc.Vec, PETSc.Vec], None]
 JacobianHook = Callable[[PETSc.Vec, PETSc.Mat], None]
 
 
+def creeps(norms: Sequence[float], window: int, factor: float) -> bool:
+    """Whether the last ``window`` iterations each lowered the residual norm but all of
+    them together by less than ``factor``: linear convergence too slow to reach a Newton
+    tolerance (× 0.84 per iteration or slower with a window of 4 and a factor of 0.5)."""
+    if window < 1 or len(norms) < window + 1:
+        return False
+    last = np.asarray(norms[-window - 1:])
+    return bool(np.all(np.diff(last) < 0) and last[-1] > factor * last[0])
+
+
 def repeats_a_cycle(norms: Sequence[float], max_period: int, rtol: float) -> bool:
     """Whether the last residual norms repeat a cycle: for some period p in 1 … ``max_period``
     the last max(p, 2) norms each equal, to ``rtol``, the one p iterations before it. A
@@ -210,6 +220,7 @@ class NonlinearSolver:
         self._factorisations = FactorisationCounter()
         self.stagnated = False  # the last solve was stopped by the stagnation test
         self.cycled = False     # ... by the cycle test (options.cycle_max_period)
+        self.crept = False      # ... by the creep test after a kept Jacobian (options.reuse_creep_window)
         self.snes.setMonitor(petsc_callback(self._monitor))
         # Newton iterations begun: SNES calls its update at the start of every iteration,
         # the one that fails in its line search (a NaN residual) or in a callback included,
@@ -252,9 +263,11 @@ class NonlinearSolver:
         self._iterations_begun += 1
 
     def _monitor(self, snes: PETSc.SNES, _iteration: int, norm: float) -> None:
-        """Records ‖F_k‖; stops a stagnating backtracking solve (``options.stagnation_window``). SNES
+        """Records ‖F_k‖; stops as failed a stagnating backtracking solve
+        (``options.stagnation_window``), full steps that cycle (``cycle_max_period``) and a
+        modified-Newton solve that creeps after a kept Jacobian (``reuse_creep_window``). SNES
         calls the monitor after its convergence test and breaks out when a reason is set,
-        so the stop costs no further Jacobian."""
+        so a stop costs no further Jacobian."""
         self.residual_history.append(float(norm))
         options, history = self.options, self.residual_history
         if snes.getConvergedReason() != 0:
@@ -267,6 +280,10 @@ class NonlinearSolver:
         elif (options.cycle_max_period > 0 and line_search == "basic"
               and repeats_a_cycle(history, options.cycle_max_period, options.cycle_rtol)):
             self.cycled = True
+            snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
+        elif (self._kept_iterations > 0 and self._reuse_enabled and line_search != "bt"
+              and creeps(history, options.reuse_creep_window, options.reuse_creep_factor)):
+            self.crept = True
             snes.setConvergedReason(PETSc.SNES.ConvergedReason.DIVERGED_DTOL)
 
     # -- set-up -----------------------------------------------------------------
@@ -562,7 +579,7 @@ class NonlinearSolver:
         """One SNES solve; its work, converged or not, is added to ``counts`` and to the
         process's ``SOLVER_COUNTS``."""
         self.residual_history = []
-        self.stagnated = self.cycled = False
+        self.stagnated = self.cycled = self.crept = False
         self.through_obstacle = False
         self._kept_iterations = 0
         self._iterations_begun = 0
@@ -705,6 +722,8 @@ class NonlinearSolver:
             return "STAGNATED (stagnation_window)"
         if self.cycled:
             return "CYCLED (cycle_max_period)"
+        if self.crept:
+            return "CREPT (reuse_creep_window)"
         if self.through_obstacle:
             return "THROUGH_OBSTACLE (depth_limit)"
         code = self.snes.getConvergedReason()
