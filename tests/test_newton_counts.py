@@ -926,8 +926,10 @@ def test_modified_newton_that_creeps_is_repeated_with_fresh_jacobians_at_once():
     Jacobian (13) while ‖F‖ contracts by 0.95 or better: near the root (J = 1) the kept
     matrix contracts ‖F‖ by only 1 − 1/13 ≈ 0.92 per iteration, so the solve creeps to the
     iteration limit (25) and is then repeated with fresh Jacobians, which converge in 6. The
-    creep test stops the first attempt once 4 iterations have lowered ‖F‖ by less than half;
-    the fresh retry is the same solve, to the last bit, so only the wasted iterations go."""
+    creep test stops the first attempt once 4 iterations have lowered ‖F‖ by less than half:
+    after 8 (measured: ‖F‖ = 10, 3.10, 1.97, 1.44, 1.12, 0.91, 0.76, 0.65, 0.57; the last 4
+    together × 0.505). The fresh retry is the same solve, to the last bit, so only the
+    wasted iterations go."""
     def cubic(u):
         return u**3 + u
 
