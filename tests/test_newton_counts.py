@@ -633,7 +633,7 @@ def test_full_steps_while_the_buckle_moves_reach_the_reference_eye(budget_eye):
 @pytest.mark.parametrize("key, value", [("jacobian_reuse", 1.0), ("jacobian_reuse", -0.1),
                                         ("buckle_step", 0.5), ("buckle_step", 0.0),
                                         ("hard_step_effort", -1), ("stagnation_window", -1),
-                                        ("cycle_max_period", -1),
+                                        ("cycle_max_period", -1), ("creep_window", -1),
                                         ("settle_step", 0.9), ("settle_step", -0.1),
                                         ("full_step_nan", "sometimes")])
 def test_budget_parameters_out_of_range_are_refused(key, value):

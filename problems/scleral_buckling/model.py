@@ -145,6 +145,7 @@ class BucklingModel:
                                      increment_tolerance=params.increment_tolerance,
                                      flat_residual_limit=params.flat_residual_limit,
                                      cycle_max_period=params.cycle_max_period,
+                                     reuse_creep_window=params.creep_window,
                                      fallback_line_search="bt" if {
                                          params.line_search, params.suture_line_search,
                                          params.settle_line_search} != {"bt"}

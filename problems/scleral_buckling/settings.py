@@ -191,6 +191,12 @@ class NumericalSettings(SolverChoice):
         "failed, and retried or its load step cut as any failed solve, before it spends a "
         "factorisation per iteration to the iteration limit (0: off; docs/scleral_buckling.md, "
         "Full steps that cycle)", group=SOLVER)
+    creep_window: int = field(
+        4, "a modified-Newton solve (jacobian_reuse) that has iterated on a kept Jacobian and "
+        "whose residual then falls at each of this many iterations but by less than half over "
+        "them is stopped and repeated from its start with fresh Jacobians, as it would be at "
+        "the iteration limit; not with bt (0: off; docs/scleral_buckling.md, Where the time "
+        "goes)", group=SOLVER)
     retina_step_depth: float = field(
         0.25, "step 4 (settling): the Newton update shortened where it would carry a retina "
         "node deeper through the choroid than this fraction of the choroid's thickness (a "
@@ -249,6 +255,8 @@ class NumericalSettings(SolverChoice):
             raise ParameterError("hard_step_effort", f"{self.hard_step_effort}: must be >= 0")
         if self.stagnation_window < 0:
             raise ParameterError("stagnation_window", f"{self.stagnation_window}: must be >= 0")
+        if self.creep_window < 0:
+            raise ParameterError("creep_window", f"{self.creep_window}: must be >= 0")
         if self.retina_contact_prediction and self.retina_contact_method != "node-to-surface":
             raise ParameterError("retina_contact_prediction", "predicts node-to-surface pairs: "
                                  "with retina_contact_method=node-to-surface only")
