@@ -50,6 +50,10 @@ class TaggedMesh:
         """Local indices of the facets tagged ``name`` (or any part of a union)."""
         return self._find(self.facet_tags, name)
 
+    def cell_regions(self) -> list[str]:
+        """The names of the regions made of cells (the tissues of an eye), in tag order."""
+        return [name for name, (dim, _) in self.names.items() if dim == self.mesh.topology.dim]
+
     def cells(self, name: str) -> np.ndarray:
         return self._find(self.cell_tags, name)
 

@@ -106,6 +106,6 @@ def cell_field(body: Body, name: str, values: dict[str, float]) -> dolfinx.fem.F
 def retina_modes(eye) -> IncompatibleModes:
     """Incompatible modes on the retina's cells: one cell through its thickness bends
     without Q1's locking (:mod:`eyemech.forms.incompatible_modes`)."""
-    tissues = [name for name, (dim, _) in eye.names.items() if dim == eye.mesh.topology.dim]
+    tissues = eye.cell_regions()
     return IncompatibleModes(eye.mesh, eye.cells("retina"), eye.tag("retina"),
                              tuple(eye.tag(name) for name in tissues if name != "retina"))

@@ -117,7 +117,7 @@ class Tissues(Term):
         coats = {"fibres": params.fibre_stiffness(), "calibrated": params.stiffening()}.get(params.material)
         if coats is None or body.modes is not None:
             return self.law
-        tissues = [name for name, (dim, _) in body.eye.names.items() if dim == body.mesh.topology.dim]
+        tissues = body.eye.cell_regions()
         stiffened = tuple(body.eye.tag(name) for name in tissues if coats.get(name, 0.0) != 0.0)
         plain = tuple(body.eye.tag(name) for name in tissues if coats.get(name, 0.0) == 0.0)
         return {tags: law for tags, law in ((stiffened, self.law), (plain, NeoHooke(self.stiffness)))
