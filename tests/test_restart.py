@@ -156,6 +156,22 @@ def test_eye_killed_mid_checkpoint_on_two_ranks_resumes_on_one_and_two(eye, tmp_
     assert_close(quantities, resume(second, ranks=1)["quantities"], 1e-6)
 
 
+@pytest.mark.mpi
+def test_eye_checkpointed_on_three_ranks_resumes_on_three_and_one(eye, tmp_path):
+    """On 3 ranks one rank of the coarse eye holds none of the retina's contact nodes, so
+    it never searches and has no sticky memory; writing that memory into a checkpoint must
+    still join the other ranks' gathers (without that, the run failed at its first
+    checkpoint with the ranks' collectives crossed). Killed inside the third checkpoint's
+    write, it resumes on 3 ranks and on 1 to the serial run's numbers."""
+    first = tmp_path / "three"
+    assert killed("scleral-buckling", EYE, first, "checkpoint:3", ranks=3).name == "ckpt_000002"
+    second = tmp_path / "one"
+    shutil.copytree(first, second)
+    quantities, _ = eye
+    assert_close(quantities, resume(first, ranks=3)["quantities"], 1e-6)
+    assert_close(quantities, resume(second, ranks=1)["quantities"], 1e-6)
+
+
 def test_cornea_sweep_killed_mid_step_resumes_the_case(cornea, tmp_path):
     """A sweep case killed in the middle of a time step (step 3: intact creep) is continued
     by ``sweep --resume`` from its checkpoint, and gives the uninterrupted numbers."""

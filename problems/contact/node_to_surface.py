@@ -600,21 +600,27 @@ class NodeToSurfaceContact:
         coordinates (slave node, triangle centroid), gathered on every rank: rows (n, 6)
         that do not depend on the partition, so a checkpoint restarts on other ranks."""
         previous = getattr(self, "_previous", None)
+        # collective on every rank: a rank without slave nodes never searched, so its
+        # memory is None, and skipping the gather there crossed it with the others'
+        master = self._reference_master()
         local = np.zeros((0, 6))
         if previous is not None and len(previous) == len(self.slave_blocks):
-            centroids = self._reference_master()[self.triangle_nodes[previous]].mean(axis=1)
+            centroids = master[self.triangle_nodes[previous]].mean(axis=1)
             local = np.hstack([self.reference[self.slave_blocks], centroids])
         return np.vstack(self.comm.allgather(local))
 
     def restore_sticky_state(self, saved: np.ndarray) -> None:
         saved = np.asarray(saved, dtype=float).reshape(-1, 6)
         self._previous = None
-        if len(saved) == 0 or len(self.slave_blocks) == 0:
+        if len(saved) == 0:  # the same on every rank (gathered)
+            return
+        master = self._reference_master()  # collective: also on a rank without slave nodes
+        if len(self.slave_blocks) == 0:
             return
         distance, row = cKDTree(saved[:, :3]).query(self.reference[self.slave_blocks])
         if distance.max() > 1e-9 * (1.0 + np.abs(saved[:, :3]).max()):
             raise ValueError("contact checkpoint: slave nodes differ from this mesh's")
-        centroids = self._reference_master()[self.triangle_nodes].mean(axis=1)
+        centroids = master[self.triangle_nodes].mean(axis=1)
         # nearest centroid: the same triangle unless the quadrilaterals were split along
         # the other diagonal (then the neighbour on the same plane)
         self._previous = cKDTree(centroids).query(saved[row, 3:])[1]
