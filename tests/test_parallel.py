@@ -344,6 +344,13 @@ def test_lens_self_contact_hooks_equal_serial(ranks):
     assert report["intersecting"] == [False, False]
 
 
+# the settled state (top level and after_settling) on 1 and 2 ranks: relative, and absolute
+# in the quantity's unit (test_default_eye_on_two_ranks_equals_serial says why)
+SETTLED_RTOL = 1e-5
+TWIN_NODE_GAPS = {"retina_choroid_gap_min_mm", "retina_choroid_gap_max_mm",
+                  "retina_choroid_gap_mean_mm"}
+
+
 @pytest.mark.mpi
 def test_default_eye_on_two_ranks_equals_serial(tmp_path):
     """The main job as users run it -- ``mpiexec -n 2 eyemech run scleral-buckling`` at the
@@ -353,12 +360,19 @@ def test_default_eye_on_two_ranks_equals_serial(tmp_path):
     the buckle's outline is computed on every rank (problems/scleral_buckling/output.py),
     and the lock-step check (problems/run/lockstep.py) turns any such hang into an error.
 
-    Tolerance 1e-8 relative (1e-14 absolute for quantities that are zero, 1e-9 µL for volumes:
-    _zero): the two runs take the same steps with the same Newton iterations, and their
-    quantities differ by round-off, measured ≤ 1e-9 (the volume changes, small differences of
-    large volumes); a partition bug changes them at O(1). This is the defaults' cost on the
-    2-core VM: 45-190 s serially and 90-130 s on 2 ranks (load 6-12); it is the issue's
-    acceptance test for the main job, so it runs the default mesh."""
+    Tolerance through suturing 1e-8 relative (1e-14 absolute for quantities that are zero,
+    1e-9 µL for volumes: _zero): the two runs take the same steps with the same Newton
+    iterations, and their quantities differ by round-off, measured ≤ 1e-9 (the volume
+    changes, small differences of large volumes); a partition bug changes them at O(1).
+    Settled, SETTLED_RTOL: in the settling's first load step full Newton steps wander (‖F‖
+    3.9e-2 → 0.19 over 15 iterations) and a contact node's status flips with the round-off
+    at the third iteration (the residuals 1e-10 apart at the second, 1e-3 at the third), so
+    the two partitions reach the pressed, frictionless retina's equilibrium by other paths:
+    measured 5.7e-7 relative in ΔAL, 3.8e-6 in ΔSE, 5.9e-5 in the deepest penetration
+    (2e-8 mm), 1.8e-7 mm in the rim's gap, and up to 7.0e-4 mm in the twin-node radial gaps
+    of the pressed retina (TWIN_NODE_GAPS), 1 and 2 ranks, 7 Dec 2026. This is the defaults'
+    cost on the 2-core VM: 45-190 s serially and 90-130 s on 2 ranks (load 6-12); it is the
+    issue's acceptance test for the main job, so it runs the default mesh."""
     runs = {}
     for ranks in (1, 2):
         out = tmp_path / f"ranks{ranks}"
@@ -378,11 +392,13 @@ def test_default_eye_on_two_ranks_equals_serial(tmp_path):
     for key, value in ours.items():
         if wall_clock(key):
             continue
-        zero = _zero(key) if key.endswith("_uL") else 1e-14
+        rtol, zero = 1e-8, _zero(key) if key.endswith("_uL") else 1e-14
+        if not key.startswith(("after_iop.", "after_buckling.", "after_suturing.")):
+            rtol, zero = SETTLED_RTOL, 1e-3 if key.split(".")[-1] in TWIN_NODE_GAPS else 1e-6
         if isinstance(value, (int, float)) and not isinstance(value, bool) \
-                and theirs[key] == pytest.approx(value, rel=1e-8, abs=zero):
+                and theirs[key] == pytest.approx(value, rel=rtol, abs=zero):
             continue
-        why = _differs(value, theirs[key], 1e-8, zero)
+        why = _differs(value, theirs[key], rtol, zero)
         if why:
             wrong[key] = why
     assert not wrong, "1 vs 2 ranks:\n" + "\n".join(f"  {k}: {v}" for k, v in wrong.items())

@@ -171,9 +171,10 @@ class EyeParameters(SceneParameters):
     tire_width: float = field(7.0, "silicone tire width (axial; across the meridian for a radial "
                               "tire)", "mm", group=GEOMETRY)
     tire_height: float = field(
-        1.5, "silicone tire height (radial). 1.5: with the pump the settled tear is closed on the "
-        "coarse, default and paper meshes; with 1.0 the paper mesh's break never seals and "
-        "stays 0.586 mm open settled (docs/scleral_buckling.md, The defaults)", "mm", group=GEOMETRY)
+        2.0, "silicone tire height (radial). 2.0: the least of 1.0 / 1.5 / 2.0 that closes the "
+        "tear after suturing and settled on the coarse, default and paper meshes (with 1.5 "
+        "the paper mesh's rim is 0.054 mm open after suturing, with 1.0 it never seals) "
+        "(docs/scleral_buckling.md, The defaults)", "mm", group=GEOMETRY)
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm", group=GEOMETRY)
     indentation: float = field(
