@@ -14,6 +14,11 @@ the default bites' overhang (the scene refuses bites narrower than the tire). Ev
 runs with ``error_estimate=true``: the operation is solved again on the default mesh and
 each stage reports ``tear_verdict`` and the bands (docs/scleral_buckling.md,
 "Discretisation error"). ``quick``: the defaults and the tire alone.
+
+Writes ``buckling_planning.csv``, the chart ``buckling_planning.png`` and the atlas page's
+table ``buckling_planning_table.md`` (:func:`markdown_table`: one row per case, made from
+the rows so that the page needs no hand edit; tests/test_buckling_planning_table.py holds
+the page to the committed CSV).
 """
 
 from __future__ import annotations
@@ -106,7 +111,78 @@ def run(out: Path, quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list
                       "the scene's error_estimate (GCI, the coarse eye against the default mesh)")
     chart = out / "buckling_planning.png"
     _chart(rows, chart)
-    return [table, chart]
+    markdown = out / "buckling_planning_table.md"
+    markdown.write_text(markdown_table(rows) + "\n")
+    return [table, chart, markdown]
+
+
+def markdown_table(rows: list[dict]) -> str:
+    """The atlas page's table: per case (the CSV's rows, as written or read back) the rim
+    after suturing and settled with its band and verdict (closed in bold), ΔAL and ΔSE
+    sutured / settled, the operation's peak IOP, the liquid vented and how, and the band's
+    tension; a failed case says so and why."""
+    header = ("| setting | rim after suturing (mm) | rim settled (mm) | ΔAL sutured / settled (mm) "
+              "| ΔSE sutured / settled (D) | peak IOP (mmHg) | vented (µL), route "
+              "| band tension sutured / settled (N) |")
+    lines = [header, "|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        label = _case_label(row)
+        if row["status"] in FAILED:
+            lines.append(f"| {label} | {row['status']}: {row.get('error', '')} |" + " |" * 6)
+            continue
+        pair = (lambda key, fmt: " / ".join(_signed(row.get(f"{stage}_{key}"), fmt)
+                                            for stage in ("acute", "settled")))
+        vented = _number(row.get("acute_vented_volume_uL"))
+        tension = pair("band_tension_N", ".2f") if row.get("acute_band_tension_N") not in (None, "") \
+            else "—"
+        cells = [label, _rim_cell(row, "acute"), _rim_cell(row, "settled"),
+                 pair("axial_length_change_mm", "+.2f"), pair("refraction_change_D", "+.2f"),
+                 f"{_number(row.get('operation_peak_iop_mmHg')):.0f}",
+                 f"{vented:.0f}, {_route_words(row.get('acute_venting_route', ''))}", tension]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _case_label(row: dict) -> str:
+    """A case in words, as the atlas page names it."""
+    factor = row["factor"]
+    if factor == DEFAULTS_FACTOR:
+        return "**defaults**"
+    value = _number(row[dict(NAMED)[factor]]) if factor != "buckle" else math.nan
+    if factor == "buckle":
+        if row["buckle"] == "segmental":
+            travel = scleral_buckling.Parameters().indentation
+            return f"tire alone ({travel:.1f} mm of travel)"
+        return BUCKLE_KINDS[row["buckle"]]
+    words = {"band_shortening_percent": "band shortened {:g} %", "band_width": "band {:g} mm wide",
+             "tire_arc_deg": "tire over {:g}°", "buckle_position": "buckle at {:g} mm",
+             "suture_width": "bites {:g} mm wide", "suture_force": "sutures {:g} N",
+             "iop_limit_mmHg": "vented at {:g} mmHg", "detachment_height": "detachment {:g} mm high"}
+    if factor == "tire_width":
+        return f"tire {value:g} mm (bites {_number(row['suture_width_mm']):g} mm)"
+    return words[factor].format(value)
+
+
+def _rim_cell(row: dict, stage: str) -> str:
+    """``gap ± band verdict`` (closed in bold; no band without the estimate)."""
+    gap, band = row.get(f"{stage}_tear_rim_gap_max_mm"), row.get(f"{stage}_tear_rim_gap_band_mm")
+    verdict = row.get(f"{stage}_tear_verdict") or ""
+    verdict = f"**{verdict}**" if verdict == "closed" else verdict
+    spread = f" ± {_number(band):.3f}" if band not in (None, "") else ""
+    return f"{_signed(gap, '.3f')}{spread} {verdict}".strip()
+
+
+def _signed(value, fmt: str) -> str:
+    """A number as the docs print it (the minus sign −); a dash for none."""
+    if value in (None, ""):
+        return "—"
+    return format(_number(value), fmt).replace("-", "−")
+
+
+def _route_words(route: str) -> str:
+    """``venting_route`` (scleral_buckling/venting.py) in the table's words."""
+    return {"paracentesis and subretinal drainage": "+ subretinal drainage",
+            "exceeds paracentesis and subretinal drainage": "**exceeds both**"}.get(route, route)
 
 
 def _row(factor: str, setting: str, overrides: dict[str, str], case: dict[str, Any]) -> dict[str, Any]:
