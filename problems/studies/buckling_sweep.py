@@ -22,7 +22,8 @@ from eyemech.problems.studies._common import save_chart, with_units, write_csv
 
 # an encircling band alone (buckle = encircling: no tire; a tire of zero height made the
 # settling stall), so that its width is what touches the sclera:
-# the clinical comparison (myopic shift for band widths 1–2.5 mm) is for bands
+# the band-width comparison (another finite-element model's myopic shift for band widths
+# 1–2.5 mm, J Ophthalmol 2016; docs/scleral_buckling.md, "Clinical comparison") is for bands
 # on the paper's operation (Table 1's clamped eye, the rigid buckle moved in by its
 # indentation, the liquid conserved): the indentation is the swept control
 BASE = {"resolution": "coarse", "buckle": "encircling", **scleral_buckling.PAPER_SETTINGS}
