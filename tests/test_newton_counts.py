@@ -387,6 +387,20 @@ def test_bench_rows_carry_the_counts(tmp_path, monkeypatch):
                               f"| {row['factorisations']} | 1 | 0 | 0 | ok |")
 
 
+def test_the_main_jobs_bench_row_names_what_it_bought():
+    """A bench row of ``scleral-buckling`` states its outcome beside its time: the tear's
+    rim and verdict after suturing / settled, the settled ΔAL and ΔSE, the peak IOP and the
+    liquid vented, read from the run's quantities (here the coarse eye's recorded run,
+    tests/data/scleral_buckling_coarse.json); a run that measured no stage has none."""
+    record = json.loads((Path(__file__).parent / "data" / "scleral_buckling_coarse.json").read_text())
+    assert scleral_buckling.bench_outcome(record["quantities"]) == (
+        "rim −0.000 mm closed / −0.000 mm closed (sutured / settled); ΔAL +0.65 mm, "
+        "ΔSE −2.37 D (settled); peak IOP 79 mmHg, vented 194 µL")
+    sutured = {"after_suturing": record["quantities"]["after_suturing"]}
+    assert scleral_buckling.bench_outcome(sutured).startswith("rim −0.000 mm closed (sutured); ΔAL +0.76 mm")
+    assert scleral_buckling.bench_outcome({"dofs": 4242}) == ""
+
+
 def test_bench_overrides_are_run_and_named_in_the_row(tmp_path, monkeypatch):
     """``eyemech bench NAME --set k=v`` runs the benchmark settings updated by the overrides;
     the row's settings column names both."""

@@ -3,7 +3,10 @@
 A scene module may define ``BENCHMARK`` (parameter overrides, e.g. the paper's
 resolution) and ``bench_operation(params) -> str``, the row's ``operation``: what the
 parameters amount to in words (the main job's defaults changed from Table 1's eye to a
-living one, and a row's ``settings`` only lists what differs from the defaults of its day).
+living one, and a row's ``settings`` only lists what differs from the defaults of its day),
+and ``bench_outcome(quantities) -> str``, the row's ``outcome``: what the run bought (the
+main job's tear verdict, its axial and refractive change), so that a time is read beside
+its result.
 ``eyemech bench NAME`` runs it once on the current communicator and appends one row to
 ``OUT/NAME.csv``; ``OUT/NAME.md`` is the table of all rows, with the machine and the method
 stated, regenerated every time.
@@ -25,9 +28,9 @@ from eyemech.problems.run.parameters import build
 from eyemech.problems.run.results import versions, write_text_atomic
 
 PHASES = ("mesh", "form_compilation", "assembly", "solve", "contact_search", "output", "total")
-COLUMNS = ("date", "machine", "ranks", "settings", "operation", "dofs", "cells", *PHASES, "peak_memory_mb",
-           "newton_iterations", "newton_iterations_all", "failed_newton_solves", "factorisations",
-           "symbolic_factorisations", "krylov_iterations", "matrix_mallocs", "status")
+COLUMNS = ("date", "machine", "ranks", "settings", "operation", "outcome", "dofs", "cells", *PHASES,
+           "peak_memory_mb", "newton_iterations", "newton_iterations_all", "failed_newton_solves",
+           "factorisations", "symbolic_factorisations", "krylov_iterations", "matrix_mallocs", "status")
 # what the counts mean (the table's notes)
 COUNTS = ("newton_iterations: of the converged solves (the steps' own); newton_iterations_all: "
           "of all solves, the failed attempts of cut steps included (failed_newton_solves of "
@@ -61,6 +64,7 @@ def run_benchmark(scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD, options: Ru
            "machine": f"{platform.node()} ({platform.machine()}, {__import__('os').cpu_count()} cpus)",
            "ranks": comm.size, "settings": _settings(overrides),
            "operation": getattr(module, "bench_operation", lambda _: "")(params),
+           "outcome": getattr(module, "bench_outcome", lambda _: "")(result.quantities),
            "dofs": result.quantities.get("dofs"),
            "cells": result.quantities.get("cells"),
            **{k: round(timings.get(k, 0.0), 2) for k in PHASES},

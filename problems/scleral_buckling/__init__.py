@@ -47,7 +47,7 @@ from eyemech.problems.run.scene import Scene
 from eyemech.problems.scleral_buckling import error_estimate
 from eyemech.problems.scleral_buckling.measures import DIOPTRES_PER_MM
 from eyemech.problems.scleral_buckling.model import BucklingModel
-from eyemech.problems.scleral_buckling.output import Writer, headline
+from eyemech.problems.scleral_buckling.output import Writer, bench_outcome, headline
 from eyemech.problems.scleral_buckling.parameters import (
     CALIBRATED_C20_SCLERA,
     CORNEA_TO_SCLERA,
@@ -60,7 +60,7 @@ from eyemech.problems.solve.driver import SecantPredictor, SolveFailure
 
 __all__ = ["BENCHMARK", "CALIBRATED_C20_SCLERA", "CORNEA_TO_SCLERA", "DIOPTRES_PER_MM", "MMHG",
            "PAPER_OPERATION", "PAPER_SETTINGS", "SCENE", "BucklingModel", "Operation",
-           "Parameters", "SolveFailure", "Writer", "bench_operation", "largest_step",
+           "Parameters", "SolveFailure", "Writer", "bench_operation", "bench_outcome", "largest_step",
            "ramp_value", "run", "slide_note"]
 
 # `eyemech bench scleral-buckling`: the whole operation (IOP, buckling, suturing, settling)

@@ -378,3 +378,33 @@ def headline(quantities: dict) -> list[str]:
                         if started is not None and math.isfinite(started)
                         else "never started, the break did not seal"))
     return lines
+
+
+def bench_outcome(quantities: dict) -> str:
+    """A benchmark row's outcome, so that its time stands beside what it bought: the tear's
+    rim gap and verdict after suturing / settled, the last stage's ΔAL and ΔSE, the peak
+    IOP and the liquid vented (empty where the run measured nothing)."""
+    stages = {name: quantities[name] for name in ("after_suturing", "after_settling")
+              if isinstance(quantities.get(name), dict)}
+    if not stages:
+        return ""
+    rims = []
+    for stage in stages.values():
+        gap = stage.get("tear_rim_gap_max_mm")
+        verdict = stage.get("tear_verdict") or rim_verdict(stage.get("tear_rim_margin_mm", math.nan))
+        if gap is not None and verdict is not None:
+            rims.append(f"{gap:.3f} mm {verdict}".replace("-", "−"))
+    words = " / ".join(name.removeprefix("after_").replace("suturing", "sutured")
+                       .replace("settling", "settled") for name in stages)
+    parts = [f"rim {' / '.join(rims)} ({words})"] if rims else []
+    last = list(stages.values())[-1]
+    changes = [f"ΔAL {last['axial_length_change_mm']:+.2f} mm" if "axial_length_change_mm" in last else "",
+               f"ΔSE {last['refraction_change_D']:+.2f} D" if "refraction_change_D" in last else ""]
+    if any(changes):
+        parts.append(", ".join(c for c in changes if c).replace("-", "−") + f" ({words.split(' / ')[-1]})")
+    peak = max((group.get("peak_iop_mmHg", -math.inf) for group in quantities.values()
+                if isinstance(group, dict)), default=-math.inf)
+    if math.isfinite(peak):
+        vented = last.get("vented_volume_uL") or 0.0
+        parts.append(f"peak IOP {peak:.0f} mmHg, vented {vented:.0f} µL")
+    return "; ".join(parts)
