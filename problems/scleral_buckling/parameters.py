@@ -87,8 +87,10 @@ class EyeParameters(SceneParameters):
                              "mm", group=GEOMETRY)
     max_cells: int = field(30_000, "refuse a mesh estimated above this many hexahedra (before "
                                    "meshing; the paper resolution has 8,150)", group=GEOMETRY)
-    element: Literal["Q1P0", "Q2P1"] = field("Q1P0", "element family (Q1P0 as in the paper)",
-                                             group=GEOMETRY)
+    element: Literal["Q1P0", "Q2P1"] = field(
+        "Q1P0", "element family (Q1P0 as in the paper). Q2P1 resolves the retina's bending, "
+        "which one Q1P0 cell locks: the check on a plan's tear verdict (docs/scleral_buckling.md, "
+        "Q2P1 on the coarse eye, the rim node by node)", group=GEOMETRY)
     coat_layers: int = field(
         2, "hexahedra through the sclera (1-8; the cornea has 2 more); more do not relieve "
            "Q1P0's bending locking, which is in-plane (ΔAL +0.3-0.5 % with 4 or 6): "
@@ -173,7 +175,8 @@ class EyeParameters(SceneParameters):
     tire_height: float = field(
         2.0, "silicone tire height (radial). 2.0: the least of 1.0 / 1.5 / 2.0 that closes the "
         "tear after suturing and settled on the coarse, default and paper meshes (with 1.5 "
-        "the paper mesh's rim is 0.054 mm open after suturing, with 1.0 it never seals) "
+        "the paper mesh's rim is 0.054 mm open after suturing, with 1.0 it never seals), "
+        "all Q1P0; with Q2P1 on the coarse eye the rim is 0.12 mm open at 1.0-2.0 alike "
         "(docs/scleral_buckling.md, The defaults)", "mm", group=GEOMETRY)
     buckle_corner_radius: float = field(0.3, "corner radius of the tire's and band's profiles "
                                         "(capped at half their height)", "mm", group=GEOMETRY)
