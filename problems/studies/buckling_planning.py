@@ -148,12 +148,12 @@ def _case_label(row: dict) -> str:
     factor = row["factor"]
     if factor == DEFAULTS_FACTOR:
         return "**defaults**"
-    value = _number(row[dict(NAMED)[factor]]) if factor != "buckle" else math.nan
     if factor == "buckle":
         if row["buckle"] == "segmental":
             travel = scleral_buckling.Parameters().indentation
             return f"tire alone ({travel:.1f} mm of travel)"
         return BUCKLE_KINDS[row["buckle"]]
+    value = _number(row[dict(NAMED)[factor]])
     words = {"band_shortening_percent": "band shortened {:g} %", "band_width": "band {:g} mm wide",
              "tire_arc_deg": "tire over {:g}°", "buckle_position": "buckle at {:g} mm",
              "suture_width": "bites {:g} mm wide", "suture_force": "sutures {:g} N",
