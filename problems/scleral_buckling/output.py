@@ -341,14 +341,13 @@ def headline(quantities: dict) -> list[str]:
     ``error_estimate`` the verdict reads the margin against the rim gap's estimated
     discretisation error, shown as ±), then the last stage's axial and refractive change,
     the operation's peak IOP and the liquid vented."""
-    stages = {name: group for name, group in quantities.items()
-              if name.startswith("after_") and isinstance(group, dict)}
+    stages = _stages(quantities)
     sutured = [name for name in ("after_suturing", "after_settling") if name in stages]
     tear, estimated = [], False
     for name in sutured:
         stage = stages[name]
         margin = stage.get("tear_rim_margin_mm", math.nan)
-        verdict = stage.get("tear_verdict") or rim_verdict(margin)
+        verdict = _verdict(stage)
         if verdict is None:  # no tear
             continue
         error = stage.get(f"{RIM_GAP}_error_estimate")
@@ -361,8 +360,7 @@ def headline(quantities: dict) -> list[str]:
                      "; the margin's discretisation error not estimated (--set error_estimate=true)"))
     if sutured:
         name, last = sutured[-1], stages[sutured[-1]]
-        peak = max((group.get("peak_iop_mmHg", -math.inf) for group in stages.values()),
-                   default=-math.inf)
+        peak = _peak_iop(stages)
         outcome = [f"ΔAL {last['axial_length_change_mm']:+.2f} mm"
                    if "axial_length_change_mm" in last else "",
                    f"ΔSE {last['refraction_change_D']:+.2f} D" if "refraction_change_D" in last else "",
@@ -384,14 +382,14 @@ def bench_outcome(quantities: dict) -> str:
     """A benchmark row's outcome, so that its time stands beside what it bought: the tear's
     rim gap and verdict after suturing / settled, the last stage's ΔAL and ΔSE, the peak
     IOP and the liquid vented (empty where the run measured nothing)."""
-    stages = {name: quantities[name] for name in ("after_suturing", "after_settling")
-              if isinstance(quantities.get(name), dict)}
+    every_stage = _stages(quantities)
+    stages = {name: every_stage[name] for name in ("after_suturing", "after_settling")
+              if name in every_stage}
     if not stages:
         return ""
     rims = []
     for stage in stages.values():
-        gap = stage.get("tear_rim_gap_max_mm")
-        verdict = stage.get("tear_verdict") or rim_verdict(stage.get("tear_rim_margin_mm", math.nan))
+        gap, verdict = stage.get("tear_rim_gap_max_mm"), _verdict(stage)
         if gap is not None and verdict is not None:
             rims.append(f"{gap:.3f} mm {verdict}".replace("-", "−"))
     words = " / ".join(name.removeprefix("after_").replace("suturing", "sutured")
@@ -402,9 +400,25 @@ def bench_outcome(quantities: dict) -> str:
                f"ΔSE {last['refraction_change_D']:+.2f} D" if "refraction_change_D" in last else ""]
     if any(changes):
         parts.append(", ".join(c for c in changes if c).replace("-", "−") + f" ({words.split(' / ')[-1]})")
-    peak = max((group.get("peak_iop_mmHg", -math.inf) for group in quantities.values()
-                if isinstance(group, dict)), default=-math.inf)
+    peak = _peak_iop(every_stage)
     if math.isfinite(peak):
         vented = last.get("vented_volume_uL") or 0.0
         parts.append(f"peak IOP {peak:.0f} mmHg, vented {vented:.0f} µL")
     return "; ".join(parts)
+
+
+def _stages(quantities: dict) -> dict:
+    """The run's per-stage groups (``after_iop``, ``after_buckling``, ...)."""
+    return {name: group for name, group in quantities.items()
+            if name.startswith("after_") and isinstance(group, dict)}
+
+
+def _verdict(stage: dict) -> str | None:
+    """The stage's tear verdict: the error estimate's where it ran, else the margin's."""
+    return stage.get("tear_verdict") or rim_verdict(stage.get("tear_rim_margin_mm", math.nan))
+
+
+def _peak_iop(stages: dict) -> float:
+    """The highest IOP any stage reached (-inf: none reported)."""
+    return max((group.get("peak_iop_mmHg", -math.inf) for group in stages.values()),
+               default=-math.inf)
