@@ -24,7 +24,8 @@ from eyemech.problems.run.context import RunOptions
 from eyemech.problems.run.parameters import ParameterError, build
 
 PUMP = 1.0  # mmHg: the pump these tests were measured with (the scene's default is 0.3)
-# the settling's Newton aids, pinned as measured (they are the scene's defaults as well)
+# the settling's Newton aids, pinned as measured (the scene's defaults but the depth
+# limit, which is 0.5 there: docs/scleral_buckling.md, "Full steps through the choroid")
 AIDS = dict(settle_line_search="basic", retina_step_depth=0.25, cycle_max_period=8)
 BAND_ALONE = dict(resolution="coarse", buckle="encircling", **AIDS)
 QUIET = RunOptions(pictures=False, fields=False)

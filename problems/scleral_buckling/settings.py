@@ -198,10 +198,13 @@ class NumericalSettings(SolverChoice):
         "the iteration limit; not with bt (0: off; docs/scleral_buckling.md, Where the time "
         "goes)", group=SOLVER)
     retina_step_depth: float = field(
-        0.25, "step 4 (settling): the Newton update shortened where it would carry a retina "
+        0.5, "step 4 (settling): the Newton update shortened where it would carry a retina "
         "node deeper through the choroid than this fraction of the choroid's thickness (a "
-        "node beyond the whole thickness is unpaired: the load step is cut). Not in steps 2-3, "
-        "where a shortened update stalled a radial tire's suturing; 0: off "
+        "node beyond the whole thickness is unpaired: the load step is cut). With 0.5 the "
+        "settling finishes on the coarse, default and paper meshes with the pump at 0.3 and at "
+        "1 mmHg, within 4 factorisations of the cheapest of 0 / 0.25 / 0.5 / 0.9 at 0.3 mmHg; "
+        "0 and 0.25 each fail on one mesh at 1 mmHg, 0.9 costs 30 more on the paper mesh. "
+        "Not in steps 2-3, where a shortened update stalled a radial tire's suturing; 0: off "
         "(docs/scleral_buckling.md, Full steps through the choroid)", group=SOLVER)
     retina_contact_prediction: bool = field(
         False, "at Newton iterates with a residual of at most flat_residual_limit, a retina "
