@@ -227,8 +227,8 @@ class EyeParameters(SceneParameters):
         "face and the choroid's inner face; through an open break the vitreous refills the "
         "space and no deficit builds up. Nothing to pump without a detachment, the settling "
         "or the retina's contact. 0.3: an assumed deficit (the clinic measures resorption times, "
-        "not pressures); with 1 the settling fails on 11 of the planning map's 24 coarse "
-        "cases, the retina pressed onto the choroid's facets; 0: off "
+        "not pressures); with 1 the settling fails on 9 of the planning map's 24 cases, "
+        "the retina pressed onto the choroid's facets; 0: off "
         "(docs/scleral_buckling.md, The pigment epithelium's pump)",
         "mmHg", group=PHYSICS)
     detachment_height: float = field(0.5, "subretinal gap at the detachment's centre "
