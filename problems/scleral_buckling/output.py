@@ -361,9 +361,7 @@ def headline(quantities: dict) -> list[str]:
     if sutured:
         name, last = sutured[-1], stages[sutured[-1]]
         peak = _peak_iop(stages)
-        outcome = [f"ΔAL {last['axial_length_change_mm']:+.2f} mm"
-                   if "axial_length_change_mm" in last else "",
-                   f"ΔSE {last['refraction_change_D']:+.2f} D" if "refraction_change_D" in last else "",
+        outcome = [*_changes(last),
                    f"peak IOP {peak:.0f} mmHg" if math.isfinite(peak) else "",
                    f"vented {last['vented_volume_uL']:.0f} µL ({last.get('venting_route', '?')})"
                    if last.get("vented_volume_uL") else "nothing vented"]
@@ -392,14 +390,13 @@ def bench_outcome(quantities: dict) -> str:
         gap, verdict = stage.get("tear_rim_gap_max_mm"), _verdict(stage)
         if gap is not None and verdict is not None:
             rims.append(f"{gap:.3f} mm {verdict}".replace("-", "−"))
-    words = " / ".join(name.removeprefix("after_").replace("suturing", "sutured")
-                       .replace("settling", "settled") for name in stages)
-    parts = [f"rim {' / '.join(rims)} ({words})"] if rims else []
+    labels = [name.removeprefix("after_").replace("suturing", "sutured").replace("settling", "settled")
+              for name in stages]
+    parts = [f"rim {' / '.join(rims)} ({' / '.join(labels)})"] if rims else []
     last = list(stages.values())[-1]
-    changes = [f"ΔAL {last['axial_length_change_mm']:+.2f} mm" if "axial_length_change_mm" in last else "",
-               f"ΔSE {last['refraction_change_D']:+.2f} D" if "refraction_change_D" in last else ""]
-    if any(changes):
-        parts.append(", ".join(c for c in changes if c).replace("-", "−") + f" ({words.split(' / ')[-1]})")
+    changes = _changes(last)
+    if changes:
+        parts.append(", ".join(changes).replace("-", "−") + f" ({labels[-1]})")
     peak = _peak_iop(every_stage)
     if math.isfinite(peak):
         vented = last.get("vented_volume_uL") or 0.0
@@ -411,6 +408,12 @@ def _stages(quantities: dict) -> dict:
     """The run's per-stage groups (``after_iop``, ``after_buckling``, ...)."""
     return {name: group for name, group in quantities.items()
             if name.startswith("after_") and isinstance(group, dict)}
+
+
+def _changes(stage: dict) -> list[str]:
+    """The stage's axial and refractive change, those it reports."""
+    return ([f"ΔAL {stage['axial_length_change_mm']:+.2f} mm"] if "axial_length_change_mm" in stage else []) \
+        + ([f"ΔSE {stage['refraction_change_D']:+.2f} D"] if "refraction_change_D" in stage else [])
 
 
 def _verdict(stage: dict) -> str | None:
